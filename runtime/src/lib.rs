@@ -1,6 +1,16 @@
 //! spreadlet runtime: synthesis and reconstruction of depth of field and motion blur by
 //! splatting sparse Laplacian PSFs ("spreadlets"), on the CPU and (feature `gpu`) with wgpu.
+//!
+//! The CPU path is [`synth::synthesize`]: [`pipeline::classify`] -> [`pipeline::splat`] ->
+//! [`pipeline::integrate`] -> [`pipeline::composite`], each a pure function the GPU path
+//! mirrors. Inputs come from [`gbuffer::GBuffer::read_exr`] and [`camera::Camera`]; databases
+//! from [`dbcache`].
 
+pub mod camera;
+pub mod dbcache;
+pub mod gbuffer;
 pub mod pipeline;
+pub mod rgba;
+pub mod synth;
 #[cfg(feature = "gpu")]
 pub mod gpu;

@@ -1,1 +1,381 @@
-fn main() {}
+//! `spreadlet`: depth of field and motion blur by splatting sparse Laplacian PSFs.
+//!
+//! Subcommands: `synth` (from a pinhole G-buffer) and `compare` (SSIM and PSNR of two EXRs).
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use clap::{Args, Parser, Subcommand, ValueEnum};
+
+use runtime::camera::Camera;
+use runtime::dbcache;
+use runtime::gbuffer::{ChannelOptions, GBuffer, Layout};
+use runtime::pipeline::{
+    ClassifyOptions, CompositeOptions, Effects, Integrator, RotationSampling, SplatOptions,
+};
+use runtime::rgba::RgbaImage;
+use runtime::synth::{synthesize, SynthOptions};
+
+#[derive(Parser, Debug)]
+#[command(
+    name = "spreadlet",
+    version,
+    about = "Depth of field and motion blur by splatting sparse Laplacian PSFs (Leimkühler et al. 2018)"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Synthesise depth of field and motion blur from a pinhole G-buffer (OpenEXR).
+    Synth(SynthArgs),
+    /// SSIM and PSNR (sRGB, as DEVELOPERS.md defines them) of two OpenEXR images.
+    Compare(CompareArgs),
+}
+
+/// Which device runs the pipeline.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ValueEnum)]
+enum Backend {
+    /// The GPU when an adapter exists, else the CPU.
+    #[default]
+    Auto,
+    /// The GPU (an error when there is none).
+    Gpu,
+    /// The CPU (rayon).
+    Cpu,
+}
+
+/// Camera fields given as flags (same names as in `camera.json`); they override the file.
+#[derive(Args, Debug, Default)]
+struct CameraFlags {
+    /// Output width, pixels.
+    #[arg(long)]
+    width: Option<u32>,
+    /// Output height, pixels.
+    #[arg(long)]
+    height: Option<u32>,
+    /// Focal length, mm.
+    #[arg(long)]
+    focal_length_mm: Option<f64>,
+    /// Sensor width, mm (maps to the image width).
+    #[arg(long)]
+    sensor_width_mm: Option<f64>,
+    /// Aperture f-number (omit both this and --focus-distance for a pinhole).
+    #[arg(long)]
+    f_stop: Option<f64>,
+    /// Focus distance, scene units (planar).
+    #[arg(long)]
+    focus_distance: Option<f64>,
+    /// Aperture blades (0 = circular).
+    #[arg(long)]
+    aperture_blades: Option<u32>,
+    /// Shutter as a fraction of the frame (0 = no motion blur).
+    #[arg(long)]
+    shutter_frames: Option<f64>,
+    /// Millimetres per scene unit (default 1000: metres).
+    #[arg(long)]
+    scene_unit_mm: Option<f64>,
+}
+
+#[derive(Args, Debug)]
+struct SynthArgs {
+    /// Pinhole G-buffer: OpenEXR with colour, depth and (for motion blur) motion vectors.
+    #[arg(long)]
+    input: PathBuf,
+    /// Camera description (`camera.json`); flags with the same names override its fields.
+    #[arg(long)]
+    camera: Option<PathBuf>,
+    #[command(flatten)]
+    camera_flags: CameraFlags,
+    /// Output OpenEXR (linear RGBA, f32), written atomically.
+    #[arg(long)]
+    out: PathBuf,
+    /// PSF database to use instead of the cached one (built on demand).
+    #[arg(long)]
+    db: Option<PathBuf>,
+    /// Profile of databases built on demand.
+    #[arg(long, default_value = "quick")]
+    db_profile: String,
+    /// Number of global depth layers (binned in constant parallax).
+    #[arg(long, default_value_t = 8)]
+    layers: u32,
+    /// Soft layering: blend width between neighbouring layers in layer units (0 = hard
+    /// layers; the flag alone = 1).
+    #[arg(long, num_args = 0..=1, default_missing_value = "1.0", default_value = "1.0")]
+    soft_layers: f32,
+    /// Do not split anti-aliased edge pixels into foreground and background parts.
+    #[arg(long)]
+    no_edge_split: bool,
+    /// Do not scale the composite up to the layers' joint coverage.
+    #[arg(long)]
+    no_coverage_renormalization: bool,
+    /// Poisson integrator.
+    #[arg(long, value_enum, default_value_t = Integrator::Pyramid)]
+    integrate: Integrator,
+    /// Placement of rotated (motion-aligned) spreadlets.
+    #[arg(long, value_enum, default_value_t = RotationSampling::Bilinear)]
+    rotation: RotationSampling,
+    /// Write statistics (effects, databases, counts per path, stage times) as JSON.
+    #[arg(long)]
+    stats: Option<PathBuf>,
+    /// Write an sRGB PNG preview.
+    #[arg(long)]
+    preview: Option<PathBuf>,
+    /// Device.
+    #[arg(long, value_enum, default_value_t = Backend::Auto)]
+    backend: Backend,
+    /// Input layout.
+    #[arg(long, value_enum, default_value_t = Layout::Auto)]
+    layout: Layout,
+    /// Blender view layer to read (when the file has several).
+    #[arg(long)]
+    layer: Option<String>,
+    /// Plain layout: depth channel name.
+    #[arg(long)]
+    depth_channel: Option<String>,
+    /// Plain layout: forward motion channels, "X,Y" (pixels per frame, x right, y down).
+    #[arg(long)]
+    motion_channels: Option<String>,
+    /// Plain layout: the motion's y axis points up.
+    #[arg(long)]
+    motion_y_up: bool,
+    /// Print no progress.
+    #[arg(long, short)]
+    quiet: bool,
+}
+
+#[derive(Args, Debug)]
+struct CompareArgs {
+    /// First image (OpenEXR; Blender multilayer or plain RGBA).
+    a: PathBuf,
+    /// Second image.
+    b: PathBuf,
+    /// Print JSON instead of text.
+    #[arg(long)]
+    json: bool,
+}
+
+fn main() {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Synth(args) => run_synth(args),
+        Command::Compare(args) => run_compare(args),
+    };
+    if let Err(e) = result {
+        eprintln!("error: {e:#}");
+        std::process::exit(1);
+    }
+}
+
+fn load_camera(path: Option<&Path>, f: &CameraFlags) -> Result<Camera> {
+    let mut value = match path {
+        Some(p) => {
+            let text = std::fs::read_to_string(p)
+                .with_context(|| format!("cannot read camera file {}", p.display()))?;
+            serde_json::from_str::<serde_json::Value>(&text)
+                .with_context(|| format!("camera file {} is not JSON", p.display()))?
+        }
+        None => serde_json::json!({}),
+    };
+    let Some(obj) = value.as_object_mut() else {
+        bail!("the camera file must hold a JSON object");
+    };
+    let mut set = |k: &str, v: Option<serde_json::Value>| {
+        if let Some(v) = v {
+            obj.insert(k.to_string(), v);
+        }
+    };
+    set("width", f.width.map(Into::into));
+    set("height", f.height.map(Into::into));
+    set("focal_length_mm", f.focal_length_mm.map(Into::into));
+    set("sensor_width_mm", f.sensor_width_mm.map(Into::into));
+    set("f_stop", f.f_stop.map(Into::into));
+    set("focus_distance", f.focus_distance.map(Into::into));
+    set("aperture_blades", f.aperture_blades.map(Into::into));
+    set("shutter_frames", f.shutter_frames.map(Into::into));
+    set("scene_unit_mm", f.scene_unit_mm.map(Into::into));
+    let camera = Camera::from_json_str(&value.to_string()).map_err(|e| match path {
+        Some(p) => anyhow::anyhow!("{}: {e}", p.display()),
+        None => anyhow::anyhow!("{e} (give --camera or the camera flags)"),
+    })?;
+    Ok(camera)
+}
+
+fn run_synth(args: SynthArgs) -> Result<()> {
+    let started = Instant::now();
+    let camera = load_camera(args.camera.as_deref(), &args.camera_flags)?;
+    let motion = match &args.motion_channels {
+        Some(s) => match s.split_once(',') {
+            Some((x, y)) => Some((x.trim().to_string(), y.trim().to_string())),
+            None => bail!("--motion-channels takes two names separated by a comma, got '{s}'"),
+        },
+        None => None,
+    };
+    let channel_options = ChannelOptions {
+        layout: args.layout,
+        layer: args.layer.clone(),
+        depth: args.depth_channel.clone(),
+        motion,
+        motion_y_up: args.motion_y_up,
+    };
+    let t = Instant::now();
+    let gbuffer = GBuffer::read_exr(&args.input, &channel_options)?;
+    let read_ms = t.elapsed().as_secs_f64() * 1e3;
+    if !(args.soft_layers.is_finite() && args.soft_layers >= 0.0) {
+        bail!("--soft-layers must be zero or positive, got {}", args.soft_layers);
+    }
+    if args.layers == 0 || args.layers > 64 {
+        bail!("--layers must be between 1 and 64, got {}", args.layers);
+    }
+
+    let effects = Effects::of(&camera, &gbuffer);
+    let t = Instant::now();
+    let mut db_source = None;
+    let db = match (effects.cheapest_model(), &args.db) {
+        (None, _) => None,
+        (Some(needed), Some(path)) => {
+            let db = dbcache::explicit_database(path, needed)?;
+            db_source = Some(dbcache::DbSource {
+                path: path.clone(),
+                built: false,
+            });
+            Some(db)
+        }
+        (Some(needed), None) => {
+            let profile: precompute::Profile = args.db_profile.parse()?;
+            let cfg = dbcache::build_config(needed, profile, camera.aperture_blades);
+            let (db, source) = dbcache::cached_database(&cfg, &dbcache::cache_dir(), !args.quiet)?;
+            db_source = Some(source);
+            Some(db)
+        }
+    };
+    let db_ms = t.elapsed().as_secs_f64() * 1e3;
+
+    let options = SynthOptions {
+        classify: ClassifyOptions {
+            layers: args.layers,
+            soft_layers: (args.soft_layers > 0.0).then_some(args.soft_layers),
+            edge_split: !args.no_edge_split,
+            ..ClassifyOptions::default()
+        },
+        splat: SplatOptions {
+            rotation: args.rotation,
+        },
+        integrator: args.integrate,
+        composite: CompositeOptions {
+            renormalize_coverage: !args.no_coverage_renormalization,
+        },
+    };
+    let backend = match args.backend {
+        Backend::Gpu => bail!(
+            "--backend gpu: the GPU synthesis path is not available in this build yet; use \
+             --backend cpu"
+        ),
+        Backend::Auto | Backend::Cpu => "cpu",
+    };
+    let (image, stats) = synthesize(&gbuffer, &camera, db.as_ref(), &options)?;
+    let t = Instant::now();
+    image.write_exr(&args.out)?;
+    if let Some(p) = &args.preview {
+        image.write_preview_png(p)?;
+    }
+    let write_ms = t.elapsed().as_secs_f64() * 1e3;
+    if !args.quiet {
+        eprintln!(
+            "{}x{} ({}{}): {} sparse, {} dense, {} copied, {} dropped; {} of {} layers; \
+             synthesis {:.0} ms (classify {:.0}, splat {:.0}, integrate {:.0}, composite {:.0}) \
+             on the {backend}",
+            stats.width,
+            stats.height,
+            if effects.defocus { "defocus" } else { "no defocus" },
+            if effects.motion { " + motion" } else { "" },
+            stats.counts.sparse,
+            stats.counts.dense,
+            stats.counts.copied,
+            stats.counts.dropped,
+            stats.layers_used,
+            stats.layers,
+            stats.times.total_ms,
+            stats.times.classify_ms,
+            stats.times.splat_ms,
+            stats.times.integrate_ms,
+            stats.times.composite_ms,
+        );
+    }
+    if let Some(p) = &args.stats {
+        let json = serde_json::json!({
+            "input": args.input,
+            "output": args.out,
+            "backend": backend,
+            "effects": { "defocus": stats.defocus, "motion": stats.motion },
+            "databases": db_source.iter().map(|s| serde_json::json!({
+                "model": stats.model,
+                "path": s.path,
+                "built_now": s.built,
+            })).collect::<Vec<_>>(),
+            "synthesis": stats,
+            "times_ms": {
+                "read_input": read_ms,
+                "database": db_ms,
+                "write_output": write_ms,
+                "wall": started.elapsed().as_secs_f64() * 1e3,
+            },
+        });
+        let text = serde_json::to_string_pretty(&json)?;
+        runtime::rgba::write_atomically(p, |f| {
+            use std::io::Write;
+            f.write_all(text.as_bytes())
+                .map_err(|source| runtime::rgba::WriteError::Io {
+                    path: p.display().to_string(),
+                    source,
+                })
+        })?;
+    }
+    Ok(())
+}
+
+fn read_rgba(path: &Path) -> Result<RgbaImage> {
+    let g = GBuffer::read_exr(path, &ChannelOptions::default())?;
+    Ok(RgbaImage {
+        width: g.width,
+        height: g.height,
+        pixels: g.color,
+    })
+}
+
+fn run_compare(args: CompareArgs) -> Result<()> {
+    let a = read_rgba(&args.a)?;
+    let b = read_rgba(&args.b)?;
+    if (a.width, a.height) != (b.width, b.height) {
+        bail!(
+            "the images differ in size: {} is {}x{}, {} is {}x{}",
+            args.a.display(),
+            a.width,
+            a.height,
+            args.b.display(),
+            b.width,
+            b.height
+        );
+    }
+    let fa: &[f32] = bytemuck::cast_slice(&a.pixels);
+    let fb: &[f32] = bytemuck::cast_slice(&b.pixels);
+    let ssim = metrics::ssim_rgb(fa, fb, a.width, a.height)?;
+    let psnr = metrics::psnr_rgb(fa, fb, a.width, a.height)?;
+    if args.json {
+        let psnr_json = if psnr.is_finite() {
+            serde_json::json!(psnr)
+        } else {
+            serde_json::json!(null)
+        };
+        println!(
+            "{}",
+            serde_json::json!({ "a": args.a, "b": args.b, "ssim": ssim, "psnr_db": psnr_json })
+        );
+    } else {
+        println!("SSIM {ssim:.4}  PSNR {psnr:.2} dB");
+    }
+    Ok(())
+}

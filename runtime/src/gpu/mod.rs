@@ -1,1 +1,23 @@
 //! The GPU path: each stage a WGSL compute shader in `shaders/`, mirroring the CPU path.
+//!
+//! - [`GpuContext`]: adapter and device acquisition, feature detection.
+//! - [`GpuSynthesizer`]: pipelines and the uploaded PSF database, reused across frames;
+//!   [`GpuSynthesizer::run`] takes the CPU path's classified records.
+//! - [`synthesize_gpu`]: the GPU twin of `synth::synthesize` (classification on the CPU).
+//! - [`GpuPyramid`]: the convolution pyramid alone (stage-level entry point).
+
+mod context;
+mod error;
+mod frontend;
+pub mod layout;
+mod pyramid;
+mod shaders;
+mod synth;
+mod util;
+
+pub use context::{GpuContext, REQUIRE_GPU_ENV};
+pub use error::GpuError;
+pub use frontend::synthesize_gpu;
+pub use pyramid::{GpuPyramid, PyramidLevels};
+pub use shaders::shader_sources_for_validation;
+pub use synth::{AtomicMode, GpuSynthOptions, GpuSynthesizer, SplatPlanes, StageTimes, SynthCounters};

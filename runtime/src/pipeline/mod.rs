@@ -1,1 +1,20 @@
+//! The synthesis pipeline, one pure function per stage (the GPU path mirrors each):
+//!
+//! 1. [`classify::classify`]: G-buffer + camera + database -> [`types::SplatRecord`]s, sorted
+//!    by layer, with [`types::FrameParams`] and per-layer info;
+//! 2. [`splat::splat`]: records + database -> [`splat::LayerStack`], per layer four Laplacian
+//!    and four direct planes (R, G, B, A), padded;
+//! 3. [`integrate::integrate`]: Laplacian planes -> primal planes (pyramid or exact), direct
+//!    planes added;
+//! 4. [`composite::composite`]: layers back to front -> RGBA image.
+
+pub mod classify;
+pub mod composite;
+pub mod integrate;
+pub mod splat;
 pub mod types;
+
+pub use classify::{classify, Classified, ClassifyOptions, Effects, LayerInfo, PathCounts};
+pub use composite::{composite, CompositeOptions};
+pub use integrate::{integrate, IntegratedLayers, Integrator};
+pub use splat::{splat, LayerStack, RotationSampling, SplatOptions};

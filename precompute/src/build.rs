@@ -1,0 +1,353 @@
+//! Building a whole database: for every cell of the nested grid, trace the pre-filtered PSF,
+//! sparsify it, score it, and store it as spreadlets or (fast track) dense.
+//!
+//! PSFs are processed in parallel (rayon), each with random streams derived from the seed and
+//! its index only, and pushed in index order: the same config gives the same bytes whatever the
+//! thread count.
+
+use std::time::Instant;
+
+use indicatif::{ProgressBar, ProgressStyle};
+use psf_db::{
+    Aperture, BuildInfo, DatabaseBuilder, DbHeader, LensPrescription, ParamSpace, PsfDatabase,
+    PsfModel, PsfStats,
+};
+use rayon::prelude::*;
+
+use crate::aperture::ApertureShape;
+use crate::config::{BuildConfig, LensOptions};
+use crate::image::PsfImage;
+use crate::prefilter::ParamBox;
+use crate::quality::{integrate_spreadlets, l1, similarity};
+use crate::report::{BuildReport, PsfReport};
+use crate::sampler::psf_rng;
+use crate::sparsify::{ablation, sparsify, SparsifyOptions, Spreadlets, Target};
+use crate::trace::lens_motion::LensMotionTracer;
+use crate::trace::physical_lens::PhysicalLensTracer;
+use crate::trace::thin_lens::ThinLensTracer;
+use crate::trace::{trace_psf, LightTracer, RayCount};
+use crate::PrecomputeError;
+
+/// Everything fixed for a build: the space, the tracer, the settings.
+pub struct BuildPlan {
+    /// The settings.
+    pub config: BuildConfig,
+    /// The sampled parameter space.
+    pub space: ParamSpace,
+    /// The model's light tracer.
+    pub tracer: Box<dyn LightTracer>,
+    /// Rays per PSF.
+    pub rays: RayCount,
+    /// The lens prescription (physical-lens).
+    pub lens: Option<LensPrescription>,
+    /// Extra notes for the header.
+    pub notes: Vec<(String, String)>,
+}
+
+impl BuildPlan {
+    /// Validates `cfg` and sets up the space and tracer.
+    pub fn new(cfg: &BuildConfig) -> Result<Self, PrecomputeError> {
+        cfg.validate()?;
+        let spec = cfg.profile.spec(cfg.model);
+        let count = cfg.psf_count.unwrap_or(spec.psf_count);
+        let n = ParamSpace::resolution_for_count(cfg.model.dims(), count).ok_or_else(|| {
+            PrecomputeError::InvalidConfig(format!(
+                "no nested grid of {} dimension(s) has {count} PSFs",
+                cfg.model.dims()
+            ))
+        })?;
+        let aperture = ApertureShape::from_blades(cfg.blades, f64::from(cfg.blade_rotation_rad));
+        let mut notes = vec![("procedure".to_string(), cfg.procedure.name().to_string())];
+        let (space, tracer, lens): (ParamSpace, Box<dyn LightTracer>, _) = match cfg.model {
+            PsfModel::ThinLens | PsfModel::LensMotion => {
+                let ranges = cfg.ranges.clone().unwrap_or(spec.ranges.clone());
+                let space = ParamSpace::for_model(cfg.model, &ranges, n)?;
+                let tracer: Box<dyn LightTracer> = if cfg.model == PsfModel::ThinLens {
+                    Box::new(ThinLensTracer { aperture })
+                } else {
+                    Box::new(LensMotionTracer { aperture })
+                };
+                (space, tracer, None)
+            }
+            PsfModel::PhysicalLens => {
+                let opts = cfg.lens.clone().unwrap_or_default();
+                opts.validate()?;
+                let width_px = opts.image_width_px.unwrap_or(spec.physical_image_width_px);
+                let mut singlet = opts.singlet();
+                let design_um = crate::optics::spectrum::LAMBDA_DESIGN_NM * 1e-3;
+                singlet.focus(opts.focus_distance * opts.scene_unit_mm, design_um)?;
+                let tracer = PhysicalLensTracer::new(
+                    singlet.clone(),
+                    opts.scene_unit_mm,
+                    opts.sensor_width_mm / f64::from(width_px),
+                );
+                if !(tracer.pinhole_distance_mm.is_finite() && tracer.pinhole_distance_mm > 0.0) {
+                    return Err(PrecomputeError::InvalidLens(
+                        "the chief ray does not reach the sensor".into(),
+                    ));
+                }
+                notes.push((
+                    "pinhole_distance_mm".into(),
+                    format!("{:.6}", tracer.pinhole_distance_mm),
+                ));
+                let ranges = [opts.depth_range, [0.0, opts.max_eccentricity_mm]];
+                let space = ParamSpace::for_model(cfg.model, &ranges, n)?;
+                let presc = physical_prescription(&opts, &singlet, width_px);
+                (space, Box::new(tracer), Some(presc))
+            }
+        };
+        let rays = match cfg.rays_per_psf {
+            Some(r) => RayCount::Fixed(r),
+            None => RayCount::PerPixel {
+                per_px: spec.rays_per_px,
+                min: spec.min_rays,
+                max: spec.max_rays,
+            },
+        };
+        Ok(BuildPlan {
+            config: cfg.clone(),
+            space,
+            tracer,
+            rays,
+            lens,
+            notes,
+        })
+    }
+
+    /// The pre-filter box of PSF `index`.
+    pub fn param_box(&self, index: u32) -> Result<ParamBox, PrecomputeError> {
+        ParamBox::for_cell(&self.space, index, self.config.prefilter).ok_or_else(|| {
+            PrecomputeError::InvalidConfig(format!(
+                "PSF {index} out of range (the space has {})",
+                self.space.psf_count()
+            ))
+        })
+    }
+
+    /// Traces PSF `index` (deterministic for the seed).
+    pub fn trace(&self, index: u32) -> Result<(PsfImage, crate::trace::TraceStats), PrecomputeError> {
+        let params = self.param_box(index)?;
+        let mut rng = psf_rng(self.config.seed, index, 0);
+        trace_psf(self.tracer.as_ref(), &params, self.rays, &mut rng, index)
+    }
+
+    /// The sparsification settings of this build.
+    pub fn sparsify_options(&self) -> SparsifyOptions {
+        SparsifyOptions {
+            budget: f64::from(self.config.spreadlet_budget),
+            dart_spacing_px: std::env::var("PRECOMPUTE_DART_SPACING")
+                .ok()
+                .and_then(|v| v.parse().ok())
+                .unwrap_or(crate::sparsify::darts::DART_SPACING_PX),
+            procedure: self.config.procedure,
+            ..SparsifyOptions::default()
+        }
+    }
+
+    /// Traces, sparsifies and scores PSF `index`.
+    pub fn process(&self, index: u32) -> Result<ProcessedPsf, PrecomputeError> {
+        let params = self.param_box(index)?;
+        let (image, tstats) = self.trace(index)?;
+        let target = Target::new(&image, self.config.procedure.split_signs());
+        let opts = self.sparsify_options();
+        let mut rng = psf_rng(self.config.seed, index, 1);
+        let sparse = sparsify(&target, &opts, &mut rng).spreadlets;
+        let recon = integrate_spreadlets(&sparse, image.width, image.height);
+        let err = l1(&recon, &image.planes);
+        let sim = similarity(&recon, &image.planes, image.width, image.height);
+        let abl = if self.config.ablation {
+            let mut rng = psf_rng(self.config.seed, index, 2);
+            Some(ablation(&target, &opts, &mut rng))
+        } else {
+            None
+        };
+        let support = image.support();
+        let dense = sparse.len() as f64 > f64::from(self.config.dense_ratio) * support as f64;
+        let range = params.range();
+        let report = PsfReport {
+            index,
+            coords: params.centre(),
+            box_min: [range[0][0], range[1][0]],
+            box_max: [range[0][1], range[1][1]],
+            image_size: [image.width, image.height],
+            rays: tstats.rays,
+            spreadlets: sparse.len(),
+            dense_support: support,
+            sparsity: sparse.len() as f64 / support.max(1) as f64,
+            similarity: sim,
+            l1: err,
+            dense,
+            extent_px: image.extent(),
+            blocked_fraction: tstats.blocked as f64 / tstats.rays.max(1) as f64,
+            ablation: abl,
+        };
+        Ok(ProcessedPsf {
+            image,
+            spreadlets: sparse,
+            report,
+        })
+    }
+}
+
+/// One processed PSF.
+#[derive(Clone, Debug)]
+pub struct ProcessedPsf {
+    /// The traced, pre-filtered PSF.
+    pub image: PsfImage,
+    /// Its spreadlets (image pixel positions).
+    pub spreadlets: Spreadlets,
+    /// Its figures.
+    pub report: PsfReport,
+}
+
+fn physical_prescription(
+    opts: &LensOptions,
+    singlet: &crate::optics::singlet::Singlet,
+    width_px: u32,
+) -> LensPrescription {
+    opts.prescription(singlet, width_px)
+}
+
+/// Builds the database `cfg` describes. `progress` shows a progress bar over PSFs on stderr.
+pub fn build_database(
+    cfg: &BuildConfig,
+    progress: bool,
+) -> Result<(PsfDatabase, BuildReport), PrecomputeError> {
+    let start = Instant::now();
+    let plan = BuildPlan::new(cfg)?;
+    let n = plan.space.psf_count();
+    let bar = if progress {
+        let b = ProgressBar::new(u64::from(n));
+        if let Ok(style) = ProgressStyle::with_template(
+            "{msg} [{elapsed_precise}] {wide_bar} {pos}/{len} PSFs (eta {eta})",
+        ) {
+            b.set_style(style);
+        }
+        b.set_message(format!("{} {}", cfg.model, cfg.profile));
+        b
+    } else {
+        ProgressBar::hidden()
+    };
+    let results: Vec<Result<ProcessedPsf, PrecomputeError>> = (0..n)
+        .into_par_iter()
+        .map(|i| {
+            let r = plan.process(i);
+            bar.inc(1);
+            r
+        })
+        .collect();
+    bar.finish_and_clear();
+
+    let mut header = DbHeader::new(cfg.model, plan.space.clone(), 0);
+    header.rays_per_psf = match plan.rays {
+        RayCount::Fixed(r) => r,
+        RayCount::PerPixel { max, .. } => max,
+    };
+    header.seed = cfg.seed;
+    header.spreadlet_budget = cfg.spreadlet_budget;
+    header.prefilter = cfg.prefilter;
+    header.aperture = Aperture {
+        blades: cfg.blades,
+        rotation_rad: cfg.blade_rotation_rad,
+    };
+    header.lens = plan.lens.clone();
+    header.build = BuildInfo {
+        profile: cfg.profile.name().into(),
+        build_seconds: None,
+        tool: format!("precompute {}", env!("CARGO_PKG_VERSION")),
+        notes: plan.notes.clone(),
+    };
+    let mut builder = DatabaseBuilder::new(header);
+    let mut reports = Vec::with_capacity(n as usize);
+    let mut stats = Vec::with_capacity(n as usize);
+    let mut resolution = 0u32;
+    for r in results {
+        let p = r?;
+        let img = &p.image;
+        resolution = resolution.max(img.width.max(img.height) as u32);
+        if p.report.dense {
+            push_dense(&mut builder, img)?;
+        } else {
+            let (cx, cy) = (img.centre[0] as i32, img.centre[1] as i32);
+            let positions: Vec<[i16; 2]> = p
+                .spreadlets
+                .positions
+                .iter()
+                .map(|q| [(q[0] - cx) as i16, (q[1] - cy) as i16])
+                .collect();
+            let values: Vec<f32> = p.spreadlets.values.iter().map(|&v| v as f32).collect();
+            builder.push_sparse(&positions, &values)?;
+        }
+        stats.push(PsfStats {
+            coords: [p.report.coords[0] as f32, p.report.coords[1] as f32],
+            spreadlets: if p.report.dense {
+                0
+            } else {
+                p.report.spreadlets as u32
+            },
+            dense_support: p.report.dense_support as u32,
+            l1: p.report.l1 as f32,
+            ssim: p.report.similarity as f32,
+            extent_px: p.report.extent_px,
+        });
+        reports.push(p.report);
+    }
+    builder.header_mut().stats = stats;
+    builder.header_mut().psf_resolution = resolution;
+    let db = builder.finish()?;
+    let mut report = BuildReport {
+        model: cfg.model.name().into(),
+        profile: cfg.profile.name().into(),
+        seed: cfg.seed,
+        spreadlet_budget: cfg.spreadlet_budget,
+        prefilter: cfg.prefilter,
+        procedure: cfg.procedure.name().into(),
+        grid_resolution: plan.space.n(),
+        psfs: reports,
+        mean_sparsity: 0.0,
+        mean_similarity: 0.0,
+        mean_l1: 0.0,
+        dense_count: 0,
+        stored_spreadlets: 0,
+        build_seconds: 0.0,
+        ablation: None,
+    };
+    report.summarise();
+    report.build_seconds = start.elapsed().as_secs_f64();
+    Ok((db, report))
+}
+
+/// Stores `img` dense, cropped to its support's bounding box.
+fn push_dense(builder: &mut DatabaseBuilder, img: &PsfImage) -> Result<(), PrecomputeError> {
+    let (w, h) = (img.width, img.height);
+    let (mut x0, mut y0, mut x1, mut y1) = (w, h, 0, 0);
+    for y in 0..h {
+        for x in 0..w {
+            if img.planes.iter().any(|p| p[y * w + x] != 0.0) {
+                x0 = x0.min(x);
+                y0 = y0.min(y);
+                x1 = x1.max(x);
+                y1 = y1.max(y);
+            }
+        }
+    }
+    if x0 > x1 {
+        (x0, y0, x1, y1) = (img.centre[0], img.centre[1], img.centre[0], img.centre[1]);
+    }
+    let (cw, chh) = (x1 - x0 + 1, y1 - y0 + 1);
+    let ch = img.channels();
+    let mut data = Vec::with_capacity(cw * chh * ch);
+    for y in y0..=y1 {
+        for x in x0..=x1 {
+            for p in &img.planes {
+                data.push(p[y * w + x]);
+            }
+        }
+    }
+    let origin = [
+        (x0 as i64 - img.centre[0] as i64) as i16,
+        (y0 as i64 - img.centre[1] as i64) as i16,
+    ];
+    builder.push_dense(origin, cw as u16, chh as u16, &data)?;
+    Ok(())
+}

@@ -1,0 +1,325 @@
+//! Build settings: the profiles (test, quick, paper), the lens options and [`BuildConfig`].
+
+use std::fmt;
+use std::str::FromStr;
+
+use psf_db::{LensPrescription, PsfModel};
+use serde::{Deserialize, Serialize};
+
+use crate::optics::glass::BK7;
+use crate::optics::singlet::Singlet;
+use crate::sparsify::Procedure;
+use crate::PrecomputeError;
+
+/// How thoroughly a database is built.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Profile {
+    /// Seconds: few small PSFs (CoC <= 12 px, motion <= 24 px), few rays; for test suites.
+    Test,
+    /// Minutes on 2 cores: CoC up to 64 px, motion up to 192 px.
+    Quick,
+    /// The paper's sample counts (100 / 400 / 4,000 PSFs) at up to 512 px PSFs; slow.
+    Paper,
+}
+
+impl Profile {
+    /// Name on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Profile::Test => "test",
+            Profile::Quick => "quick",
+            Profile::Paper => "paper",
+        }
+    }
+
+    /// The profile's numbers for `model`.
+    pub fn spec(self, model: PsfModel) -> ProfileSpec {
+        use PsfModel::*;
+        use Profile::*;
+        let (psf_count, ranges): (u32, Vec<[f64; 2]>) = match (self, model) {
+            (Test, ThinLens) => (6, vec![[0.0, 12.0]]),
+            (Test, LensMotion) => (10, vec![[0.0, 12.0], [0.0, 24.0]]),
+            (Test, PhysicalLens) => (6, vec![]),
+            (Quick, ThinLens) => (24, vec![[0.0, 64.0]]),
+            (Quick, LensMotion) => (48, vec![[0.0, 64.0], [0.0, 192.0]]),
+            (Quick, PhysicalLens) => (40, vec![]),
+            (Paper, ThinLens) => (100, vec![[0.0, 255.0]]),
+            (Paper, LensMotion) => (400, vec![[0.0, 127.0], [0.0, 256.0]]),
+            (Paper, PhysicalLens) => (4000, vec![]),
+        };
+        let (rays_per_px, min_rays, max_rays, image_width_px) = match self {
+            Test => (48.0, 20_000, 400_000, 480),
+            Quick => (192.0, 200_000, 24_000_000, 1920),
+            Paper => (4096.0, 4_000_000, 1_200_000_000, 3840),
+        };
+        ProfileSpec {
+            psf_count,
+            ranges,
+            rays_per_px,
+            min_rays,
+            max_rays,
+            physical_image_width_px: image_width_px,
+        }
+    }
+}
+
+impl fmt::Display for Profile {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl FromStr for Profile {
+    type Err = PrecomputeError;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "test" => Ok(Profile::Test),
+            "quick" => Ok(Profile::Quick),
+            "paper" => Ok(Profile::Paper),
+            _ => Err(PrecomputeError::InvalidConfig(format!(
+                "unknown profile '{s}' (expected test, quick or paper)"
+            ))),
+        }
+    }
+}
+
+/// The numbers behind a [`Profile`] for one model.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ProfileSpec {
+    /// Target number of PSFs (the grid resolution is the smallest giving at least this many).
+    pub psf_count: u32,
+    /// Parameter ranges `[min, max]` per dimension (physical units); empty for
+    /// `physical-lens`, whose ranges come from [`LensOptions`].
+    pub ranges: Vec<[f64; 2]>,
+    /// Rays per pixel of the PSF image (the ray count scales with the PSF's area).
+    pub rays_per_px: f64,
+    /// Fewest rays per PSF.
+    pub min_rays: u64,
+    /// Most rays per PSF.
+    pub max_rays: u64,
+    /// Image width of the `physical-lens` sensor, pixels.
+    pub physical_image_width_px: u32,
+}
+
+/// The `physical-lens` model's lens, focus, sensor and parameter ranges.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LensOptions {
+    /// Signed radius of the front surface, mm (> 0).
+    pub radius_front_mm: f64,
+    /// Signed radius of the back surface, mm (< 0).
+    pub radius_back_mm: f64,
+    /// Centre thickness, mm.
+    pub thickness_mm: f64,
+    /// Clear diameter of the lens (rim), mm.
+    pub lens_diameter_mm: f64,
+    /// Diameter of the aperture stop, mm.
+    pub stop_diameter_mm: f64,
+    /// Stop position relative to the front vertex, mm (<= 0: in front of the lens).
+    pub stop_position_mm: f64,
+    /// Distance in focus (from the stop), scene units.
+    pub focus_distance: f64,
+    /// Millimetres per scene unit.
+    pub scene_unit_mm: f64,
+    /// Sensor width, mm.
+    pub sensor_width_mm: f64,
+    /// Image width, pixels; `None` takes the profile's.
+    pub image_width_px: Option<u32>,
+    /// Depth range `[near, far]` sampled, scene units (from the stop).
+    pub depth_range: [f64; 2],
+    /// Largest eccentricity sampled, mm on the sensor.
+    pub max_eccentricity_mm: f64,
+}
+
+impl Default for LensOptions {
+    /// An f = 51 mm BK7 biconvex singlet at f/4.3 with its stop 15 mm in front, focused at
+    /// 1 m, on a 36 mm wide sensor; depths 0.4-10 m, eccentricities up to 18 mm.
+    fn default() -> Self {
+        LensOptions {
+            radius_front_mm: 51.68,
+            radius_back_mm: -51.68,
+            thickness_mm: 6.0,
+            lens_diameter_mm: 16.0,
+            stop_diameter_mm: 12.0,
+            stop_position_mm: -15.0,
+            focus_distance: 1.0,
+            scene_unit_mm: 1000.0,
+            sensor_width_mm: 36.0,
+            image_width_px: None,
+            depth_range: [0.4, 10.0],
+            max_eccentricity_mm: 18.0,
+        }
+    }
+}
+
+impl LensOptions {
+    /// The singlet (not yet focused).
+    pub fn singlet(&self) -> Singlet {
+        Singlet {
+            radius_front_mm: self.radius_front_mm,
+            radius_back_mm: self.radius_back_mm,
+            thickness_mm: self.thickness_mm,
+            rim_radius_mm: 0.5 * self.lens_diameter_mm,
+            stop_radius_mm: 0.5 * self.stop_diameter_mm,
+            stop_gap_mm: -self.stop_position_mm,
+            glass: BK7,
+            sensor_z_mm: 0.0,
+        }
+    }
+
+    /// Checks ranges and units.
+    pub fn validate(&self) -> Result<(), PrecomputeError> {
+        let bad = |m: String| Err(PrecomputeError::InvalidLens(m));
+        if !(self.scene_unit_mm.is_finite() && self.scene_unit_mm > 0.0) {
+            return bad(format!("scene_unit_mm must be > 0, got {}", self.scene_unit_mm));
+        }
+        if !(self.sensor_width_mm.is_finite() && self.sensor_width_mm > 0.0) {
+            return bad(format!("sensor width must be > 0 mm, got {}", self.sensor_width_mm));
+        }
+        let [near, far] = self.depth_range;
+        if !(near.is_finite() && far.is_finite() && near > 0.0 && near < far) {
+            return bad(format!("depth range must satisfy 0 < near < far, got {near}..{far}"));
+        }
+        if !(self.focus_distance.is_finite() && self.focus_distance > 0.0) {
+            return bad(format!("focus distance must be > 0, got {}", self.focus_distance));
+        }
+        if !(self.max_eccentricity_mm.is_finite() && self.max_eccentricity_mm > 0.0) {
+            return bad(format!(
+                "max eccentricity must be > 0 mm, got {}",
+                self.max_eccentricity_mm
+            ));
+        }
+        if self.image_width_px == Some(0) {
+            return bad("image width must be > 0 px".into());
+        }
+        self.singlet().validate()
+    }
+
+    /// The prescription recorded in the database header, for a focused `singlet` and the
+    /// image width used.
+    pub fn prescription(&self, singlet: &Singlet, image_width_px: u32) -> LensPrescription {
+        LensPrescription {
+            radius_front_mm: self.radius_front_mm,
+            radius_back_mm: self.radius_back_mm,
+            thickness_mm: self.thickness_mm,
+            lens_diameter_mm: self.lens_diameter_mm,
+            stop_diameter_mm: self.stop_diameter_mm,
+            stop_position_mm: self.stop_position_mm,
+            glass: "N-BK7".into(),
+            dispersion: singlet.glass.clone(),
+            focus_distance: self.focus_distance,
+            scene_unit_mm: self.scene_unit_mm,
+            focal_length_mm: singlet.focal_length(crate::optics::spectrum::LAMBDA_DESIGN_NM * 1e-3),
+            sensor_distance_mm: singlet.sensor_z_mm - singlet.stop_gap_mm - singlet.thickness_mm,
+            sensor_width_mm: self.sensor_width_mm,
+            image_width_px,
+        }
+    }
+}
+
+/// Everything a database build needs. Start from [`BuildConfig::new`] and change fields.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BuildConfig {
+    /// The PSF model.
+    pub model: PsfModel,
+    /// The profile (sample counts, ranges, rays).
+    pub profile: Profile,
+    /// Random seed; the same config and seed give the same bytes.
+    pub seed: u64,
+    /// Rays per PSF; `None` scales with the PSF's area per the profile.
+    pub rays_per_psf: Option<u64>,
+    /// Spreadlet density (1.0 default; 0.5 and 2.0 the paper's other operating points); the
+    /// dart spacing scales with `1 / sqrt(budget)`.
+    pub spreadlet_budget: f32,
+    /// Pre-filter each PSF over its cell (default on).
+    pub prefilter: bool,
+    /// Aperture blades (0 = circular) for thin-lens and lens-motion.
+    pub blades: u32,
+    /// Rotation of the bladed aperture, radians.
+    pub blade_rotation_rad: f32,
+    /// Lens for physical-lens (`None` = [`LensOptions::default`]).
+    pub lens: Option<LensOptions>,
+    /// Sparsification procedure (default: [`Procedure::Improved`]).
+    pub procedure: Procedure,
+    /// Also measure the ablation (darts / +Lloyd / +annealing / full) per PSF; slower.
+    pub ablation: bool,
+    /// Override the profile's PSF count target.
+    pub psf_count: Option<u32>,
+    /// Override the profile's parameter ranges (thin-lens, lens-motion).
+    pub ranges: Option<Vec<[f64; 2]>>,
+    /// A PSF is stored dense when its spreadlets exceed this fraction of its dense support.
+    pub dense_ratio: f32,
+}
+
+impl BuildConfig {
+    /// Defaults for `model` and `profile`: seed 1, rays from the profile, budget 1,
+    /// pre-filtering on, circular aperture, default lens, improved procedure, dense above 0.5.
+    pub fn new(model: PsfModel, profile: Profile) -> Self {
+        BuildConfig {
+            model,
+            profile,
+            seed: 1,
+            rays_per_psf: None,
+            spreadlet_budget: 1.0,
+            prefilter: true,
+            blades: 0,
+            blade_rotation_rad: 0.0,
+            lens: None,
+            procedure: Procedure::default(),
+            ablation: false,
+            psf_count: None,
+            ranges: None,
+            dense_ratio: 0.5,
+        }
+    }
+
+    /// Checks every setting; the message says which and why.
+    pub fn validate(&self) -> Result<(), PrecomputeError> {
+        let bad = |m: String| Err(PrecomputeError::InvalidConfig(m));
+        if !(self.spreadlet_budget.is_finite()
+            && self.spreadlet_budget >= 0.01
+            && self.spreadlet_budget <= 100.0)
+        {
+            return bad(format!(
+                "spreadlet budget must be in [0.01, 100], got {}",
+                self.spreadlet_budget
+            ));
+        }
+        if self.rays_per_psf == Some(0) {
+            return bad("rays per PSF must be > 0".into());
+        }
+        if self.blades == 1 || self.blades == 2 || self.blades > 64 {
+            return bad(format!("blades must be 0 (circle) or 3..=64, got {}", self.blades));
+        }
+        if !self.blade_rotation_rad.is_finite() {
+            return bad("blade rotation must be finite".into());
+        }
+        if let Some(n) = self.psf_count {
+            if n == 0 || n > 1_000_000 {
+                return bad(format!("PSF count must be in 1..=1000000, got {n}"));
+            }
+        }
+        if !(self.dense_ratio.is_finite() && self.dense_ratio >= 0.0) {
+            return bad(format!("dense ratio must be >= 0, got {}", self.dense_ratio));
+        }
+        if let Some(r) = &self.ranges {
+            if r.len() != self.model.dims() {
+                return bad(format!(
+                    "{} needs {} ranges, got {}",
+                    self.model,
+                    self.model.dims(),
+                    r.len()
+                ));
+            }
+            for &[lo, hi] in r {
+                if !(lo.is_finite() && hi.is_finite() && lo >= 0.0 && lo < hi) {
+                    return bad(format!("range {lo}..{hi} must satisfy 0 <= min < max"));
+                }
+            }
+        }
+        if let Some(l) = &self.lens {
+            l.validate()?;
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,39 @@
+//! The lens-motion PSF: the thin-lens CoC of radius `r` px swept along +x by a linear motion of
+//! `m` px over a box shutter centred on the frame time: at shutter time `t` in `[0, 1)` the
+//! point sits at `(t - 1/2) m`, so it moves from `-m/2` to `+m/2`.
+
+use super::{Bounds, Hit, LightTracer};
+use crate::aperture::ApertureShape;
+use crate::prefilter::ParamBox;
+
+/// Light tracer of the `lens-motion` model; `s = [CoC radius px, motion length px]`.
+#[derive(Clone, Copy, Debug)]
+pub struct LensMotionTracer {
+    /// Aperture shape.
+    pub aperture: ApertureShape,
+}
+
+impl LightTracer for LensMotionTracer {
+    fn channels(&self) -> usize {
+        1
+    }
+    fn ray_dims(&self) -> usize {
+        3
+    }
+    fn bounds(&self, params: &ParamBox) -> Bounds {
+        let range = params.range();
+        let r = range[0][1].max(0.0);
+        let m = range[1][1].max(0.0);
+        [-r - 0.5 * m, r + 0.5 * m, -r, r]
+    }
+    #[inline]
+    fn trace(&self, s: [f64; 2], u: &[f64]) -> Option<Hit> {
+        let a = self.aperture.sample(u[0], u[1]);
+        let r = s[0].max(0.0);
+        let m = s[1].max(0.0);
+        Some(Hit {
+            offset: [r * a[0] + (u[2] - 0.5) * m, r * a[1]],
+            weight: [1.0, 0.0, 0.0],
+        })
+    }
+}

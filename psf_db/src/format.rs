@@ -1,0 +1,874 @@
+//! The PSF database file: header, flat arrays for the GPU, checksum.
+//!
+//! Byte layout (all integers little-endian):
+//!
+//! | offset | size | content |
+//! | --- | --- | --- |
+//! | 0 | 8 | magic [`MAGIC`] = `SPRDLT\0\x01` |
+//! | 8 | 4 | format version `u32` ([`FORMAT_VERSION`]) |
+//! | 12 | 8 | header length `H` in bytes, `u64` |
+//! | 20 | H | [`DbHeader`], bincode 2 (serde, `config::standard()`) |
+//! | 20+H | 40 | array counts, five `u64`: `n_psf`, `n_spreadlets`, `channels`, `n_dense`, `n_dense_data` |
+//! | ... | 4 (n_psf+1) | `cumulative: [u32]`, start of each PSF's spreadlets, last = `n_spreadlets` |
+//! | ... | 4 n_spreadlets | `positions: [[i16; 2]]`, offset (x right, y down) from the PSF centre, px |
+//! | ... | 4 n_spreadlets channels | `values: [f32]`, Laplacian values, channel-interleaved |
+//! | ... | 4 n_psf | `dense_slot: [u32]`, `u32::MAX` for a sparse PSF, else an index into `dense` |
+//! | ... | 12 n_dense | `dense: [DenseEntry]` (`offset u32, width u16, height u16, origin_x i16, origin_y i16`) |
+//! | ... | 4 n_dense_data | `dense_data: [f32]`, dense PSF images, row-major, channel-interleaved |
+//! | end-4 | 4 | CRC32 (crc32fast / IEEE) of every byte before it |
+//!
+//! Readers check, in this order: magic, version, that the header length and the array counts
+//! fit the bytes present (before allocating anything), the checksum, the header, and finally
+//! that every count, index, offset and position is in bounds. Any failure is a [`DbError`].
+//! bincode is used only inside this module.
+
+use std::io::Write;
+use std::path::Path;
+
+use bytemuck::{Pod, Zeroable};
+use serde::{Deserialize, Serialize};
+
+use crate::error::DbError;
+use crate::model::PsfModel;
+use crate::space::ParamSpace;
+
+/// The first 8 bytes of every database file.
+pub const MAGIC: [u8; 8] = *b"SPRDLT\0\x01";
+/// The format version this build writes and reads.
+pub const FORMAT_VERSION: u32 = 1;
+/// `dense_slot` value of a PSF stored as spreadlets.
+pub const SPARSE_SLOT: u32 = u32::MAX;
+/// Largest header accepted, bytes (the header holds per-PSF statistics: a few MB at most).
+pub const MAX_HEADER_BYTES: u64 = 64 << 20;
+
+const PREAMBLE: usize = 20;
+const COUNTS: usize = 40;
+const CRC: usize = 4;
+
+/// Aperture shape of the lens models.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Aperture {
+    /// Number of diaphragm blades; 0 = circular aperture.
+    pub blades: u32,
+    /// Rotation of the polygon, radians (counter-clockwise on the image, y down).
+    pub rotation_rad: f32,
+}
+
+impl Default for Aperture {
+    fn default() -> Self {
+        Aperture {
+            blades: 0,
+            rotation_rad: 0.0,
+        }
+    }
+}
+
+/// Wavelength dependence of the glass's refractive index, wavelength in micrometres.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub enum Dispersion {
+    /// `n(l) = a + b / l^2`, `b` in um^2.
+    Cauchy {
+        /// Constant term.
+        a: f64,
+        /// Coefficient of `1 / l^2`, um^2.
+        b_um2: f64,
+    },
+    /// `n^2(l) = 1 + sum_i b_i l^2 / (l^2 - c_i)`, `c_i` in um^2 (BK7: b = 1.0396, 0.2318, 1.0105;
+    /// c = 0.0060, 0.0200, 103.56).
+    Sellmeier {
+        /// The three `B` coefficients.
+        b: [f64; 3],
+        /// The three `C` coefficients, um^2.
+        c_um2: [f64; 3],
+    },
+}
+
+/// The physical lens a `physical-lens` database was traced through (filled by the precompute).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LensPrescription {
+    /// Signed radius of curvature of the front surface, mm (positive: centre behind the surface).
+    pub radius_front_mm: f64,
+    /// Signed radius of curvature of the back surface, mm (biconvex: negative).
+    pub radius_back_mm: f64,
+    /// Centre thickness of the lens, mm.
+    pub thickness_mm: f64,
+    /// Clear diameter of the lens, mm.
+    pub lens_diameter_mm: f64,
+    /// Diameter of the aperture stop, mm.
+    pub stop_diameter_mm: f64,
+    /// Position of the stop along the axis relative to the front vertex, mm (negative: in front).
+    pub stop_position_mm: f64,
+    /// Glass name (e.g. "N-BK7").
+    pub glass: String,
+    /// The glass's dispersion formula.
+    pub dispersion: Dispersion,
+    /// Distance in focus, scene units.
+    pub focus_distance: f64,
+    /// Millimetres per scene unit.
+    pub scene_unit_mm: f64,
+    /// Paraxial focal length, mm.
+    pub focal_length_mm: f64,
+    /// Distance from the back vertex to the sensor, mm (set by focusing).
+    pub sensor_distance_mm: f64,
+    /// Sensor width, mm.
+    pub sensor_width_mm: f64,
+    /// Image width, pixels (pixels per mm = image_width_px / sensor_width_mm).
+    pub image_width_px: u32,
+}
+
+/// Per-PSF statistics recorded by the precompute.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PsfStats {
+    /// The PSF's representative parameters (physical units; second entry 0 in 1D spaces).
+    pub coords: [f32; 2],
+    /// Number of spreadlets (0 for a dense PSF).
+    pub spreadlets: u32,
+    /// Number of pixels of the dense PSF's support.
+    pub dense_support: u32,
+    /// L1 error of the integrated spreadlets against the pre-filtered PSF.
+    pub l1: f32,
+    /// SSIM of the integrated spreadlets against the pre-filtered PSF (`metrics::ssim_plane`).
+    pub ssim: f32,
+    /// Largest distance of the PSF's support from its centre, pixels.
+    pub extent_px: f32,
+}
+
+/// How a database was built (informational).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct BuildInfo {
+    /// Profile name ("quick", "paper", ...).
+    pub profile: String,
+    /// Wall-clock build time, seconds. Leave `None` for byte-reproducible files.
+    pub build_seconds: Option<f64>,
+    /// Tool and version that wrote the file.
+    pub tool: String,
+    /// Free-form key/value notes.
+    pub notes: Vec<(String, String)>,
+}
+
+/// The database header (bincode-encoded in the file).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DbHeader {
+    /// PSF model; callers check it against the model they expect.
+    pub model: PsfModel,
+    /// Parameter space (ranges, betas, nested grid: `space.grid()`).
+    pub space: ParamSpace,
+    /// Channels per spreadlet value and dense pixel (= `model.channels()`).
+    pub channels: u32,
+    /// PSF image resolution used for tracing, px (square); every offset lies within +-this.
+    pub psf_resolution: u32,
+    /// Light-tracing samples per PSF.
+    pub rays_per_psf: u64,
+    /// Random seed of the build.
+    pub seed: u64,
+    /// Spreadlet density knob (1.0 = default).
+    pub spreadlet_budget: f32,
+    /// Whether PSFs were pre-filtered over their cell's box.
+    pub prefilter: bool,
+    /// Aperture shape.
+    pub aperture: Aperture,
+    /// Lens prescription (`physical-lens` only).
+    pub lens: Option<LensPrescription>,
+    /// Per-PSF statistics, in PSF order (empty or `psf_count` entries).
+    pub stats: Vec<PsfStats>,
+    /// Build information.
+    pub build: BuildInfo,
+}
+
+impl DbHeader {
+    /// A header with defaults for everything but model, space and PSF resolution: channels from
+    /// the model, no rays, seed 0, budget 1.0, pre-filtering on, circular aperture, no lens,
+    /// no stats.
+    pub fn new(model: PsfModel, space: ParamSpace, psf_resolution: u32) -> Self {
+        DbHeader {
+            model,
+            space,
+            channels: model.channels() as u32,
+            psf_resolution,
+            rays_per_psf: 0,
+            seed: 0,
+            spreadlet_budget: 1.0,
+            prefilter: true,
+            aperture: Aperture::default(),
+            lens: None,
+            stats: Vec::new(),
+            build: BuildInfo::default(),
+        }
+    }
+}
+
+/// Where a dense (fast-track) PSF image lies in `dense_data`; the GPU struct (12 bytes).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
+pub struct DenseEntry {
+    /// Index of the first `f32` in `dense_data`.
+    pub offset: u32,
+    /// Image width, px.
+    pub width: u16,
+    /// Image height, px.
+    pub height: u16,
+    /// x of the image's top-left pixel relative to the PSF centre, px.
+    pub origin_x: i16,
+    /// y of the image's top-left pixel relative to the PSF centre, px (y down).
+    pub origin_y: i16,
+}
+
+/// A dense PSF image borrowed from a database.
+#[derive(Clone, Copy, Debug)]
+pub struct DenseView<'a> {
+    /// Width, px.
+    pub width: usize,
+    /// Height, px.
+    pub height: usize,
+    /// Offset of the top-left pixel from the PSF centre, px (x right, y down).
+    pub origin: [i32; 2],
+    /// Channels per pixel.
+    pub channels: usize,
+    /// `width * height * channels` values, row-major, channel-interleaved (primal PSF values).
+    pub data: &'a [f32],
+}
+
+impl DenseView<'_> {
+    /// Value at pixel `(x, y)` of the image (not relative to the centre), channel `c`.
+    #[inline]
+    pub fn get(&self, x: usize, y: usize, c: usize) -> f32 {
+        self.data[(y * self.width + x) * self.channels + c]
+    }
+}
+
+/// A loaded (or freshly built) PSF database.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PsfDatabase {
+    header: DbHeader,
+    cumulative: Vec<u32>,
+    positions: Vec<[i16; 2]>,
+    values: Vec<f32>,
+    dense_slot: Vec<u32>,
+    dense: Vec<DenseEntry>,
+    dense_data: Vec<f32>,
+    max_extent_px: u32,
+}
+
+impl PsfDatabase {
+    /// The header.
+    pub fn header(&self) -> &DbHeader {
+        &self.header
+    }
+
+    /// The PSF model (shortcut for `header().model`).
+    pub fn model(&self) -> PsfModel {
+        self.header.model
+    }
+
+    /// The parameter space (shortcut for `header().space`).
+    pub fn space(&self) -> &ParamSpace {
+        &self.header.space
+    }
+
+    /// Number of PSFs.
+    pub fn psf_count(&self) -> usize {
+        self.dense_slot.len()
+    }
+
+    /// Channels per value (1 or 3).
+    pub fn channels(&self) -> usize {
+        self.header.channels as usize
+    }
+
+    /// Spreadlets of PSF `i`: positions (px from the centre) and values
+    /// (`channels` per position, interleaved). Empty for a dense PSF. Panics if `i >= psf_count()`.
+    #[inline]
+    pub fn spreadlets(&self, i: usize) -> (&[[i16; 2]], &[f32]) {
+        let a = self.cumulative[i] as usize;
+        let b = self.cumulative[i + 1] as usize;
+        let c = self.channels();
+        (&self.positions[a..b], &self.values[a * c..b * c])
+    }
+
+    /// The dense image of PSF `i` when it is stored dense (fast track), else `None`.
+    /// Panics if `i >= psf_count()`.
+    #[inline]
+    pub fn dense(&self, i: usize) -> Option<DenseView<'_>> {
+        let slot = self.dense_slot[i];
+        if slot == SPARSE_SLOT {
+            return None;
+        }
+        let e = self.dense[slot as usize];
+        let c = self.channels();
+        let len = e.width as usize * e.height as usize * c;
+        let off = e.offset as usize;
+        Some(DenseView {
+            width: e.width as usize,
+            height: e.height as usize,
+            origin: [e.origin_x as i32, e.origin_y as i32],
+            channels: c,
+            data: &self.dense_data[off..off + len],
+        })
+    }
+
+    /// The PSF for physical parameters `s` and whether `s` was clamped into the space. O(1).
+    #[inline]
+    pub fn lookup(&self, s: [f32; 2]) -> (u32, bool) {
+        self.header.space.lookup(s)
+    }
+
+    /// Ceiling of the largest Euclidean distance (px) of any spreadlet or dense pixel from its
+    /// PSF centre: the padding a layer needs, valid under any rotation of the PSF.
+    pub fn max_extent_px(&self) -> u32 {
+        self.max_extent_px
+    }
+
+    /// `cumulative` array (`psf_count + 1` entries), as uploaded to the GPU.
+    pub fn cumulative(&self) -> &[u32] {
+        &self.cumulative
+    }
+
+    /// `positions` array (one `[x, y]` per spreadlet).
+    pub fn positions(&self) -> &[[i16; 2]] {
+        &self.positions
+    }
+
+    /// `values` array (`channels` per spreadlet).
+    pub fn values(&self) -> &[f32] {
+        &self.values
+    }
+
+    /// `dense_slot` array (`psf_count` entries, [`SPARSE_SLOT`] for sparse PSFs).
+    pub fn dense_slots(&self) -> &[u32] {
+        &self.dense_slot
+    }
+
+    /// `dense` entries.
+    pub fn dense_entries(&self) -> &[DenseEntry] {
+        &self.dense
+    }
+
+    /// `dense_data` array.
+    pub fn dense_data(&self) -> &[f32] {
+        &self.dense_data
+    }
+
+    /// Total number of spreadlets.
+    pub fn spreadlet_count(&self) -> usize {
+        self.positions.len()
+    }
+
+    /// Reads and validates a database file. The magic and version are checked on the first
+    /// bytes before the rest of the file is read, so a foreign file is rejected cheaply.
+    pub fn read(path: impl AsRef<Path>) -> Result<Self, DbError> {
+        use std::io::Read;
+        let path = path.as_ref();
+        let io = |source| DbError::Io {
+            path: path.to_path_buf(),
+            source,
+        };
+        let mut file = std::fs::File::open(path).map_err(io)?;
+        let len = file.metadata().map_err(io)?.len();
+        let mut head = Vec::with_capacity(PREAMBLE);
+        (&mut file)
+            .take(PREAMBLE as u64)
+            .read_to_end(&mut head)
+            .map_err(io)?;
+        if head.len() < PREAMBLE {
+            // Too short for a preamble: let the parser say whether it is foreign or truncated.
+            return Self::from_bytes(&head);
+        }
+        if head[..8] != MAGIC {
+            return Err(DbError::BadMagic);
+        }
+        let version = read_u32(&head, 8);
+        if version != FORMAT_VERSION {
+            return Err(DbError::UnsupportedVersion {
+                found: version,
+                expected: FORMAT_VERSION,
+            });
+        }
+        let mut bytes = head;
+        bytes.reserve(usize::try_from(len).unwrap_or(0).saturating_sub(PREAMBLE));
+        file.read_to_end(&mut bytes).map_err(io)?;
+        Self::from_bytes(&bytes)
+    }
+
+    /// Writes the database to `path` atomically: a temporary file in the same folder, synced,
+    /// then renamed over `path`. Never leaves a half-written file at `path`.
+    pub fn write_atomic(&self, path: impl AsRef<Path>) -> Result<(), DbError> {
+        let path = path.as_ref();
+        let bytes = self.to_bytes()?;
+        let io = |source| DbError::Io {
+            path: path.to_path_buf(),
+            source,
+        };
+        let dir = match path.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p,
+            _ => Path::new("."),
+        };
+        let mut tmp = tempfile::NamedTempFile::new_in(dir).map_err(io)?;
+        tmp.write_all(&bytes).map_err(io)?;
+        tmp.as_file().sync_all().map_err(io)?;
+        tmp.persist(path).map_err(|e| io(e.error))?;
+        Ok(())
+    }
+
+    /// The file's bytes.
+    pub fn to_bytes(&self) -> Result<Vec<u8>, DbError> {
+        let header = bincode::serde::encode_to_vec(&self.header, bincode::config::standard())
+            .map_err(|e| DbError::Header(e.to_string()))?;
+        let mut out = Vec::with_capacity(
+            PREAMBLE
+                + header.len()
+                + COUNTS
+                + 4 * (self.cumulative.len()
+                    + self.positions.len()
+                    + self.values.len()
+                    + self.dense_slot.len()
+                    + 3 * self.dense.len()
+                    + self.dense_data.len())
+                + CRC,
+        );
+        out.extend_from_slice(&MAGIC);
+        out.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
+        out.extend_from_slice(&(header.len() as u64).to_le_bytes());
+        out.extend_from_slice(&header);
+        for count in [
+            self.dense_slot.len(),
+            self.positions.len(),
+            self.channels(),
+            self.dense.len(),
+            self.dense_data.len(),
+        ] {
+            out.extend_from_slice(&(count as u64).to_le_bytes());
+        }
+        for v in &self.cumulative {
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+        for p in &self.positions {
+            out.extend_from_slice(&p[0].to_le_bytes());
+            out.extend_from_slice(&p[1].to_le_bytes());
+        }
+        for v in &self.values {
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+        for v in &self.dense_slot {
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+        for e in &self.dense {
+            out.extend_from_slice(&e.offset.to_le_bytes());
+            out.extend_from_slice(&e.width.to_le_bytes());
+            out.extend_from_slice(&e.height.to_le_bytes());
+            out.extend_from_slice(&e.origin_x.to_le_bytes());
+            out.extend_from_slice(&e.origin_y.to_le_bytes());
+        }
+        for v in &self.dense_data {
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+        let crc = crc32fast::hash(&out);
+        out.extend_from_slice(&crc.to_le_bytes());
+        Ok(out)
+    }
+
+    /// Parses and validates a database from its bytes (see the module docs for the checks).
+    pub fn from_bytes(bytes: &[u8]) -> Result<Self, DbError> {
+        let found = bytes.len() as u64;
+        if bytes.len() < MAGIC.len() {
+            return Err(if MAGIC.starts_with(bytes) {
+                DbError::Truncated {
+                    needed: PREAMBLE as u64,
+                    found,
+                }
+            } else {
+                DbError::BadMagic
+            });
+        }
+        if bytes[..8] != MAGIC {
+            return Err(DbError::BadMagic);
+        }
+        if bytes.len() < PREAMBLE {
+            return Err(DbError::Truncated {
+                needed: PREAMBLE as u64,
+                found,
+            });
+        }
+        let version = read_u32(bytes, 8);
+        if version != FORMAT_VERSION {
+            return Err(DbError::UnsupportedVersion {
+                found: version,
+                expected: FORMAT_VERSION,
+            });
+        }
+        let header_len = read_u64(bytes, 12);
+        let min_needed = ((PREAMBLE + COUNTS + CRC) as u64).saturating_add(header_len);
+        if min_needed > found {
+            return Err(DbError::Truncated {
+                needed: min_needed,
+                found,
+            });
+        }
+        if header_len > MAX_HEADER_BYTES {
+            return Err(DbError::Header(format!(
+                "header length {header_len} exceeds the limit of {MAX_HEADER_BYTES} bytes"
+            )));
+        }
+        let counts_at = PREAMBLE + header_len as usize;
+        let n_psf = read_u64(bytes, counts_at);
+        let n_spreadlets = read_u64(bytes, counts_at + 8);
+        let channels = read_u64(bytes, counts_at + 16);
+        let n_dense = read_u64(bytes, counts_at + 24);
+        let n_dense_data = read_u64(bytes, counts_at + 32);
+        // Every array length in bytes, with overflow counted as "needs more than any file".
+        let sizes = [
+            n_psf.checked_add(1).and_then(|n| n.checked_mul(4)),
+            n_spreadlets.checked_mul(4),
+            n_spreadlets
+                .checked_mul(channels)
+                .and_then(|n| n.checked_mul(4)),
+            n_psf.checked_mul(4),
+            n_dense.checked_mul(12),
+            n_dense_data.checked_mul(4),
+        ];
+        let mut expected = Some(min_needed);
+        for s in sizes {
+            expected = expected.and_then(|e| s.and_then(|s| e.checked_add(s)));
+        }
+        let expected = expected.unwrap_or(u64::MAX);
+        if expected > found {
+            return Err(DbError::Truncated {
+                needed: expected,
+                found,
+            });
+        }
+        if expected < found {
+            return Err(DbError::LengthMismatch { expected, found });
+        }
+        let body = bytes.len() - CRC;
+        let stored = read_u32(bytes, body);
+        let computed = crc32fast::hash(&bytes[..body]);
+        if stored != computed {
+            return Err(DbError::Checksum { stored, computed });
+        }
+
+        let header_bytes = &bytes[PREAMBLE..counts_at];
+        let config = bincode::config::standard().with_limit::<{ MAX_HEADER_BYTES as usize }>();
+        let (header, used): (DbHeader, usize) =
+            bincode::serde::decode_from_slice(header_bytes, config)
+                .map_err(|e| DbError::Header(e.to_string()))?;
+        if used != header_bytes.len() {
+            return Err(DbError::Header(format!(
+                "header decodes to {used} bytes, length field says {}",
+                header_bytes.len()
+            )));
+        }
+        if u64::from(header.space.psf_count()) != n_psf {
+            return Err(DbError::OutOfBounds {
+                what: format!(
+                    "{n_psf} PSFs stored, the header's space has {}",
+                    header.space.psf_count()
+                ),
+            });
+        }
+        if u64::from(header.channels) != channels {
+            return Err(DbError::OutOfBounds {
+                what: format!(
+                    "{channels} channels in the arrays, {} in the header",
+                    header.channels
+                ),
+            });
+        }
+
+        // All lengths now agree with the bytes present: allocation is bounded by the file size.
+        let mut at = counts_at + COUNTS;
+        let mut take = |len: usize| {
+            let s = &bytes[at..at + len];
+            at += len;
+            s
+        };
+        let cumulative = take(4 * (n_psf as usize + 1))
+            .chunks_exact(4)
+            .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+            .collect();
+        let positions = take(4 * n_spreadlets as usize)
+            .chunks_exact(4)
+            .map(|c| {
+                [
+                    i16::from_le_bytes([c[0], c[1]]),
+                    i16::from_le_bytes([c[2], c[3]]),
+                ]
+            })
+            .collect();
+        let values = take(4 * (n_spreadlets * channels) as usize)
+            .chunks_exact(4)
+            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+            .collect();
+        let dense_slot = take(4 * n_psf as usize)
+            .chunks_exact(4)
+            .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+            .collect();
+        let dense = take(12 * n_dense as usize)
+            .chunks_exact(12)
+            .map(|c| DenseEntry {
+                offset: u32::from_le_bytes([c[0], c[1], c[2], c[3]]),
+                width: u16::from_le_bytes([c[4], c[5]]),
+                height: u16::from_le_bytes([c[6], c[7]]),
+                origin_x: i16::from_le_bytes([c[8], c[9]]),
+                origin_y: i16::from_le_bytes([c[10], c[11]]),
+            })
+            .collect();
+        let dense_data = take(4 * n_dense_data as usize)
+            .chunks_exact(4)
+            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+            .collect();
+        let mut db = PsfDatabase {
+            header,
+            cumulative,
+            positions,
+            values,
+            dense_slot,
+            dense,
+            dense_data,
+            max_extent_px: 0,
+        };
+        db.validate()?;
+        Ok(db)
+    }
+
+    /// Checks every count, index, offset and position, and computes `max_extent_px`.
+    fn validate(&mut self) -> Result<(), DbError> {
+        let oob = |what: String| Err(DbError::OutOfBounds { what });
+        let h = &self.header;
+        let n_psf = h.space.psf_count() as usize;
+        let ch = h.channels as usize;
+        if h.space.dim_count() != h.model.dims() {
+            return oob(format!(
+                "model {} has {} dimensions, the space {}",
+                h.model,
+                h.model.dims(),
+                h.space.dim_count()
+            ));
+        }
+        if ch != h.model.channels() {
+            return oob(format!(
+                "model {} has {} channels, the header says {ch}",
+                h.model,
+                h.model.channels()
+            ));
+        }
+        if h.psf_resolution == 0 || h.psf_resolution > i16::MAX as u32 {
+            return oob(format!(
+                "PSF resolution {} outside 1..=32767",
+                h.psf_resolution
+            ));
+        }
+        if !(h.stats.is_empty() || h.stats.len() == n_psf) {
+            return oob(format!("{} PSF stats for {n_psf} PSFs", h.stats.len()));
+        }
+        if self.dense_slot.len() != n_psf || self.cumulative.len() != n_psf + 1 {
+            return oob(format!("array lengths do not match {n_psf} PSFs"));
+        }
+        if self.values.len() != self.positions.len() * ch {
+            return oob("values do not match positions x channels".into());
+        }
+        if self.cumulative[0] != 0 {
+            return oob("cumulative[0] is not 0".into());
+        }
+        if self.cumulative[n_psf] as usize != self.positions.len() {
+            return oob(format!(
+                "cumulative ends at {}, {} spreadlets stored",
+                self.cumulative[n_psf],
+                self.positions.len()
+            ));
+        }
+        if let Some(i) = self.cumulative.windows(2).position(|w| w[1] < w[0]) {
+            return oob(format!("cumulative decreases at PSF {i}"));
+        }
+        let r = h.psf_resolution as i32;
+        let mut max_sq: i64 = 0;
+        for (k, p) in self.positions.iter().enumerate() {
+            let (x, y) = (p[0] as i32, p[1] as i32);
+            if x.abs() > r || y.abs() > r {
+                return oob(format!(
+                    "spreadlet {k} at ({x}, {y}) outside the PSF resolution +-{r}"
+                ));
+            }
+            max_sq = max_sq.max((x * x + y * y) as i64);
+        }
+        if let Some(k) = self.values.iter().position(|v| !v.is_finite()) {
+            return oob(format!("spreadlet value {k} is not finite"));
+        }
+        if let Some(k) = self.dense_data.iter().position(|v| !v.is_finite()) {
+            return oob(format!("dense value {k} is not finite"));
+        }
+        let mut used = vec![false; self.dense.len()];
+        for (i, &slot) in self.dense_slot.iter().enumerate() {
+            if slot == SPARSE_SLOT {
+                continue;
+            }
+            let Some(e) = self.dense.get(slot as usize) else {
+                return oob(format!(
+                    "PSF {i} has dense slot {slot}, {} dense entries",
+                    self.dense.len()
+                ));
+            };
+            if std::mem::replace(&mut used[slot as usize], true) {
+                return oob(format!("dense entry {slot} used by two PSFs"));
+            }
+            if self.cumulative[i] != self.cumulative[i + 1] {
+                return oob(format!("PSF {i} is both dense and sparse"));
+            }
+            let len = e.width as u64 * e.height as u64 * ch as u64;
+            if e.offset as u64 + len > self.dense_data.len() as u64 {
+                return oob(format!(
+                    "dense PSF {i} reads dense_data[{}..{}] of {}",
+                    e.offset,
+                    e.offset as u64 + len,
+                    self.dense_data.len()
+                ));
+            }
+            let (x0, y0) = (e.origin_x as i32, e.origin_y as i32);
+            let (x1, y1) = (x0 + e.width as i32 - 1, y0 + e.height as i32 - 1);
+            if x0 < -r || y0 < -r || x1 > r || y1 > r {
+                return oob(format!(
+                    "dense PSF {i} spans ({x0}, {y0})..=({x1}, {y1}), outside +-{r}"
+                ));
+            }
+            if e.width > 0 && e.height > 0 {
+                let fx = x0.abs().max(x1.abs()) as i64;
+                let fy = y0.abs().max(y1.abs()) as i64;
+                max_sq = max_sq.max(fx * fx + fy * fy);
+            }
+        }
+        if let Some(k) = used.iter().position(|u| !u) {
+            return oob(format!("dense entry {k} belongs to no PSF"));
+        }
+        self.max_extent_px = (max_sq as f64).sqrt().ceil() as u32;
+        Ok(())
+    }
+}
+
+/// Builds a database PSF by PSF, in index order.
+#[derive(Clone, Debug)]
+pub struct DatabaseBuilder {
+    db: PsfDatabase,
+}
+
+impl DatabaseBuilder {
+    /// A builder for `header` (its stats may be filled any time before [`Self::finish`]).
+    pub fn new(header: DbHeader) -> Self {
+        let n = header.space.psf_count() as usize;
+        DatabaseBuilder {
+            db: PsfDatabase {
+                header,
+                cumulative: {
+                    let mut c = Vec::with_capacity(n + 1);
+                    c.push(0);
+                    c
+                },
+                positions: Vec::new(),
+                values: Vec::new(),
+                dense_slot: Vec::with_capacity(n),
+                dense: Vec::new(),
+                dense_data: Vec::new(),
+                max_extent_px: 0,
+            },
+        }
+    }
+
+    /// The header, to fill stats or build info while pushing.
+    pub fn header_mut(&mut self) -> &mut DbHeader {
+        &mut self.db.header
+    }
+
+    /// Number of PSFs pushed so far (= index of the next one).
+    pub fn pushed(&self) -> usize {
+        self.db.dense_slot.len()
+    }
+
+    fn check_room(&self) -> Result<(), DbError> {
+        if self.pushed() >= self.db.header.space.psf_count() as usize {
+            return Err(DbError::Invalid(format!(
+                "more PSFs pushed than the space's {}",
+                self.db.header.space.psf_count()
+            )));
+        }
+        Ok(())
+    }
+
+    /// Appends the next PSF as spreadlets: offsets (px) and `channels` values per offset.
+    /// Returns its index.
+    pub fn push_sparse(&mut self, positions: &[[i16; 2]], values: &[f32]) -> Result<u32, DbError> {
+        self.check_room()?;
+        let ch = self.db.header.channels as usize;
+        if values.len() != positions.len() * ch {
+            return Err(DbError::Invalid(format!(
+                "{} values for {} spreadlets x {ch} channels",
+                values.len(),
+                positions.len()
+            )));
+        }
+        let total = self.db.positions.len() + positions.len();
+        let total = u32::try_from(total)
+            .map_err(|_| DbError::Invalid("more than u32::MAX spreadlets".into()))?;
+        self.db.positions.extend_from_slice(positions);
+        self.db.values.extend_from_slice(values);
+        self.db.cumulative.push(total);
+        self.db.dense_slot.push(SPARSE_SLOT);
+        Ok(self.pushed() as u32 - 1)
+    }
+
+    /// Appends the next PSF as a dense image of `width x height` pixels (row-major,
+    /// channel-interleaved primal values) whose top-left pixel is at `origin` (px from the
+    /// centre). Returns its index.
+    pub fn push_dense(
+        &mut self,
+        origin: [i16; 2],
+        width: u16,
+        height: u16,
+        data: &[f32],
+    ) -> Result<u32, DbError> {
+        self.check_room()?;
+        let ch = self.db.header.channels as usize;
+        if data.len() != width as usize * height as usize * ch {
+            return Err(DbError::Invalid(format!(
+                "{} dense values for {width}x{height} px x {ch} channels",
+                data.len()
+            )));
+        }
+        let offset = u32::try_from(self.db.dense_data.len())
+            .map_err(|_| DbError::Invalid("dense data beyond u32 offsets".into()))?;
+        let slot = self.db.dense.len() as u32;
+        self.db.dense.push(DenseEntry {
+            offset,
+            width,
+            height,
+            origin_x: origin[0],
+            origin_y: origin[1],
+        });
+        self.db.dense_data.extend_from_slice(data);
+        let last = *self.db.cumulative.last().unwrap_or(&0);
+        self.db.cumulative.push(last);
+        self.db.dense_slot.push(slot);
+        Ok(self.pushed() as u32 - 1)
+    }
+
+    /// Checks that every PSF was pushed and everything is in bounds, and returns the database.
+    pub fn finish(self) -> Result<PsfDatabase, DbError> {
+        let n = self.db.header.space.psf_count() as usize;
+        if self.pushed() != n {
+            return Err(DbError::Invalid(format!(
+                "{} PSFs pushed, the space has {n}",
+                self.pushed()
+            )));
+        }
+        let mut db = self.db;
+        db.validate()?;
+        Ok(db)
+    }
+}
+
+fn read_u32(b: &[u8], at: usize) -> u32 {
+    u32::from_le_bytes([b[at], b[at + 1], b[at + 2], b[at + 3]])
+}
+
+fn read_u64(b: &[u8], at: usize) -> u64 {
+    let mut a = [0u8; 8];
+    a.copy_from_slice(&b[at..at + 8]);
+    u64::from_le_bytes(a)
+}

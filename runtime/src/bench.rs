@@ -1,0 +1,331 @@
+//! `spreadlet bench`: per-stage and total times of synthesis on both backends at several frame
+//! sizes, on a synthetic frame, as a Markdown table (medians of several runs, one process).
+//!
+//! The frame is one record per pixel over a smooth field of PSF coordinates that spans the
+//! database's whole parameter space (so every PSF size occurs), with a band in focus (copied
+//! pixels), motion directions turning across the frame (lens-motion), and `layers` depth layers.
+//! Classification is not timed (it is CPU work shared by both backends).
+
+use std::fmt::Write as _;
+use std::time::Instant;
+
+use psf_db::PsfDatabase;
+
+use crate::pipeline::types::{FrameParams, SplatPath, SplatRecord};
+use crate::pipeline::{
+    composite, integrate, splat, Classified, CompositeOptions, Integrator, LayerInfo, PathCounts,
+    SplatOptions,
+};
+
+/// What to measure.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BenchConfig {
+    /// Square frame sizes, px.
+    pub sizes: Vec<u32>,
+    /// Runs per backend and size (the median is reported); at least 1.
+    pub runs: usize,
+    /// Depth layers.
+    pub layers: u32,
+    /// Integration method.
+    pub integrator: Integrator,
+    /// Measure the CPU path.
+    pub cpu: bool,
+    /// Measure the GPU path (skipped, with a note, when there is no adapter).
+    pub gpu: bool,
+}
+
+impl Default for BenchConfig {
+    fn default() -> Self {
+        BenchConfig {
+            sizes: vec![512, 1024],
+            runs: 5,
+            layers: 8,
+            integrator: Integrator::Pyramid,
+            cpu: true,
+            gpu: true,
+        }
+    }
+}
+
+/// Median times of one backend at one size, milliseconds.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct BenchRow {
+    /// `cpu` or `gpu`.
+    pub backend: String,
+    /// Device: CPU thread count, or the GPU adapter's name.
+    pub device: String,
+    /// Frame edge, px.
+    pub size: u32,
+    /// Records in the frame.
+    pub records: usize,
+    /// Splatting, ms (median).
+    pub splat_ms: f64,
+    /// Integration, ms (median).
+    pub integrate_ms: f64,
+    /// Compositing, ms (median).
+    pub composite_ms: f64,
+    /// Whole frame after classification, ms (median; GPU: with record upload and image
+    /// readback).
+    pub total_ms: f64,
+    /// How the GPU stages were timed (`timestamps` or `wall`); `wall` for the CPU.
+    pub timing: String,
+    /// Runs.
+    pub runs: usize,
+}
+
+/// All rows of a benchmark run, and notes (e.g. why the GPU was skipped).
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct BenchReport {
+    /// The database measured with (model and PSF count).
+    pub database: String,
+    /// Rows, in the order measured.
+    pub rows: Vec<BenchRow>,
+    /// Remarks.
+    pub notes: Vec<String>,
+}
+
+/// Errors of a benchmark run.
+#[derive(Debug, thiserror::Error)]
+pub enum BenchError {
+    /// Nothing to measure.
+    #[error("benchmark configuration: {0}")]
+    Config(String),
+    /// The GPU path failed.
+    #[cfg(feature = "gpu")]
+    #[error(transparent)]
+    Gpu(#[from] crate::gpu::GpuError),
+}
+
+/// A synthetic `size x size` frame for `db` (see the module doc), as `pipeline::classify`
+/// would give it: records sorted by layer, then row, then column.
+pub fn synthetic_frame(db: &PsfDatabase, size: u32, layers: u32) -> Classified {
+    let layers = layers.max(1);
+    let dims = db.space().dims();
+    let range = |i: usize| dims.get(i).map_or((0.0, 0.0), |d| (d.min as f32, d.max as f32));
+    let (s0_min, s0_max) = range(0);
+    let (s1_min, s1_max) = range(1);
+    let pad = db.max_extent_px() + 2;
+    let n = size as usize;
+    let mut per_layer: Vec<Vec<SplatRecord>> = vec![Vec::new(); layers as usize];
+    for y in 0..n {
+        for x in 0..n {
+            let (u, v) = (x as f32 / n as f32, y as f32 / n as f32);
+            // Depth ramp top to bottom; the focus band is in the middle third.
+            let depth = v;
+            let defocus = ((depth - 0.5).abs() * 2.0 - 0.15).max(0.0) / 0.85;
+            let wobble = 0.5 + 0.5 * (9.0 * u).sin() * (7.0 * v).cos();
+            let s0 = s0_min + (s0_max - s0_min) * defocus * (0.6 + 0.4 * wobble);
+            let s1 = s1_min + (s1_max - s1_min) * wobble * u;
+            let (psf, _) = db.lookup([s0, s1]);
+            let in_focus = defocus == 0.0 && (s1_max <= s1_min || wobble * u < 0.02);
+            let path = if in_focus {
+                SplatPath::Copy
+            } else if db.dense(psf as usize).is_some() {
+                SplatPath::Dense
+            } else {
+                SplatPath::Sparse
+            };
+            let angle = 6.0 * (u - 0.5) * (v - 0.5) + (3.0 * u).sin();
+            let layer = ((depth * layers as f32) as u32).min(layers - 1);
+            let checker = if (x / 16 + y / 16) % 2 == 0 { 1.0 } else { 0.25 };
+            per_layer[layer as usize].push(SplatRecord {
+                center_x: (x as u32 + pad) as i32,
+                center_y: (y as u32 + pad) as i32,
+                psf_index: psf,
+                layer,
+                rot_cos: angle.cos(),
+                rot_sin: angle.sin(),
+                weight: 1.0,
+                path: path as u32,
+                color: [checker * u, checker * 0.6, checker * (1.0 - u), 1.0],
+            });
+        }
+    }
+    let mut records = Vec::with_capacity(n * n);
+    let mut infos = Vec::with_capacity(layers as usize);
+    let mut counts = PathCounts::default();
+    for recs in per_layer {
+        let mut info = LayerInfo {
+            first_record: records.len(),
+            record_count: recs.len(),
+            ..LayerInfo::default()
+        };
+        for r in &recs {
+            match r.path {
+                p if p == SplatPath::Sparse as u32 => info.sparse += 1,
+                p if p == SplatPath::Dense as u32 => info.dense += 1,
+                _ => info.copied += 1,
+            }
+        }
+        counts.sparse += info.sparse;
+        counts.dense += info.dense;
+        counts.copied += info.copied;
+        infos.push(info);
+        records.extend(recs);
+    }
+    Classified {
+        frame: FrameParams {
+            width: size,
+            height: size,
+            pad,
+            layers,
+            padded_width: size + 2 * pad,
+            padded_height: size + 2 * pad,
+            record_count: records.len() as u32,
+            db_channels: db.channels() as u32,
+        },
+        records,
+        layers: infos,
+        counts,
+    }
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    let m = v.len() / 2;
+    if v.len() % 2 == 1 {
+        v[m]
+    } else {
+        0.5 * (v[m - 1] + v[m])
+    }
+}
+
+fn ms(t: Instant) -> f64 {
+    t.elapsed().as_secs_f64() * 1e3
+}
+
+/// Times of the CPU path on `frame`, one entry per run: (splat, integrate, composite, total).
+fn time_cpu(db: &PsfDatabase, frame: &Classified, config: &BenchConfig) -> Vec<[f64; 4]> {
+    (0..config.runs)
+        .map(|_| {
+            let t0 = Instant::now();
+            let t = Instant::now();
+            let stack = splat(frame, Some(db), &SplatOptions::default());
+            let s = ms(t);
+            let t = Instant::now();
+            let layers = integrate(&stack, config.integrator);
+            let i = ms(t);
+            drop(stack);
+            let t = Instant::now();
+            let image = composite(&layers, &CompositeOptions::default());
+            let c = ms(t);
+            std::hint::black_box(image);
+            [s, i, c, ms(t0)]
+        })
+        .collect()
+}
+
+fn row(backend: &str, device: String, size: u32, records: usize, runs: &[[f64; 4]], timing: &str) -> BenchRow {
+    let col = |k: usize| median(runs.iter().map(|r| r[k]).collect());
+    BenchRow {
+        backend: backend.into(),
+        device,
+        size,
+        records,
+        splat_ms: col(0),
+        integrate_ms: col(1),
+        composite_ms: col(2),
+        total_ms: col(3),
+        timing: timing.into(),
+        runs: runs.len(),
+    }
+}
+
+/// Runs the benchmark with `db` (the lens-motion `quick` database is the paper's comparison
+/// point). The GPU's first frame of each size (pipeline warm-up, buffer allocation) is not
+/// counted.
+pub fn run_bench(db: &PsfDatabase, config: &BenchConfig) -> Result<BenchReport, BenchError> {
+    if config.sizes.is_empty() || config.runs == 0 || !(config.cpu || config.gpu) {
+        return Err(BenchError::Config("need at least one size, one run and one backend".into()));
+    }
+    if config.sizes.iter().any(|&s| s == 0 || s > 16384) {
+        return Err(BenchError::Config("sizes must be in 1..=16384 px".into()));
+    }
+    let mut report = BenchReport {
+        database: format!(
+            "{} ({} PSFs, {} spreadlets, max extent {} px)",
+            db.model().name(),
+            db.psf_count(),
+            db.spreadlet_count(),
+            db.max_extent_px()
+        ),
+        ..BenchReport::default()
+    };
+    #[cfg(feature = "gpu")]
+    let mut gpu = if config.gpu {
+        match crate::gpu::GpuContext::new()? {
+            Some(ctx) => Some(crate::gpu::GpuSynthesizer::new(&ctx, db, Default::default())?),
+            None => {
+                report.notes.push("no GPU adapter: GPU rows skipped".into());
+                None
+            }
+        }
+    } else {
+        None
+    };
+    #[cfg(not(feature = "gpu"))]
+    if config.gpu {
+        report.notes.push("built without the `gpu` feature: GPU rows skipped".into());
+    }
+    for &size in &config.sizes {
+        let frame = synthetic_frame(db, size, config.layers);
+        let records = frame.records.len();
+        if config.cpu {
+            let runs = time_cpu(db, &frame, config);
+            let device = format!("CPU, {} threads", rayon::current_num_threads());
+            report.rows.push(row("cpu", device, size, records, &runs, "wall"));
+        }
+        #[cfg(feature = "gpu")]
+        if let Some(gpu) = gpu.as_mut() {
+            // Warm-up: pipelines compiled by the driver, buffers allocated.
+            gpu.run(&frame.frame, &frame.records, config.integrator)?;
+            let mut runs = Vec::with_capacity(config.runs);
+            let mut timestamps = true;
+            for _ in 0..config.runs {
+                let (_, t) = gpu.run(&frame.frame, &frame.records, config.integrator)?;
+                timestamps &= t.gpu_timestamps;
+                runs.push([t.splat_ms, t.integrate_ms, t.composite_ms, t.total_ms]);
+            }
+            let timing = if timestamps { "timestamps" } else { "wall" };
+            report.rows.push(row("gpu", gpu.adapter_name(), size, records, &runs, timing));
+        }
+    }
+    Ok(report)
+}
+
+impl BenchReport {
+    /// The rows as a Markdown table, with the database and notes above it.
+    pub fn to_markdown(&self) -> String {
+        let mut s = String::new();
+        let _ = writeln!(s, "Database: {}\n", self.database);
+        let _ = writeln!(
+            s,
+            "| backend | device | size | records | splat ms | integrate ms | composite ms | total ms | timing | runs |"
+        );
+        let _ = writeln!(s, "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |");
+        for r in &self.rows {
+            let _ = writeln!(
+                s,
+                "| {} | {} | {}x{} | {} | {:.1} | {:.1} | {:.1} | {:.1} | {} | {} |",
+                r.backend,
+                r.device,
+                r.size,
+                r.size,
+                r.records,
+                r.splat_ms,
+                r.integrate_ms,
+                r.composite_ms,
+                r.total_ms,
+                r.timing,
+                r.runs
+            );
+        }
+        for n in &self.notes {
+            let _ = writeln!(s, "\nNote: {n}");
+        }
+        s
+    }
+}

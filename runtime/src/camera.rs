@@ -1,0 +1,286 @@
+//! The camera: lens and shutter as a user types them into a 3D package (`camera.json`, or the
+//! same names as command-line flags), validated, and the thin-lens circle of confusion.
+//!
+//! Units: `focal_length_mm` and `sensor_width_mm` in millimetres, `focus_distance` and depths in
+//! scene units (planar, along the viewing axis), `scene_unit_mm` millimetres per scene unit
+//! (1000 for metres, the default), CoC radii in output pixels, `shutter_frames` a fraction of
+//! the frame interval centred on the frame's time.
+
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// Largest accepted image edge, pixels (guards against absurd allocations).
+pub const MAX_IMAGE_EDGE: u32 = 32_768;
+
+/// Errors of camera parsing and validation.
+#[derive(Debug, thiserror::Error)]
+pub enum CameraError {
+    /// The file could not be read.
+    #[error("cannot read camera file {path}: {source}")]
+    Io {
+        /// The file.
+        path: String,
+        /// The cause.
+        source: std::io::Error,
+    },
+    /// The JSON is malformed or a field has the wrong type or is missing.
+    #[error("camera file {path} is not valid camera JSON: {source}")]
+    Json {
+        /// The file.
+        path: String,
+        /// The cause.
+        source: serde_json::Error,
+    },
+    /// A field's value cannot describe a real camera.
+    #[error("camera: {0}")]
+    Invalid(String),
+}
+
+/// A camera as in `camera.json` (see `shared/examples/README.md`). Unknown fields are ignored.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Camera {
+    /// Output width, pixels.
+    pub width: u32,
+    /// Output height, pixels.
+    pub height: u32,
+    /// Focal length, millimetres.
+    pub focal_length_mm: f64,
+    /// Sensor width, millimetres; maps onto the image width (horizontal sensor fit).
+    pub sensor_width_mm: f64,
+    /// Aperture as an f-number (diameter = focal length / f-stop); `None` for a pinhole.
+    #[serde(default)]
+    pub f_stop: Option<f64>,
+    /// Focus distance in scene units, planar; `None` for a pinhole.
+    #[serde(default)]
+    pub focus_distance: Option<f64>,
+    /// Number of aperture blades; 0 for a circular aperture.
+    #[serde(default)]
+    pub aperture_blades: u32,
+    /// Exposure as a fraction of the frame interval, centred on the frame; 0 = no motion blur.
+    #[serde(default)]
+    pub shutter_frames: f64,
+    /// Millimetres per scene unit (1000 when the scene is in metres, the default).
+    #[serde(default = "default_scene_unit_mm")]
+    pub scene_unit_mm: f64,
+}
+
+fn default_scene_unit_mm() -> f64 {
+    1000.0
+}
+
+impl Camera {
+    /// Reads and validates a `camera.json`.
+    pub fn from_json_file(path: &Path) -> Result<Self, CameraError> {
+        let text = std::fs::read_to_string(path).map_err(|source| CameraError::Io {
+            path: path.display().to_string(),
+            source,
+        })?;
+        Self::from_json_str(&text).map_err(|e| match e {
+            CameraError::Json { source, .. } => CameraError::Json {
+                path: path.display().to_string(),
+                source,
+            },
+            other => other,
+        })
+    }
+
+    /// Parses and validates camera JSON text.
+    pub fn from_json_str(text: &str) -> Result<Self, CameraError> {
+        let camera: Camera = serde_json::from_str(text).map_err(|source| CameraError::Json {
+            path: "<text>".into(),
+            source,
+        })?;
+        camera.validate()?;
+        Ok(camera)
+    }
+
+    /// Checks that the camera can exist; the message names the field.
+    pub fn validate(&self) -> Result<(), CameraError> {
+        let bad = |m: String| Err(CameraError::Invalid(m));
+        if self.width == 0 || self.height == 0 {
+            return bad(format!(
+                "image size {}x{} is empty: width and height must be at least 1",
+                self.width, self.height
+            ));
+        }
+        if self.width > MAX_IMAGE_EDGE || self.height > MAX_IMAGE_EDGE {
+            return bad(format!(
+                "image size {}x{} exceeds the limit of {MAX_IMAGE_EDGE} pixels per edge",
+                self.width, self.height
+            ));
+        }
+        if !(self.focal_length_mm.is_finite() && self.focal_length_mm > 0.0) {
+            return bad(format!(
+                "focal_length_mm must be a positive number, got {}",
+                self.focal_length_mm
+            ));
+        }
+        if !(self.sensor_width_mm.is_finite() && self.sensor_width_mm > 0.0) {
+            return bad(format!(
+                "sensor_width_mm must be a positive number, got {}",
+                self.sensor_width_mm
+            ));
+        }
+        if !(self.scene_unit_mm.is_finite() && self.scene_unit_mm > 0.0) {
+            return bad(format!(
+                "scene_unit_mm must be a positive number, got {}",
+                self.scene_unit_mm
+            ));
+        }
+        if let Some(n) = self.f_stop {
+            if !(n.is_finite() && n > 0.0) {
+                return bad(format!(
+                    "f_stop must be a positive f-number (or null for a pinhole), got {n}"
+                ));
+            }
+        }
+        if let Some(s) = self.focus_distance {
+            if !s.is_finite() || s <= 0.0 {
+                return bad(format!(
+                    "focus_distance must be a positive distance in scene units (or null), got {s}"
+                ));
+            }
+            let f = self.focal_length_scene();
+            if s <= f {
+                return bad(format!(
+                    "focus_distance {s} lies inside the focal length ({f} scene units = {} mm): a \
+                     lens cannot focus there",
+                    self.focal_length_mm
+                ));
+            }
+        }
+        if !(self.shutter_frames.is_finite() && self.shutter_frames >= 0.0) {
+            return bad(format!(
+                "shutter_frames must be zero or positive, got {}",
+                self.shutter_frames
+            ));
+        }
+        if self.aperture_blades == 1 || self.aperture_blades == 2 {
+            return bad(format!(
+                "aperture_blades must be 0 (circular) or at least 3, got {}",
+                self.aperture_blades
+            ));
+        }
+        Ok(())
+    }
+
+    /// Focal length in scene units.
+    pub fn focal_length_scene(&self) -> f64 {
+        self.focal_length_mm / self.scene_unit_mm
+    }
+
+    /// True when the camera has a finite aperture and a focus distance (depth of field).
+    pub fn has_lens(&self) -> bool {
+        matches!((self.f_stop, self.focus_distance), (Some(_), Some(_)))
+    }
+
+    /// True when the shutter is open for a non-zero fraction of the frame.
+    pub fn has_shutter(&self) -> bool {
+        self.shutter_frames > 0.0
+    }
+
+    /// Pixels per millimetre on the sensor.
+    pub fn pixels_per_mm(&self) -> f64 {
+        f64::from(self.width) / self.sensor_width_mm
+    }
+
+    /// The thin-lens model of this camera, `None` for a pinhole.
+    pub fn thin_lens(&self) -> Option<ThinLens> {
+        let (n, s) = (self.f_stop?, self.focus_distance?);
+        let f = self.focal_length_scene();
+        let aperture_mm = self.focal_length_mm / n;
+        // CoC diameter on the sensor (mm) = A f |d - s| / (d (s - f)); radius in pixels, signed:
+        // r(d) = k (1 - s/d), k = A f / (s - f) / 2 * px/mm. Linear in 1/d: constant parallax.
+        let k = 0.5 * aperture_mm * f / (s - f) * self.pixels_per_mm();
+        Some(ThinLens {
+            focus_distance: s,
+            coc_scale_px: k,
+        })
+    }
+}
+
+/// The thin-lens circle of confusion as a function of depth.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ThinLens {
+    /// Focus distance, scene units.
+    pub focus_distance: f64,
+    /// The signed CoC radius (pixels) that a point at infinite depth gets.
+    pub coc_scale_px: f64,
+}
+
+impl ThinLens {
+    /// Signed CoC radius in pixels at planar depth `depth` (scene units): positive behind the
+    /// focus plane, negative in front; proportional to the parallax `1/s - 1/d`.
+    /// `depth` must be positive; `+inf` gives [`ThinLens::coc_scale_px`].
+    pub fn signed_coc_px(&self, depth: f64) -> f64 {
+        self.coc_scale_px * (1.0 - self.focus_distance / depth)
+    }
+
+    /// Unsigned CoC radius in pixels.
+    pub fn coc_px(&self, depth: f64) -> f64 {
+        self.signed_coc_px(depth).abs()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn comets() -> Camera {
+        Camera::from_json_str(
+            r#"{"scene":"comets","width":512,"height":512,"focal_length_mm":50.0,
+            "sensor_width_mm":36.0,"f_stop":1.6,"focus_distance":0.7,"aperture_blades":0,
+            "shutter_frames":1.0,"reference_spp":2048,"reference_seconds":null}"#,
+        )
+        .expect("valid camera")
+    }
+
+    #[test]
+    fn coc_matches_the_thin_lens_formula_by_hand() {
+        let cam = comets();
+        let lens = cam.thin_lens().expect("lens");
+        // d = 1.4 m: A = 50/1.6 = 31.25 mm, f = 0.05 m, s = 0.7 m.
+        // diameter = 31.25 * 0.05 * 0.7 / (1.4 * 0.65) mm = 1.2019... mm; radius px = /2 * 512/36.
+        let d = 1.4;
+        let diameter_mm: f64 = 31.25 * 0.05 * (d - 0.7) / (d * (0.7 - 0.05));
+        let expected = diameter_mm / 2.0 * 512.0 / 36.0;
+        assert!((lens.coc_px(d) - expected).abs() < 1e-9);
+        assert!(lens.signed_coc_px(d) > 0.0);
+        assert!(lens.signed_coc_px(0.5) < 0.0);
+        assert!(lens.coc_px(0.7).abs() < 1e-12);
+    }
+
+    #[test]
+    fn pinhole_when_either_is_null() {
+        let cam = Camera::from_json_str(
+            r#"{"width":8,"height":8,"focal_length_mm":50,"sensor_width_mm":36,"f_stop":null,
+            "focus_distance":2.0}"#,
+        )
+        .expect("valid");
+        assert!(!cam.has_lens());
+        assert!(cam.thin_lens().is_none());
+        assert!(!cam.has_shutter());
+    }
+
+    #[test]
+    fn impossible_cameras_are_rejected_with_the_field_named() {
+        let cases = [
+            (r#""f_stop":-2.0,"focus_distance":1.0"#, "f_stop"),
+            (r#""f_stop":2.0,"focus_distance":0.01"#, "focal length"),
+            (r#""f_stop":0.0,"focus_distance":1.0"#, "f_stop"),
+            (r#""f_stop":2.0,"focus_distance":1.0,"shutter_frames":-1"#, "shutter_frames"),
+        ];
+        for (fields, needle) in cases {
+            let text = format!(
+                r#"{{"width":8,"height":8,"focal_length_mm":50,"sensor_width_mm":36,{fields}}}"#
+            );
+            let err = Camera::from_json_str(&text).expect_err(fields).to_string();
+            assert!(err.contains(needle), "{err} should mention {needle}");
+        }
+        let zero = r#"{"width":0,"height":8,"focal_length_mm":50,"sensor_width_mm":36}"#;
+        assert!(Camera::from_json_str(zero).is_err());
+        let missing = r#"{"width":8,"height":8,"sensor_width_mm":36}"#;
+        let err = Camera::from_json_str(missing).expect_err("missing").to_string();
+        assert!(err.contains("focal_length_mm"), "{err}");
+    }
+}

@@ -1,0 +1,162 @@
+//! The database cache: a user with only a G-buffer and a camera gets a result from one command.
+//! A missing database is built with `precompute` (the `quick` profile by default, progress on
+//! stderr) into the cache folder (`$SPREADLET_CACHE`, else `./.spreadlet-cache`), named by
+//! model, profile and a hash of the build settings, and reused on later runs.
+
+use std::path::{Path, PathBuf};
+
+use precompute::{build_database, BuildConfig, Profile};
+use psf_db::{PsfDatabase, PsfModel};
+
+/// Environment variable naming the cache folder.
+pub const CACHE_ENV: &str = "SPREADLET_CACHE";
+
+/// Errors of the cache.
+#[derive(Debug, thiserror::Error)]
+pub enum CacheError {
+    /// The cache folder could not be created.
+    #[error("cannot create the database cache folder {path}: {source}")]
+    Folder {
+        /// The folder.
+        path: String,
+        /// The cause.
+        source: std::io::Error,
+    },
+    /// Building the database failed.
+    #[error("building the {model} database failed: {source}")]
+    Build {
+        /// The model.
+        model: &'static str,
+        /// The cause.
+        source: precompute::PrecomputeError,
+    },
+    /// Reading or writing a database failed.
+    #[error(transparent)]
+    Db(#[from] psf_db::DbError),
+    /// A database file given explicitly is of another model than the scene needs.
+    #[error("database {path} is a {found} database, but this input needs {needed}")]
+    WrongModel {
+        /// The file.
+        path: String,
+        /// Its model.
+        found: &'static str,
+        /// The model needed.
+        needed: &'static str,
+    },
+}
+
+/// The cache folder: `$SPREADLET_CACHE` when set and non-empty, else `./.spreadlet-cache`.
+pub fn cache_dir() -> PathBuf {
+    match std::env::var_os(CACHE_ENV) {
+        Some(v) if !v.is_empty() => PathBuf::from(v),
+        _ => PathBuf::from(".spreadlet-cache"),
+    }
+}
+
+/// The build settings for `model` at `profile` with an aperture of `blades` blades (0 =
+/// circular).
+pub fn build_config(model: PsfModel, profile: Profile, blades: u32) -> BuildConfig {
+    let mut cfg = BuildConfig::new(model, profile);
+    cfg.blades = blades;
+    cfg
+}
+
+/// The file name a configuration is cached under: model, profile, and a hash (FNV-1a 64) of
+/// every build setting and the database format version.
+pub fn cache_file_name(cfg: &BuildConfig) -> String {
+    let key = format!("{cfg:?} format={}", psf_db::FORMAT_VERSION);
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for b in key.bytes() {
+        h ^= u64::from(b);
+        h = h.wrapping_mul(0x0100_0000_01b3);
+    }
+    format!("{}-{}-{h:016x}.sprdlt", cfg.model.name(), cfg.profile.name())
+}
+
+/// Where a cached database came from.
+#[derive(Clone, Debug, PartialEq, Eq, serde::Serialize)]
+pub struct DbSource {
+    /// The file.
+    pub path: PathBuf,
+    /// True when it was built by this call.
+    pub built: bool,
+}
+
+/// The database for `cfg` from the cache folder `dir`, built (and stored) when missing or
+/// unreadable (a corrupt cache file is rebuilt, not trusted).
+pub fn cached_database(
+    cfg: &BuildConfig,
+    dir: &Path,
+    progress: bool,
+) -> Result<(PsfDatabase, DbSource), CacheError> {
+    let path = dir.join(cache_file_name(cfg));
+    if path.exists() {
+        match PsfDatabase::read(&path) {
+            Ok(db) if db.model() == cfg.model => {
+                return Ok((db, DbSource { path, built: false }));
+            }
+            Ok(_) | Err(_) => {
+                if progress {
+                    eprintln!("cached database {} is unusable; rebuilding", path.display());
+                }
+            }
+        }
+    }
+    std::fs::create_dir_all(dir).map_err(|source| CacheError::Folder {
+        path: dir.display().to_string(),
+        source,
+    })?;
+    if progress {
+        eprintln!(
+            "building the {} database ({} profile) into {}",
+            cfg.model.name(),
+            cfg.profile.name(),
+            path.display()
+        );
+    }
+    let (db, _report) = build_database(cfg, progress).map_err(|source| CacheError::Build {
+        model: cfg.model.name(),
+        source,
+    })?;
+    db.write_atomic(&path)?;
+    Ok((db, DbSource { path, built: true }))
+}
+
+/// Reads a database given explicitly and checks that it is of a model usable for `needed`
+/// (a lens-motion database also serves defocus alone).
+pub fn explicit_database(path: &Path, needed: PsfModel) -> Result<PsfDatabase, CacheError> {
+    let db = PsfDatabase::read(path)?;
+    let found = db.model();
+    let ok = found == needed
+        || (needed == PsfModel::ThinLens && found == PsfModel::LensMotion)
+        || found == PsfModel::PhysicalLens && needed != PsfModel::LensMotion;
+    if !ok {
+        return Err(CacheError::WrongModel {
+            path: path.display().to_string(),
+            found: found.name(),
+            needed: needed.name(),
+        });
+    }
+    Ok(db)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cache_names_differ_by_model_profile_and_settings() {
+        let a = cache_file_name(&build_config(PsfModel::ThinLens, Profile::Quick, 0));
+        let b = cache_file_name(&build_config(PsfModel::ThinLens, Profile::Quick, 6));
+        let c = cache_file_name(&build_config(PsfModel::LensMotion, Profile::Quick, 0));
+        let d = cache_file_name(&build_config(PsfModel::ThinLens, Profile::Test, 0));
+        assert!(a.starts_with("thin-lens-quick-"));
+        assert_ne!(a, b);
+        assert_ne!(a, c);
+        assert_ne!(a, d);
+        assert_eq!(
+            a,
+            cache_file_name(&build_config(PsfModel::ThinLens, Profile::Quick, 0))
+        );
+    }
+}

@@ -1,0 +1,380 @@
+//! Reading pinhole G-buffers (colour, depth, forward motion) from OpenEXR.
+//!
+//! Two layouts:
+//! - **Blender multilayer** (`<Layer>.Combined.{R,G,B,A}`, `<Layer>.Depth.Z`,
+//!   `<Layer>.Vector.{X,Y,Z,W}`): the layer name is found, not assumed. Blender's vector pass
+//!   has y up and `Z, W` = position now minus position in the next frame, so the forward motion
+//!   in image coordinates (x right, y down) is `(-Z, +W)`.
+//! - **plain** single-layer files: `R, G, B` (and `A`, else 1), depth `Z` or `depth.Z` (or a
+//!   name given), forward motion `forward.u/forward.v` or `motion.x/motion.y` (or a pair given)
+//!   in pixels per frame, x right, y down (`motion_y_up` flips y).
+//!
+//! Policy for bad values (also in the stats): a pixel whose colour has a NaN or an infinity is
+//! dropped (made transparent black) and counted; a NaN, zero or negative depth is an error
+//! naming the pixel (+infinity is allowed: a point at infinity); a non-finite motion vector is
+//! an error naming the pixel.
+
+use std::path::Path;
+
+/// Largest accepted pixel count (width x height): 8192 x 8192.
+pub const MAX_PIXELS: usize = 8192 * 8192;
+
+/// Errors of reading G-buffers.
+#[derive(Debug, thiserror::Error)]
+pub enum GBufferError {
+    /// The file could not be opened or decoded.
+    #[error("cannot read OpenEXR {path}: {message}")]
+    Exr {
+        /// The file.
+        path: String,
+        /// The decoder's message.
+        message: String,
+    },
+    /// A channel the layout needs is not in the file.
+    #[error("{path}: missing channel {missing}; the file has: {present}")]
+    MissingChannel {
+        /// The file.
+        path: String,
+        /// The channel (or the alternatives) looked for.
+        missing: String,
+        /// The channels present, comma-separated.
+        present: String,
+    },
+    /// The layout is ambiguous or does not fit the file.
+    #[error("{path}: {message}")]
+    Layout {
+        /// The file.
+        path: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// The image is empty or larger than the limit.
+    #[error("{path}: image size {width}x{height} is {reason}")]
+    Size {
+        /// The file.
+        path: String,
+        /// Declared width.
+        width: usize,
+        /// Declared height.
+        height: usize,
+        /// Why it is refused.
+        reason: &'static str,
+    },
+    /// A depth or motion value the runtime cannot use.
+    #[error("{path}: {what} at pixel ({x}, {y}) is {value}: {why}")]
+    BadValue {
+        /// The file.
+        path: String,
+        /// Which quantity.
+        what: &'static str,
+        /// Column.
+        x: usize,
+        /// Row.
+        y: usize,
+        /// The value found.
+        value: f32,
+        /// What is expected.
+        why: &'static str,
+    },
+}
+
+/// Which channel layout to read.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+pub enum Layout {
+    /// Blender multilayer when `*.Combined.R` exists, else plain.
+    #[default]
+    Auto,
+    /// `<Layer>.Combined.*`, `<Layer>.Depth.Z`, `<Layer>.Vector.*`.
+    Blender,
+    /// `R, G, B, A`, `Z`/`depth.Z`, `forward.u/v` or `motion.x/y`.
+    Plain,
+}
+
+/// How to find the channels.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct ChannelOptions {
+    /// The layout.
+    pub layout: Layout,
+    /// Blender view layer name; needed only when the file holds several.
+    pub layer: Option<String>,
+    /// Plain layout: depth channel name (default: `Z`, then `depth.Z`).
+    pub depth: Option<String>,
+    /// Plain layout: forward motion channel names (x, y) (default: `forward.u/forward.v`, then
+    /// `motion.x/motion.y`).
+    pub motion: Option<(String, String)>,
+    /// Plain layout: the motion's y axis points up (negate it).
+    pub motion_y_up: bool,
+}
+
+/// A pinhole G-buffer, all planes row-major from the top-left pixel.
+#[derive(Clone, Debug, PartialEq)]
+pub struct GBuffer {
+    /// Width, pixels.
+    pub width: usize,
+    /// Height, pixels.
+    pub height: usize,
+    /// Linear premultiplied RGBA.
+    pub color: Vec<[f32; 4]>,
+    /// Planar depth in scene units, when the file has it.
+    pub depth: Option<Vec<f32>>,
+    /// Forward motion per frame in pixels (x right, y down), when the file has it.
+    pub motion: Option<Vec<[f32; 2]>>,
+    /// Pixels whose colour was NaN or infinite, dropped (made transparent black).
+    pub dropped_pixels: usize,
+    /// The names of the channels in the file (for messages).
+    pub channels_present: Vec<String>,
+}
+
+impl GBuffer {
+    /// A G-buffer from planes already in memory; validates depth and motion and drops
+    /// non-finite colours (counted), as the reader does.
+    pub fn from_planes(
+        width: usize,
+        height: usize,
+        color: Vec<[f32; 4]>,
+        depth: Option<Vec<f32>>,
+        motion: Option<Vec<[f32; 2]>>,
+    ) -> Result<Self, GBufferError> {
+        let mut g = GBuffer {
+            width,
+            height,
+            color,
+            depth,
+            motion,
+            dropped_pixels: 0,
+            channels_present: Vec::new(),
+        };
+        g.sanitize("<memory>")?;
+        Ok(g)
+    }
+
+    /// Reads a G-buffer from an OpenEXR file.
+    pub fn read_exr(path: &Path, options: &ChannelOptions) -> Result<Self, GBufferError> {
+        use exr::prelude::*;
+        let name = path.display().to_string();
+        let exr_err = |e: exr::error::Error| GBufferError::Exr {
+            path: name.clone(),
+            message: e.to_string(),
+        };
+        // Check the declared size before decoding anything (a huge size in a tiny file).
+        let meta = exr::meta::MetaData::read_from_file(path, false).map_err(exr_err)?;
+        let header = meta.headers.first().ok_or_else(|| GBufferError::Layout {
+            path: name.clone(),
+            message: "the file has no image part".into(),
+        })?;
+        let size = header.layer_size;
+        check_size(&name, size.width(), size.height())?;
+
+        let image = read()
+            .no_deep_data()
+            .largest_resolution_level()
+            .all_channels()
+            .first_valid_layer()
+            .all_attributes()
+            .from_file(path)
+            .map_err(exr_err)?;
+        let layer = image.layer_data;
+        let (width, height) = (layer.size.width(), layer.size.height());
+        check_size(&name, width, height)?;
+        let channels: Vec<(String, Vec<f32>)> = layer
+            .channel_data
+            .list
+            .iter()
+            .map(|c| (c.name.to_string(), c.sample_data.values_as_f32().collect()))
+            .collect();
+        let names: Vec<String> = channels.iter().map(|(n, _)| n.clone()).collect();
+        let find = |n: &str| channels.iter().find(|(c, _)| c == n).map(|(_, d)| d);
+        let missing = |m: String| GBufferError::MissingChannel {
+            path: name.clone(),
+            missing: m,
+            present: names.join(", "),
+        };
+
+        let blender_layers: Vec<String> = names
+            .iter()
+            .filter_map(|n| n.strip_suffix(".Combined.R").map(str::to_string))
+            .collect();
+        let layout = match options.layout {
+            Layout::Auto if !blender_layers.is_empty() => Layout::Blender,
+            Layout::Auto => Layout::Plain,
+            l => l,
+        };
+
+        let n = width * height;
+        let (rgba, depth, motion) = match layout {
+            Layout::Blender => {
+                let prefix = match &options.layer {
+                    Some(l) => {
+                        if !blender_layers.contains(l) {
+                            return Err(missing(format!("{l}.Combined.R")));
+                        }
+                        l.clone()
+                    }
+                    None => match blender_layers.as_slice() {
+                        [one] => one.clone(),
+                        [] => return Err(missing("<Layer>.Combined.R".into())),
+                        many => {
+                            return Err(GBufferError::Layout {
+                                path: name.clone(),
+                                message: format!(
+                                    "several view layers ({}); choose one with --layer",
+                                    many.join(", ")
+                                ),
+                            })
+                        }
+                    },
+                };
+                let get = |suffix: &str| {
+                    let full = format!("{prefix}.{suffix}");
+                    find(&full).ok_or_else(|| missing(full))
+                };
+                let rgba = [
+                    Some(get("Combined.R")?),
+                    Some(get("Combined.G")?),
+                    Some(get("Combined.B")?),
+                    get("Combined.A").ok(),
+                ];
+                let depth = get("Depth.Z").ok();
+                let motion = match (get("Vector.Z").ok(), get("Vector.W").ok()) {
+                    (Some(z), Some(w)) => Some(
+                        z.iter()
+                            .zip(w.iter())
+                            .map(|(&z, &w)| [-z, w])
+                            .collect::<Vec<_>>(),
+                    ),
+                    _ => None,
+                };
+                (rgba, depth, motion)
+            }
+            Layout::Plain | Layout::Auto => {
+                let get = |c: &str| find(c).ok_or_else(|| missing(c.to_string()));
+                let rgba = [Some(get("R")?), Some(get("G")?), Some(get("B")?), find("A")];
+                let depth = match &options.depth {
+                    Some(d) => Some(get(d)?),
+                    None => find("Z").or_else(|| find("depth.Z")),
+                };
+                let pair = match &options.motion {
+                    Some((x, y)) => Some((get(x)?, get(y)?)),
+                    None => find("forward.u")
+                        .zip(find("forward.v"))
+                        .or_else(|| find("motion.x").zip(find("motion.y"))),
+                };
+                let flip = if options.motion_y_up { -1.0 } else { 1.0 };
+                let motion = pair.map(|(u, v)| {
+                    u.iter()
+                        .zip(v.iter())
+                        .map(|(&u, &v)| [u, flip * v])
+                        .collect::<Vec<_>>()
+                });
+                (rgba, depth, motion)
+            }
+        };
+        let mut color = vec![[0.0f32, 0.0, 0.0, 1.0]; n];
+        for (c, plane) in rgba.iter().enumerate() {
+            if let Some(plane) = plane {
+                for (px, &v) in color.iter_mut().zip(plane.iter()) {
+                    px[c] = v;
+                }
+            }
+        }
+        let mut g = GBuffer {
+            width,
+            height,
+            color,
+            depth: depth.cloned(),
+            motion,
+            dropped_pixels: 0,
+            channels_present: names,
+        };
+        g.sanitize(&name)?;
+        Ok(g)
+    }
+
+    /// Applies the bad-value policy (see the module documentation).
+    fn sanitize(&mut self, name: &str) -> Result<(), GBufferError> {
+        check_size(name, self.width, self.height)?;
+        let n = self.width * self.height;
+        let layout_err = |what: &str, len: usize| GBufferError::Layout {
+            path: name.to_string(),
+            message: format!("{what} has {len} values, the image {n} pixels"),
+        };
+        if self.color.len() != n {
+            return Err(layout_err("colour", self.color.len()));
+        }
+        for px in &mut self.color {
+            if px.iter().any(|v| !v.is_finite()) {
+                *px = [0.0; 4];
+                self.dropped_pixels += 1;
+            }
+        }
+        let w = self.width;
+        if let Some(depth) = &self.depth {
+            if depth.len() != n {
+                return Err(layout_err("depth", depth.len()));
+            }
+            if let Some(i) = depth.iter().position(|d| d.is_nan() || *d <= 0.0) {
+                return Err(GBufferError::BadValue {
+                    path: name.to_string(),
+                    what: "depth",
+                    x: i % w,
+                    y: i / w,
+                    value: depth[i],
+                    why: "depth must be positive (or +inf)",
+                });
+            }
+        }
+        if let Some(motion) = &self.motion {
+            if motion.len() != n {
+                return Err(layout_err("motion", motion.len()));
+            }
+            if let Some(i) = motion.iter().position(|m| !(m[0].is_finite() && m[1].is_finite())) {
+                let m = motion[i];
+                return Err(GBufferError::BadValue {
+                    path: name.to_string(),
+                    what: "motion",
+                    x: i % w,
+                    y: i / w,
+                    value: if m[0].is_finite() { m[1] } else { m[0] },
+                    why: "motion vectors must be finite",
+                });
+            }
+        }
+        Ok(())
+    }
+}
+
+fn check_size(name: &str, width: usize, height: usize) -> Result<(), GBufferError> {
+    let err = |reason| GBufferError::Size {
+        path: name.to_string(),
+        width,
+        height,
+        reason,
+    };
+    if width == 0 || height == 0 {
+        return Err(err("empty"));
+    }
+    if width.checked_mul(height).is_none_or(|n| n > MAX_PIXELS) {
+        return Err(err("larger than the limit of 8192x8192 pixels"));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn nan_colour_is_dropped_and_nan_depth_is_an_error() {
+        let color = vec![[1.0, f32::NAN, 0.0, 1.0], [0.5, 0.5, 0.5, 1.0]];
+        let g = GBuffer::from_planes(2, 1, color.clone(), Some(vec![1.0, 2.0]), None)
+            .expect("valid");
+        assert_eq!(g.dropped_pixels, 1);
+        assert_eq!(g.color[0], [0.0; 4]);
+        let err = GBuffer::from_planes(2, 1, color.clone(), Some(vec![1.0, f32::NAN]), None)
+            .expect_err("nan depth");
+        assert!(err.to_string().contains("(1, 0)"), "{err}");
+        assert!(GBuffer::from_planes(2, 1, color.clone(), Some(vec![0.0, 1.0]), None).is_err());
+        assert!(GBuffer::from_planes(2, 1, color, Some(vec![f32::INFINITY, 1.0]), None).is_ok());
+        assert!(GBuffer::from_planes(0, 1, vec![], None, None).is_err());
+    }
+}

@@ -1,0 +1,90 @@
+//! The GPU twin of [`crate::synth::synthesize`], for `--backend gpu|auto`: classification on
+//! the CPU (the same records both paths consume), then splat, integrate and composite on the
+//! GPU, with the same [`SynthStats`].
+
+use std::time::Instant;
+
+use psf_db::PsfDatabase;
+
+use super::{GpuContext, GpuError, GpuSynthOptions, GpuSynthesizer, StageTimes};
+use crate::camera::Camera;
+use crate::gbuffer::GBuffer;
+use crate::pipeline::{classify, Effects, PathCounts};
+use crate::rgba::RgbaImage;
+use crate::synth::{SynthOptions, SynthStats};
+
+impl GpuSynthOptions {
+    /// The GPU knobs matching the CPU path's `options` (rotation sampling, compositing).
+    pub fn from_synth(options: &SynthOptions) -> Self {
+        GpuSynthOptions {
+            rotation: options.splat.rotation,
+            composite: options.composite,
+            ..GpuSynthOptions::default()
+        }
+    }
+}
+
+/// Synthesises like [`crate::synth::synthesize`], with the stages after classification on the
+/// GPU. `gpu` must have been made for the same `db` (see [`GpuSynthesizer::for_database`]);
+/// reuse it across frames. `stats.times` holds classification (CPU) and the GPU stages; the
+/// GPU's own breakdown (upload, readback, whether timestamps were used) comes back too.
+pub fn synthesize_gpu(
+    gpu: &mut GpuSynthesizer,
+    gbuffer: &GBuffer,
+    camera: &Camera,
+    db: Option<&PsfDatabase>,
+    options: &SynthOptions,
+) -> Result<(RgbaImage, SynthStats, StageTimes), GpuError> {
+    let effects = Effects::of(camera, gbuffer);
+    let mut stats = SynthStats {
+        defocus: effects.defocus,
+        motion: effects.motion,
+        width: gbuffer.width,
+        height: gbuffer.height,
+        layers: options.classify.layers,
+        integrator: options.integrator,
+        ..SynthStats::default()
+    };
+    let total = Instant::now();
+    if effects.cheapest_model().is_none() {
+        // Nothing to simulate (as on the CPU path): the input comes back as it is.
+        classify::classify_sizes(gbuffer, camera).map_err(|e| GpuError::Input(e.to_string()))?;
+        stats.counts = PathCounts {
+            copied: gbuffer.color.iter().filter(|c| **c != [0.0; 4]).count(),
+            dropped: gbuffer.dropped_pixels,
+            ..PathCounts::default()
+        };
+        stats.layers_used = 1;
+        stats.times.total_ms = total.elapsed().as_secs_f64() * 1e3;
+        let image = RgbaImage { width: gbuffer.width, height: gbuffer.height, pixels: gbuffer.color.clone() };
+        return Ok((image, stats, StageTimes::default()));
+    }
+    let t = Instant::now();
+    let classified =
+        classify(gbuffer, camera, db, &options.classify).map_err(|e| GpuError::Input(e.to_string()))?;
+    stats.times.classify_ms = t.elapsed().as_secs_f64() * 1e3;
+    stats.model = db.map(|d| d.model().name());
+    stats.counts = classified.counts;
+    stats.pad_px = classified.frame.pad;
+    stats.layers_used = classified.layers.iter().filter(|l| l.record_count > 0).count() as u32;
+    let (image, gpu_times) = gpu.run(&classified.frame, &classified.records, options.integrator)?;
+    stats.times.splat_ms = gpu_times.splat_ms;
+    stats.times.integrate_ms = gpu_times.integrate_ms;
+    stats.times.composite_ms = gpu_times.composite_ms;
+    stats.times.total_ms = total.elapsed().as_secs_f64() * 1e3;
+    Ok((image, stats, gpu_times))
+}
+
+impl GpuSynthesizer {
+    /// A synthesizer for `db` (`None`: copies only), the usual entry point of the binary.
+    pub fn for_database(
+        ctx: &GpuContext,
+        db: Option<&PsfDatabase>,
+        options: GpuSynthOptions,
+    ) -> Result<Self, GpuError> {
+        match db {
+            Some(db) => Self::new(ctx, db, options),
+            None => Self::without_database(ctx, options),
+        }
+    }
+}

@@ -1,0 +1,76 @@
+//! Rust twins of the GPU-only structs in `shaders/common.wgsl` (the records shared with the
+//! CPU path are in [`crate::pipeline::types`]). Same field order; `tests/gpu_layout.rs` checks
+//! sizes and offsets against the WGSL through naga.
+
+use bytemuck::{Pod, Zeroable};
+
+/// A set of equally sized planes inside one f32 buffer: plane `p`, pixel `(x, y)` is element
+/// `offset + p * stride + y * width + x`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
+pub struct PlaneSet {
+    /// Plane width, px.
+    pub width: u32,
+    /// Plane height, px.
+    pub height: u32,
+    /// Element (f32) index of plane 0's first pixel.
+    pub offset: u32,
+    /// Elements from one plane to the next (at least `width * height`).
+    pub stride: u32,
+}
+
+impl PlaneSet {
+    /// Planes of `width x height` packed back to back from `offset`.
+    pub fn packed(width: usize, height: usize, offset: usize) -> Self {
+        PlaneSet {
+            width: width as u32,
+            height: height as u32,
+            offset: offset as u32,
+            stride: (width * height) as u32,
+        }
+    }
+
+    /// Elements one plane spans.
+    pub fn plane_len(&self) -> usize {
+        self.width as usize * self.height as usize
+    }
+}
+
+/// Parameters of one pass over planes (pyramid steps, output, composite).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct PassParams {
+    /// What the pass reads.
+    pub src: PlaneSet,
+    /// What the pass writes.
+    pub dst: PlaneSet,
+    /// A second input (the analysis level of a synthesis step).
+    pub aux: PlaneSet,
+    /// Number of planes processed (`layers * 4`).
+    pub planes: u32,
+    /// Scale applied by the output pass (`poisson::PYRAMID_SCALE`, or 1 for exact integration).
+    pub scale: f32,
+    /// Border (padding) cropped by the composite pass, px.
+    pub border: u32,
+    /// Pass-specific flags (composite: bit 0 = renormalise coverage).
+    pub flags: u32,
+}
+
+/// Where the splat stage writes.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
+pub struct SplatTargets {
+    /// Laplacian planes (`layer * 4 + channel`): analysis level 0 of the pyramid, whose pixel
+    /// `(border, border)` is the padded layer's pixel (0, 0).
+    pub laplacian: PlaneSet,
+    /// Direct planes (`layer * 4 + channel`), padded-layer size.
+    pub direct: PlaneSet,
+    /// Border of the Laplacian planes, px (`poisson::pyramid::PAD`).
+    pub border: u32,
+    /// Rotated offsets: 0 = bilinear split, 1 = nearest pixel.
+    pub rotation: u32,
+    /// Number of PSFs in the database.
+    pub psf_count: u32,
+    /// Values per spreadlet position and per dense pixel (1 or 3).
+    pub channels: u32,
+}

@@ -1,0 +1,659 @@
+//! [`GpuSynthesizer`]: the whole synthesis pipeline after classification on the GPU (splat,
+//! integrate, composite), mirroring `crate::pipeline` stage by stage.
+//!
+//! The database is uploaded once in [`GpuSynthesizer::new`]; pipelines are compiled there too.
+//! Frame buffers (records, Laplacian and direct planes, pyramid levels, output, staging) are
+//! created for the first frame of a size and reused by every later frame of that size.
+
+use std::time::Instant;
+
+use poisson::pyramid::{PAD, PYRAMID_SCALE};
+use poisson::{ExactIntegrator, Plane};
+use psf_db::{DenseEntry, PsfDatabase, SPARSE_SLOT};
+use rayon::prelude::*;
+
+use super::layout::{PassParams, PlaneSet, SplatTargets};
+use super::pyramid::{PyramidFrame, PyramidPipelines, TILE};
+use super::util::{
+    bind_group, compute_pipelines, map_read, map_read_bytes, storage_entry, storage_init,
+    storage_zeroed, uniform_entry, uniform_init,
+};
+use super::{shaders, GpuContext, GpuError};
+use crate::pipeline::composite::CompositeOptions;
+use crate::pipeline::integrate::Integrator;
+use crate::pipeline::splat::RotationSampling;
+use crate::pipeline::types::{FrameParams, SplatRecord};
+use crate::rgba::RgbaImage;
+
+/// How splats are accumulated.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum AtomicMode {
+    /// `atomicAdd` on f32 where the device has `SHADER_FLOAT32_ATOMIC`, else compare-exchange.
+    #[default]
+    Auto,
+    /// Always the compare-exchange loop on u32 bit patterns (for testing that path).
+    CompareExchange,
+}
+
+/// Knobs of the GPU pipeline (the same meaning as the CPU path's).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct GpuSynthOptions {
+    /// Placement of rotated spreadlets (as `pipeline::SplatOptions::rotation`).
+    pub rotation: RotationSampling,
+    /// Compositing options (as `pipeline::composite`).
+    pub composite: CompositeOptions,
+    /// Float atomics or compare-exchange.
+    pub atomics: AtomicMode,
+    /// Invocations that share one record's spreadlets (a power of two, 1 to 64; default 8:
+    /// many records of small PSFs keep the device busy, 64 suits few large PSFs).
+    pub lanes_per_record: u32,
+}
+
+impl Default for GpuSynthOptions {
+    fn default() -> Self {
+        GpuSynthOptions {
+            rotation: RotationSampling::default(),
+            composite: CompositeOptions::default(),
+            atomics: AtomicMode::default(),
+            lanes_per_record: 8,
+        }
+    }
+}
+
+/// Milliseconds per stage of one frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct StageTimes {
+    /// Writing the records and frame constants (CPU wall time of the queue writes).
+    pub upload_ms: f64,
+    /// Splatting (sparse, dense and copied records), ms.
+    pub splat_ms: f64,
+    /// Integration (pyramid, or exact on the CPU with the transfers around it), ms.
+    pub integrate_ms: f64,
+    /// Compositing, ms.
+    pub composite_ms: f64,
+    /// Copying the image back to the host, ms (CPU wall time).
+    pub readback_ms: f64,
+    /// Wall time of the whole call, ms.
+    pub total_ms: f64,
+    /// True when splat/integrate/composite come from GPU timestamp queries; false when they
+    /// are CPU wall times around separate submissions.
+    pub gpu_timestamps: bool,
+}
+
+/// How often the expensive set-up work has run (to check that frames of one size reuse it).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct SynthCounters {
+    /// Pipeline compilations (once per synthesizer).
+    pub pipeline_builds: u32,
+    /// Database uploads (once per synthesizer).
+    pub database_uploads: u32,
+    /// Frame buffer allocations (once per frame size and layer count).
+    pub frame_allocations: u32,
+    /// Record buffer allocations (grows when a frame has more records than any before).
+    pub record_allocations: u32,
+    /// Frames run.
+    pub frames: u32,
+}
+
+/// Laplacian and direct planes after the splat stage (read back for tests), index
+/// `layer * 4 + channel`, each `padded_width x padded_height`.
+#[derive(Clone, Debug)]
+pub struct SplatPlanes {
+    /// Laplacian planes.
+    pub laplacian: Vec<Plane>,
+    /// Direct planes.
+    pub direct: Vec<Plane>,
+}
+
+/// The PSF database on the GPU.
+struct DbBuffers {
+    cumulative: wgpu::Buffer,
+    positions: wgpu::Buffer,
+    values: wgpu::Buffer,
+    dense_table: wgpu::Buffer,
+    dense_data: wgpu::Buffer,
+    psf_count: u32,
+    channels: u32,
+}
+
+impl DbBuffers {
+    fn upload(ctx: &GpuContext, db: Option<&PsfDatabase>) -> Result<Self, GpuError> {
+        let Some(db) = db else {
+            let empty = |l| storage_init(ctx, l, &[]);
+            return Ok(Self {
+                cumulative: empty("cumulative"),
+                positions: empty("positions"),
+                values: empty("values"),
+                dense_table: empty("dense table"),
+                dense_data: empty("dense data"),
+                psf_count: 0,
+                channels: 1,
+            });
+        };
+        let limit = ctx.limits().max_storage_buffer_binding_size as u64;
+        let check = |what: &'static str, bytes: usize| {
+            if bytes as u64 > limit {
+                Err(GpuError::TooLarge { what, bytes: bytes as u64, limit })
+            } else {
+                Ok(())
+            }
+        };
+        check("database positions", 4 * db.positions().len())?;
+        check("database values", 4 * db.values().len())?;
+        check("database dense data", 4 * db.dense_data().len())?;
+        // dense_slot resolved here: one entry per PSF, size 0 for sparse PSFs.
+        let entries = db.dense_entries();
+        let table: Vec<DenseEntry> = db
+            .dense_slots()
+            .iter()
+            .map(|&s| {
+                if s == SPARSE_SLOT {
+                    DenseEntry::default()
+                } else {
+                    entries.get(s as usize).copied().unwrap_or_default()
+                }
+            })
+            .collect();
+        Ok(Self {
+            cumulative: storage_init(ctx, "cumulative", bytemuck::cast_slice(db.cumulative())),
+            positions: storage_init(ctx, "positions", bytemuck::cast_slice(db.positions())),
+            values: storage_init(ctx, "values", bytemuck::cast_slice(db.values())),
+            dense_table: storage_init(ctx, "dense table", bytemuck::cast_slice(&table)),
+            dense_data: storage_init(ctx, "dense data", bytemuck::cast_slice(db.dense_data())),
+            psf_count: db.psf_count() as u32,
+            channels: db.channels() as u32,
+        })
+    }
+}
+
+/// Everything that depends on the frame size and layer count.
+struct FrameBuffers {
+    key: (u32, u32, u32, u32),
+    frame_uniform: wgpu::Buffer,
+    targets_uniform: wgpu::Buffer,
+    records: wgpu::Buffer,
+    record_capacity: usize,
+    layer_set: PlaneSet,
+    layer_images: wgpu::Buffer,
+    pyramid: PyramidFrame,
+    splat_group: wgpu::BindGroup,
+    composite_group: wgpu::BindGroup,
+    _composite_params: wgpu::Buffer,
+    output: wgpu::Buffer,
+    output_staging: wgpu::Buffer,
+    output_bytes: u64,
+    queries: Option<Queries>,
+}
+
+struct Queries {
+    set: wgpu::QuerySet,
+    resolve: wgpu::Buffer,
+    staging: wgpu::Buffer,
+}
+
+/// Timestamp slots: begin/end of splat, integrate, composite.
+const QUERY_COUNT: u32 = 6;
+
+/// The synthesis pipeline on the GPU: compiled pipelines and the uploaded database, reused for
+/// every frame.
+pub struct GpuSynthesizer {
+    ctx: GpuContext,
+    options: GpuSynthOptions,
+    float_atomics: bool,
+    db: DbBuffers,
+    splat_layout: wgpu::BindGroupLayout,
+    splat: wgpu::ComputePipeline,
+    pyramid: PyramidPipelines,
+    composite_layout: wgpu::BindGroupLayout,
+    composite: wgpu::ComputePipeline,
+    frame: Option<FrameBuffers>,
+    counters: SynthCounters,
+}
+
+/// How far [`GpuSynthesizer::execute`] goes.
+#[derive(Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+enum Until {
+    Splat,
+    Integrate,
+    Composite,
+}
+
+impl GpuSynthesizer {
+    /// Compiles the pipelines and uploads `db` (once).
+    pub fn new(ctx: &GpuContext, db: &PsfDatabase, options: GpuSynthOptions) -> Result<Self, GpuError> {
+        Self::build(ctx, Some(db), options)
+    }
+
+    /// A synthesizer without a database: only copied records draw anything (pinhole, still
+    /// frames), as on the CPU path with `db = None`.
+    pub fn without_database(ctx: &GpuContext, options: GpuSynthOptions) -> Result<Self, GpuError> {
+        Self::build(ctx, None, options)
+    }
+
+    fn build(ctx: &GpuContext, db: Option<&PsfDatabase>, options: GpuSynthOptions) -> Result<Self, GpuError> {
+        let lanes = options.lanes_per_record;
+        if !(1..=64).contains(&lanes) || !lanes.is_power_of_two() {
+            return Err(GpuError::Input(format!("lanes per record must be a power of two in 1..=64, not {lanes}")));
+        }
+        let float_atomics = ctx.has_float_atomics() && options.atomics == AtomicMode::Auto;
+        let splat_layout = ctx.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("splat"),
+            entries: &[
+                uniform_entry(0),
+                uniform_entry(1),
+                storage_entry(2, true),
+                storage_entry(3, true),
+                storage_entry(4, true),
+                storage_entry(5, true),
+                storage_entry(6, true),
+                storage_entry(7, true),
+                storage_entry(8, false),
+                storage_entry(9, false),
+            ],
+        });
+        let splat = compute_pipelines(
+            ctx,
+            "splat",
+            &shaders::splat(float_atomics),
+            &splat_layout,
+            &["splat_records"],
+            &[("LANES", lanes as f64)],
+        )?
+        .pop()
+        .ok_or_else(|| GpuError::Wgpu { stage: "splat", message: "no pipeline".into() })?;
+        let composite_layout = ctx.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("composite"),
+            entries: &[uniform_entry(0), storage_entry(1, true), storage_entry(2, false)],
+        });
+        let composite = compute_pipelines(
+            ctx,
+            "composite",
+            &shaders::composite(),
+            &composite_layout,
+            &["composite"],
+            &[],
+        )?
+        .pop()
+        .ok_or_else(|| GpuError::Wgpu { stage: "composite", message: "no pipeline".into() })?;
+        let pyramid = PyramidPipelines::new(ctx)?;
+        let db = DbBuffers::upload(ctx, db)?;
+        ctx.take_error("database upload")?;
+        Ok(Self {
+            ctx: ctx.clone(),
+            options,
+            float_atomics,
+            db,
+            splat_layout,
+            splat,
+            pyramid,
+            composite_layout,
+            composite,
+            frame: None,
+            counters: SynthCounters { pipeline_builds: 1, database_uploads: 1, ..Default::default() },
+        })
+    }
+
+    /// Whether splats use native float atomics (else the compare-exchange loop).
+    pub fn uses_float_atomics(&self) -> bool {
+        self.float_atomics
+    }
+
+    /// The options.
+    pub fn options(&self) -> &GpuSynthOptions {
+        &self.options
+    }
+
+    /// Set-up counters (pipelines, database uploads, frame allocations, frames).
+    pub fn counters(&self) -> SynthCounters {
+        self.counters
+    }
+
+    /// The adapter this runs on.
+    pub fn adapter_name(&self) -> String {
+        self.ctx.adapter_name()
+    }
+
+    /// Synthesises one frame: splat `records`, integrate with `integrator`, composite. The
+    /// records and frame come from `pipeline::classify` (the same input as the CPU path).
+    pub fn run(
+        &mut self,
+        frame: &FrameParams,
+        records: &[SplatRecord],
+        integrator: Integrator,
+    ) -> Result<(RgbaImage, StageTimes), GpuError> {
+        let t0 = Instant::now();
+        let mut times = self.execute(frame, records, integrator, Until::Composite)?;
+        let t = Instant::now();
+        let fb = self.frame_buffers()?;
+        let data = map_read(&self.ctx, "output", &fb.output_staging, fb.output_bytes)?;
+        let (w, h) = (frame.width as usize, frame.height as usize);
+        let pixels: Vec<[f32; 4]> = data
+            .chunks_exact(4)
+            .take(w * h)
+            .map(|c| [c[0], c[1], c[2], c[3]])
+            .collect();
+        if times.gpu_timestamps {
+            self.read_timestamps(&mut times)?;
+        }
+        times.readback_ms = ms(t);
+        times.total_ms = ms(t0);
+        Ok((RgbaImage { width: w, height: h, pixels }, times))
+    }
+
+    /// Stage-level entry point: splat only, and read back the Laplacian and direct planes.
+    pub fn splat_planes(&mut self, frame: &FrameParams, records: &[SplatRecord]) -> Result<SplatPlanes, GpuError> {
+        self.execute(frame, records, Integrator::Pyramid, Until::Splat)?;
+        let fb = self.frame_buffers()?;
+        let (pw, ph) = (frame.padded_width as usize, frame.padded_height as usize);
+        let padded = fb.pyramid.read_level(&self.ctx, &fb.pyramid.analysis, fb.pyramid.analysis_sets[0])?;
+        let laplacian = padded.iter().map(|p| p.crop(PAD as isize, PAD as isize, pw, ph)).collect();
+        let direct = fb.pyramid.read_level(&self.ctx, &fb.layer_images, fb.layer_set)?;
+        Ok(SplatPlanes { laplacian, direct })
+    }
+
+    /// Stage-level entry point: splat and integrate, and read back the layer images (primal
+    /// plus direct), index `layer * 4 + channel`, padded-layer size.
+    pub fn layer_images(
+        &mut self,
+        frame: &FrameParams,
+        records: &[SplatRecord],
+        integrator: Integrator,
+    ) -> Result<Vec<Plane>, GpuError> {
+        self.execute(frame, records, integrator, Until::Integrate)?;
+        let fb = self.frame_buffers()?;
+        fb.pyramid.read_level(&self.ctx, &fb.layer_images, fb.layer_set)
+    }
+
+    fn frame_buffers(&self) -> Result<&FrameBuffers, GpuError> {
+        self.frame.as_ref().ok_or_else(|| GpuError::Input("no frame has run".into()))
+    }
+
+    fn validate(frame: &FrameParams, records: &[SplatRecord]) -> Result<(), GpuError> {
+        let bad = |m: String| Err(GpuError::Input(m));
+        if frame.width == 0 || frame.height == 0 || frame.layers == 0 {
+            return bad(format!("empty frame {}x{} with {} layers", frame.width, frame.height, frame.layers));
+        }
+        if Some(frame.padded_width) != frame.pad.checked_mul(2).and_then(|p| p.checked_add(frame.width))
+            || Some(frame.padded_height) != frame.pad.checked_mul(2).and_then(|p| p.checked_add(frame.height))
+        {
+            return bad(format!(
+                "padded size {}x{} is not {}x{} plus 2 x {} px",
+                frame.padded_width, frame.padded_height, frame.width, frame.height, frame.pad
+            ));
+        }
+        if frame.record_count as usize != records.len() {
+            return bad(format!("frame says {} records, {} given", frame.record_count, records.len()));
+        }
+        Ok(())
+    }
+
+    /// (Re)creates the frame buffers when the size or layer count changed, and the record
+    /// buffer when it is too small.
+    fn prepare(&mut self, frame: &FrameParams, records: usize) -> Result<(), GpuError> {
+        let key = (frame.width, frame.height, frame.pad, frame.layers);
+        let ctx = &self.ctx;
+        if self.frame.as_ref().is_none_or(|f| f.key != key) {
+            self.frame = None;
+            let (pw, ph) = (frame.padded_width as usize, frame.padded_height as usize);
+            let planes = frame.layers as usize * 4;
+            let plane_bytes = 4 * (pw * ph) as u64;
+            let layer_set = PlaneSet::packed(pw, ph, 0);
+            let layer_images = storage_zeroed(ctx, "layer images", plane_bytes * planes as u64)?;
+            let pyramid = PyramidFrame::new(ctx, &self.pyramid, pw, ph, planes, &layer_images, layer_set, PYRAMID_SCALE)?;
+            let (w, h) = (frame.width as usize, frame.height as usize);
+            let output_bytes = 16 * (w * h) as u64;
+            let output = storage_zeroed(ctx, "output image", output_bytes)?;
+            let output_staging = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("output staging"),
+                size: output.size(),
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            let composite_params = uniform_init(
+                ctx,
+                "composite",
+                bytemuck::bytes_of(&PassParams {
+                    src: layer_set,
+                    dst: PlaneSet::packed(w, h, 0),
+                    planes: frame.layers,
+                    border: frame.pad,
+                    flags: u32::from(self.options.composite.renormalize_coverage),
+                    ..Default::default()
+                }),
+            );
+            let composite_group =
+                bind_group(ctx, "composite", &self.composite_layout, &[&composite_params, &layer_images, &output]);
+            let frame_uniform = uniform_init(ctx, "frame", bytemuck::bytes_of(frame));
+            let targets = SplatTargets {
+                laplacian: pyramid.analysis_sets[0],
+                direct: layer_set,
+                border: PAD as u32,
+                rotation: match self.options.rotation {
+                    RotationSampling::Bilinear => 0,
+                    RotationSampling::Nearest => 1,
+                },
+                psf_count: self.db.psf_count,
+                channels: self.db.channels,
+            };
+            let targets_uniform = uniform_init(ctx, "splat targets", bytemuck::bytes_of(&targets));
+            let records_buf = storage_zeroed(ctx, "records", 16)?;
+            let splat_group = self.splat_group(&frame_uniform, &targets_uniform, &records_buf, &pyramid.analysis, &layer_images);
+            let queries = ctx.has_timestamps().then(|| Queries {
+                set: ctx.device.create_query_set(&wgpu::QuerySetDescriptor {
+                    label: Some("stage timestamps"),
+                    ty: wgpu::QueryType::Timestamp,
+                    count: QUERY_COUNT,
+                }),
+                resolve: ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("timestamps"),
+                    size: 8 * QUERY_COUNT as u64,
+                    usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+                    mapped_at_creation: false,
+                }),
+                staging: ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("timestamps staging"),
+                    size: 8 * QUERY_COUNT as u64,
+                    usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                    mapped_at_creation: false,
+                }),
+            });
+            self.counters.frame_allocations += 1;
+            self.frame = Some(FrameBuffers {
+                key,
+                frame_uniform,
+                targets_uniform,
+                records: records_buf,
+                record_capacity: 0,
+                layer_set,
+                layer_images,
+                pyramid,
+                splat_group,
+                composite_group,
+                _composite_params: composite_params,
+                output,
+                output_staging,
+                output_bytes,
+                queries,
+            });
+        }
+        let needs_records = self.frame.as_ref().is_some_and(|f| f.record_capacity < records);
+        if needs_records {
+            let capacity = records.next_power_of_two();
+            let buf = storage_zeroed(ctx, "records", (capacity * size_of::<SplatRecord>()) as u64)?;
+            let fb = self.frame.as_ref().ok_or_else(|| GpuError::Input("no frame".into()))?;
+            let group = self.splat_group(&fb.frame_uniform, &fb.targets_uniform, &buf, &fb.pyramid.analysis, &fb.layer_images);
+            self.counters.record_allocations += 1;
+            if let Some(fb) = self.frame.as_mut() {
+                fb.records = buf;
+                fb.record_capacity = capacity;
+                fb.splat_group = group;
+            }
+        }
+        Ok(())
+    }
+
+    fn splat_group(
+        &self,
+        frame_uniform: &wgpu::Buffer,
+        targets: &wgpu::Buffer,
+        records: &wgpu::Buffer,
+        laplacian: &wgpu::Buffer,
+        direct: &wgpu::Buffer,
+    ) -> wgpu::BindGroup {
+        let db = &self.db;
+        bind_group(
+            &self.ctx,
+            "splat",
+            &self.splat_layout,
+            &[
+                frame_uniform,
+                targets,
+                records,
+                &db.cumulative,
+                &db.positions,
+                &db.values,
+                &db.dense_table,
+                &db.dense_data,
+                laplacian,
+                direct,
+            ],
+        )
+    }
+
+    /// Runs the stages up to `until`; with `Until::Composite` the image is copied into the
+    /// output staging buffer (and the timestamps resolved), all submitted.
+    fn execute(
+        &mut self,
+        frame: &FrameParams,
+        records: &[SplatRecord],
+        integrator: Integrator,
+        until: Until,
+    ) -> Result<StageTimes, GpuError> {
+        Self::validate(frame, records)?;
+        let t_upload = Instant::now();
+        self.prepare(frame, records.len())?;
+        let ctx = &self.ctx;
+        let fb = self.frame.as_ref().ok_or_else(|| GpuError::Input("no frame".into()))?;
+        ctx.queue.write_buffer(&fb.frame_uniform, 0, bytemuck::bytes_of(frame));
+        if !records.is_empty() {
+            ctx.queue.write_buffer(&fb.records, 0, bytemuck::cast_slice(records));
+        }
+        let mut times = StageTimes { upload_ms: ms(t_upload), ..Default::default() };
+        // GPU timestamps only when every stage runs in one submission.
+        let queries = fb.queries.as_ref().filter(|_| integrator == Integrator::Pyramid);
+        times.gpu_timestamps = queries.is_some() && until == Until::Composite;
+        let ts = |i: u32| {
+            queries.map(|q| wgpu::ComputePassTimestampWrites {
+                query_set: &q.set,
+                beginning_of_pass_write_index: Some(2 * i),
+                end_of_pass_write_index: Some(2 * i + 1),
+            })
+        };
+        let wall = !times.gpu_timestamps;
+
+        // Splat.
+        let t = Instant::now();
+        let mut enc = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("frame") });
+        let lap = fb.pyramid.analysis_sets[0];
+        enc.clear_buffer(&fb.pyramid.analysis, 4 * lap.offset as u64, Some(4 * (lap.stride as u64) * (frame.layers as u64 * 4)));
+        enc.clear_buffer(&fb.layer_images, 0, None);
+        {
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("splat"), timestamp_writes: ts(0) });
+            let n = (records.len() as u32).div_ceil(64 / self.options.lanes_per_record);
+            if n > 0 {
+                let max = ctx.limits().max_compute_workgroups_per_dimension.max(1);
+                let x = n.min(max);
+                pass.set_pipeline(&self.splat);
+                pass.set_bind_group(0, &fb.splat_group, &[]);
+                pass.dispatch_workgroups(x, n.div_ceil(x), 1);
+            }
+        }
+        if wall || until == Until::Splat {
+            ctx.queue.submit([enc.finish()]);
+            ctx.wait("splat")?;
+            times.splat_ms = ms(t);
+            enc = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("frame") });
+        }
+        if until == Until::Splat {
+            self.counters.frames += 1;
+            return Ok(times);
+        }
+
+        // Integrate.
+        let t = Instant::now();
+        if integrator == Integrator::Exact {
+            // Exact integration is an FFT on the CPU (as `poisson::ExactIntegrator`): read the
+            // Laplacian back, integrate, upload into synthesis level 0, run the output pass.
+            let (pw, ph) = (frame.padded_width as usize, frame.padded_height as usize);
+            let padded = fb.pyramid.read_level(ctx, &fb.pyramid.analysis, lap)?;
+            let exact = ExactIntegrator::new(pw, ph);
+            let primal: Vec<Plane> = padded
+                .par_iter()
+                .map(|p| {
+                    let lap = p.crop(PAD as isize, PAD as isize, pw, ph);
+                    if lap.data.iter().all(|&v| v == 0.0) {
+                        Plane::new(pw, ph)
+                    } else {
+                        exact.integrate(&lap)
+                    }
+                })
+                .collect();
+            let refs: Vec<&Plane> = primal.iter().collect();
+            fb.pyramid.upload_padded(ctx, &fb.pyramid.synthesis, fb.pyramid.synthesis_sets[0], &refs);
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("integrate"), timestamp_writes: None });
+            fb.pyramid.encode(&self.pyramid, &mut pass, true);
+        } else {
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("integrate"), timestamp_writes: ts(1) });
+            fb.pyramid.encode(&self.pyramid, &mut pass, false);
+        }
+        if wall || until == Until::Integrate {
+            ctx.queue.submit([enc.finish()]);
+            ctx.wait("integrate")?;
+            times.integrate_ms = ms(t);
+            enc = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("frame") });
+        }
+        if until == Until::Integrate {
+            self.counters.frames += 1;
+            return Ok(times);
+        }
+
+        // Composite.
+        let t = Instant::now();
+        {
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("composite"), timestamp_writes: ts(2) });
+            pass.set_pipeline(&self.composite);
+            pass.set_bind_group(0, &fb.composite_group, &[]);
+            pass.dispatch_workgroups(frame.width.div_ceil(TILE), frame.height.div_ceil(TILE), 1);
+        }
+        enc.copy_buffer_to_buffer(&fb.output, 0, &fb.output_staging, 0, fb.output_bytes);
+        if let Some(q) = queries {
+            enc.resolve_query_set(&q.set, 0..QUERY_COUNT, &q.resolve, 0);
+            enc.copy_buffer_to_buffer(&q.resolve, 0, &q.staging, 0, 8 * QUERY_COUNT as u64);
+        }
+        ctx.queue.submit([enc.finish()]);
+        if wall {
+            ctx.wait("composite")?;
+            times.composite_ms = ms(t);
+        }
+        self.counters.frames += 1;
+        Ok(times)
+    }
+
+    fn read_timestamps(&self, times: &mut StageTimes) -> Result<(), GpuError> {
+        let Some(q) = self.frame.as_ref().and_then(|f| f.queries.as_ref()) else {
+            return Ok(());
+        };
+        let raw = map_read_bytes(&self.ctx, "timestamps", &q.staging, 8 * QUERY_COUNT as u64)?;
+        let ticks: Vec<u64> = bytemuck::pod_collect_to_vec(&raw);
+        let period_ns = self.ctx.queue.get_timestamp_period() as f64;
+        let span = |i: usize| ticks[2 * i + 1].saturating_sub(ticks[2 * i]) as f64 * period_ns * 1e-6;
+        times.splat_ms = span(0);
+        times.integrate_ms = span(1);
+        times.composite_ms = span(2);
+        Ok(())
+    }
+}
+
+fn ms(t: Instant) -> f64 {
+    t.elapsed().as_secs_f64() * 1e3
+}

@@ -1,0 +1,635 @@
+//! Stage 1, classification: every G-buffer pixel becomes one or more [`SplatRecord`]s (PSF
+//! index, layer, rotation, weighted colour, drawing path), sorted by layer then pixel order.
+//!
+//! Per pixel: the signed thin-lens CoC from depth (pixels), the motion over the shutter
+//! (pixels), the database PSF nearest to them (O(1) through the nested grid), the rotation of
+//! the PSF's reference direction (+x) onto the motion (lens-motion) or onto the radial direction
+//! (physical lens), and the path: copied when the PSF lies under a pixel, drawn dense when the
+//! database stores that PSF dense (fast track), else splatted sparse.
+//!
+//! Layers are global and binned uniformly in parallax `1/depth` (the signed CoC is affine in
+//! it: constant parallax units), layer 0 the farthest. With soft layering a pixel near a layer
+//! boundary is split into two records whose weights sum to one.
+//!
+//! Anti-aliased edge pixels of a near object carry the depth of the background behind it (the
+//! depth pass is not anti-aliased). With `edge_split`, a pixel that has a markedly nearer
+//! neighbour is split into a foreground part (the neighbour's depth and motion) and a
+//! background part (its own), the foreground fraction estimated by projecting its colour onto
+//! the segment between the foreground neighbour's colour and the background colour opposite.
+
+use psf_db::{PsfDatabase, PsfModel};
+
+use super::types::{FrameParams, SplatPath, SplatRecord};
+use crate::camera::Camera;
+use crate::gbuffer::GBuffer;
+
+/// Errors of classification.
+#[derive(Debug, thiserror::Error)]
+pub enum ClassifyError {
+    /// The camera and the G-buffer disagree about the image size.
+    #[error("the camera says {cam_w}x{cam_h} pixels but the G-buffer is {img_w}x{img_h}")]
+    SizeMismatch {
+        /// Camera width.
+        cam_w: u32,
+        /// Camera height.
+        cam_h: u32,
+        /// Image width.
+        img_w: usize,
+        /// Image height.
+        img_h: usize,
+    },
+    /// The camera needs a pass the G-buffer does not have.
+    #[error("{effect} needs the {pass} pass, which the input does not have (channels: {present})")]
+    MissingPass {
+        /// What needs it.
+        effect: &'static str,
+        /// Which pass.
+        pass: &'static str,
+        /// Channels in the file.
+        present: String,
+    },
+    /// The effects need a database and none was given.
+    #[error("the {0} model is needed but no database of it was given")]
+    NoDatabase(&'static str),
+    /// The database is of another model than the one the effects need.
+    #[error("database model mismatch: the scene needs {needed}, the database is {found}")]
+    WrongModel {
+        /// What the effects need.
+        needed: &'static str,
+        /// What was given.
+        found: &'static str,
+    },
+    /// Zero layers requested.
+    #[error("--layers must be at least 1")]
+    NoLayers,
+    /// A physical-lens database describes another camera or lacks its prescription.
+    #[error("physical-lens database: {0}")]
+    PhysicalLens(String),
+}
+
+/// Knobs of classification.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ClassifyOptions {
+    /// Number of global depth layers (at least 1).
+    pub layers: u32,
+    /// Soft layering: width of the blend between neighbouring layers, in layer units (0 = hard
+    /// layers, 1 = a tent over the full layer); `None` = hard.
+    pub soft_layers: Option<f32>,
+    /// Split anti-aliased edge pixels into foreground and background parts.
+    pub edge_split: bool,
+    /// A PSF whose CoC radius and motion length are both below this (pixels) is copied.
+    pub copy_threshold_px: f32,
+    /// Extra padding beyond the database's largest PSF extent, pixels.
+    pub pad_margin: u32,
+}
+
+impl Default for ClassifyOptions {
+    fn default() -> Self {
+        Self {
+            layers: 8,
+            soft_layers: Some(1.0),
+            edge_split: true,
+            copy_threshold_px: 0.5,
+            pad_margin: 2,
+        }
+    }
+}
+
+/// Per-layer summary.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct LayerInfo {
+    /// Parallax (1/depth, per scene unit) at the far edge of the layer's bin.
+    pub parallax_min: f32,
+    /// Parallax at the near edge of the layer's bin.
+    pub parallax_max: f32,
+    /// Index of the layer's first record in [`Classified::records`].
+    pub first_record: usize,
+    /// Number of records in the layer.
+    pub record_count: usize,
+    /// Records drawn sparse.
+    pub sparse: usize,
+    /// Records drawn dense.
+    pub dense: usize,
+    /// Records copied.
+    pub copied: usize,
+}
+
+/// Record counts per path, over all layers.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct PathCounts {
+    /// Records splatted as sparse spreadlets.
+    pub sparse: usize,
+    /// Records drawn as dense fast-track PSFs.
+    pub dense: usize,
+    /// Records whose PSF lies under a pixel, copied.
+    pub copied: usize,
+    /// Input pixels dropped (non-finite colour, or zero colour and alpha).
+    pub dropped: usize,
+    /// Records whose PSF coordinates were outside the database and clamped.
+    pub clamped: usize,
+    /// Pixels split into a foreground and a background part by the edge fix.
+    pub edge_split: usize,
+    /// Pixels split into two layers by soft layering.
+    pub soft_split: usize,
+}
+
+/// Output of [`classify`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct Classified {
+    /// Frame constants (size, padding, layers, record count, database channels).
+    pub frame: FrameParams,
+    /// Records sorted by layer, then by pixel (row-major), then fragment.
+    pub records: Vec<SplatRecord>,
+    /// One entry per layer (index 0 = farthest).
+    pub layers: Vec<LayerInfo>,
+    /// Counts per path.
+    pub counts: PathCounts,
+}
+
+/// The effects a camera and input call for, and the model that covers them most cheaply.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+pub struct Effects {
+    /// Depth of field (finite aperture).
+    pub defocus: bool,
+    /// Motion blur (open shutter and some non-zero motion).
+    pub motion: bool,
+}
+
+impl Effects {
+    /// What `camera` and `gbuffer` call for.
+    pub fn of(camera: &Camera, gbuffer: &GBuffer) -> Self {
+        let motion = camera.has_shutter()
+            && gbuffer
+                .motion
+                .as_ref()
+                .is_some_and(|m| m.iter().any(|v| v[0] != 0.0 || v[1] != 0.0));
+        Self {
+            defocus: camera.has_lens(),
+            motion,
+        }
+    }
+
+    /// The cheapest model that covers the effects; `None` when nothing needs simulating.
+    pub fn cheapest_model(self) -> Option<PsfModel> {
+        match (self.defocus, self.motion) {
+            (false, false) => None,
+            (true, false) => Some(PsfModel::ThinLens),
+            (_, true) => Some(PsfModel::LensMotion),
+        }
+    }
+}
+
+/// One part of a pixel before layering: weight, parallax, CoC and motion.
+#[derive(Clone, Copy, Debug)]
+struct Fragment {
+    weight: f32,
+    parallax: f32,
+    depth: f32,
+    motion: [f32; 2],
+}
+
+/// Checks that the camera and the G-buffer agree about the image size.
+pub fn classify_sizes(gbuffer: &GBuffer, camera: &Camera) -> Result<(), ClassifyError> {
+    if camera.width as usize != gbuffer.width || camera.height as usize != gbuffer.height {
+        return Err(ClassifyError::SizeMismatch {
+            cam_w: camera.width,
+            cam_h: camera.height,
+            img_w: gbuffer.width,
+            img_h: gbuffer.height,
+        });
+    }
+    Ok(())
+}
+
+/// Classifies every pixel. `db` may be `None` only when no effect needs simulating (then every
+/// pixel is copied). The physical-lens model is used when `db` is a physical-lens database.
+pub fn classify(
+    gbuffer: &GBuffer,
+    camera: &Camera,
+    db: Option<&PsfDatabase>,
+    options: &ClassifyOptions,
+) -> Result<Classified, ClassifyError> {
+    let (w, h) = (gbuffer.width, gbuffer.height);
+    classify_sizes(gbuffer, camera)?;
+    if options.layers == 0 {
+        return Err(ClassifyError::NoLayers);
+    }
+    let effects = Effects::of(camera, gbuffer);
+    let present = || gbuffer.channels_present.join(", ");
+    if camera.has_lens() && gbuffer.depth.is_none() {
+        return Err(ClassifyError::MissingPass {
+            effect: "depth of field",
+            pass: "depth",
+            present: present(),
+        });
+    }
+    if camera.has_shutter() && gbuffer.motion.is_none() {
+        return Err(ClassifyError::MissingPass {
+            effect: "motion blur (shutter_frames > 0)",
+            pass: "motion vector",
+            present: present(),
+        });
+    }
+    let model = match (db, effects.cheapest_model()) {
+        (_, None) => None,
+        (None, Some(m)) => return Err(ClassifyError::NoDatabase(m.name())),
+        (Some(db), Some(needed)) => {
+            let found = db.model();
+            let ok = match needed {
+                PsfModel::ThinLens => found != PsfModel::PhysicalLens || !effects.motion,
+                PsfModel::LensMotion => found == PsfModel::LensMotion,
+                PsfModel::PhysicalLens => found == PsfModel::PhysicalLens,
+            };
+            if !ok {
+                return Err(ClassifyError::WrongModel {
+                    needed: needed.name(),
+                    found: found.name(),
+                });
+            }
+            Some(found)
+        }
+    };
+    let lens = camera.thin_lens();
+    let shutter = camera.shutter_frames as f32;
+    let pixels_per_mm = camera.pixels_per_mm() as f32;
+    // Nothing to simulate: every pixel is copied, and one layer returns the input unchanged.
+    let n_layers = if model.is_some() {
+        options.layers as usize
+    } else {
+        1
+    };
+
+    // Parallax of every pixel and the range over pixels that carry something.
+    let depth_at = |i: usize| gbuffer.depth.as_ref().map_or(f32::INFINITY, |d| d[i]);
+    let parallax_of = |d: f32| if d.is_finite() { 1.0 / d } else { 0.0 };
+    let motion_at = |i: usize| -> [f32; 2] {
+        match (&gbuffer.motion, effects.motion) {
+            (Some(m), true) => [m[i][0] * shutter, m[i][1] * shutter],
+            _ => [0.0, 0.0],
+        }
+    };
+    let signed_coc = |d: f32| -> f32 { lens.map_or(0.0, |l| l.signed_coc_px(f64::from(d)) as f32) };
+
+    let mut counts = PathCounts {
+        dropped: gbuffer.dropped_pixels,
+        ..PathCounts::default()
+    };
+
+    // Fragments per pixel (up to two: edge split).
+    let mut fragments: Vec<(usize, Fragment)> = Vec::with_capacity(w * h);
+    for y in 0..h {
+        for x in 0..w {
+            let i = y * w + x;
+            let c = gbuffer.color[i];
+            if c == [0.0; 4] {
+                continue;
+            }
+            let d = depth_at(i);
+            let own = Fragment {
+                weight: 1.0,
+                parallax: parallax_of(d),
+                depth: d,
+                motion: motion_at(i),
+            };
+            let split = if options.edge_split && model.is_some() {
+                edge_split(gbuffer, x, y, &signed_coc, &depth_at)
+            } else {
+                None
+            };
+            match split {
+                Some((alpha, j)) => {
+                    counts.edge_split += 1;
+                    let dj = depth_at(j);
+                    fragments.push((
+                        i,
+                        Fragment {
+                            weight: alpha,
+                            parallax: parallax_of(dj),
+                            depth: dj,
+                            motion: motion_at(j),
+                        },
+                    ));
+                    fragments.push((
+                        i,
+                        Fragment {
+                            weight: 1.0 - alpha,
+                            ..own
+                        },
+                    ));
+                }
+                None => fragments.push((i, own)),
+            }
+        }
+    }
+
+    let (pmin, pmax) = fragments
+        .iter()
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), (_, f)| {
+            (a.min(f.parallax), b.max(f.parallax))
+        });
+    let span = if pmax > pmin { pmax - pmin } else { 0.0 };
+    // Layer coordinate: 0 at the far edge, n at the near edge.
+    let layer_coord = |p: f32| -> f32 {
+        if span > 0.0 {
+            ((p - pmin) / span * n_layers as f32).clamp(0.0, n_layers as f32)
+        } else {
+            0.0
+        }
+    };
+
+    let pad = db.map_or(0, |d| d.max_extent_px()) + options.pad_margin;
+    let padded_width = w as u32 + 2 * pad;
+    let padded_height = h as u32 + 2 * pad;
+
+    // Records per layer, then concatenated (deterministic order).
+    let mut per_layer: Vec<Vec<SplatRecord>> = vec![Vec::new(); n_layers];
+    let centre = [w as f32 * 0.5, h as f32 * 0.5];
+    for &(i, frag) in &fragments {
+        if frag.weight <= 0.0 {
+            continue;
+        }
+        let (x, y) = (i % w, i / w);
+        let color = gbuffer.color[i];
+        let coc = signed_coc(frag.depth).abs();
+        let m = frag.motion;
+        let motion_len = (m[0] * m[0] + m[1] * m[1]).sqrt();
+        let (mut rot_cos, mut rot_sin) = (1.0f32, 0.0f32);
+        let (path, psf_index, clamped) = match (model, db) {
+            (Some(PsfModel::PhysicalLens), Some(db)) => {
+                let dx = x as f32 + 0.5 - centre[0];
+                let dy = y as f32 + 0.5 - centre[1];
+                let r = (dx * dx + dy * dy).sqrt();
+                if r > 0.0 {
+                    rot_cos = dx / r;
+                    rot_sin = dy / r;
+                }
+                let (idx, cl) = db.lookup([frag.depth, r / pixels_per_mm]);
+                (path_of(db, idx), idx, cl)
+            }
+            (Some(_), Some(db))
+                if coc >= options.copy_threshold_px || motion_len >= options.copy_threshold_px =>
+            {
+                let s = match db.model() {
+                    PsfModel::LensMotion => {
+                        if motion_len > 0.0 {
+                            rot_cos = m[0] / motion_len;
+                            rot_sin = m[1] / motion_len;
+                        }
+                        [coc, motion_len]
+                    }
+                    _ => [coc, 0.0],
+                };
+                let (idx, cl) = db.lookup(s);
+                (path_of(db, idx), idx, cl)
+            }
+            _ => (SplatPath::Copy, 0, false),
+        };
+        counts.clamped += usize::from(clamped);
+
+        // Layer weights: hard, or blended near the boundary between two layer centres.
+        let u = layer_coord(frag.parallax);
+        let mut targets = [(0usize, 0.0f32); 2];
+        let n_targets;
+        match options.soft_layers {
+            Some(band) if band > 0.0 && n_layers > 1 => {
+                let t = (u - 0.5).clamp(0.0, (n_layers - 1) as f32);
+                let a = (t.floor() as usize).min(n_layers - 2);
+                let f = t - a as f32;
+                let near = ((f - 0.5) / band + 0.5).clamp(0.0, 1.0);
+                if near <= 0.0 {
+                    targets[0] = (a, 1.0);
+                    n_targets = 1;
+                } else if near >= 1.0 {
+                    targets[0] = (a + 1, 1.0);
+                    n_targets = 1;
+                } else {
+                    targets = [(a, 1.0 - near), (a + 1, near)];
+                    n_targets = 2;
+                    counts.soft_split += 1;
+                }
+            }
+            _ => {
+                targets[0] = ((u.floor() as usize).min(n_layers - 1), 1.0);
+                n_targets = 1;
+            }
+        }
+        for &(layer, lw) in &targets[..n_targets] {
+            let weight = frag.weight * lw;
+            per_layer[layer].push(SplatRecord {
+                center_x: x as i32 + pad as i32,
+                center_y: y as i32 + pad as i32,
+                psf_index,
+                layer: layer as u32,
+                rot_cos,
+                rot_sin,
+                weight,
+                path: path as u32,
+                color: color.map(|v| v * weight),
+            });
+        }
+    }
+
+    let mut records = Vec::with_capacity(per_layer.iter().map(Vec::len).sum());
+    let mut layers = Vec::with_capacity(n_layers);
+    for (l, recs) in per_layer.into_iter().enumerate() {
+        let mut info = LayerInfo {
+            parallax_min: pmin + span * l as f32 / n_layers as f32,
+            parallax_max: pmin + span * (l + 1) as f32 / n_layers as f32,
+            first_record: records.len(),
+            record_count: recs.len(),
+            ..LayerInfo::default()
+        };
+        for r in &recs {
+            match r.path {
+                p if p == SplatPath::Sparse as u32 => info.sparse += 1,
+                p if p == SplatPath::Dense as u32 => info.dense += 1,
+                _ => info.copied += 1,
+            }
+        }
+        counts.sparse += info.sparse;
+        counts.dense += info.dense;
+        counts.copied += info.copied;
+        layers.push(info);
+        records.extend(recs);
+    }
+    let frame = FrameParams {
+        width: w as u32,
+        height: h as u32,
+        pad,
+        layers: n_layers as u32,
+        padded_width,
+        padded_height,
+        record_count: records.len() as u32,
+        db_channels: db.map_or(1, |d| d.channels() as u32),
+    };
+    Ok(Classified {
+        frame,
+        records,
+        layers,
+        counts,
+    })
+}
+
+fn path_of(db: &PsfDatabase, idx: u32) -> SplatPath {
+    if db.dense(idx as usize).is_some() {
+        SplatPath::Dense
+    } else {
+        SplatPath::Sparse
+    }
+}
+
+/// The foreground fraction of an edge pixel and the index of its foreground neighbour, when
+/// the pixel at `(x, y)` has a neighbour whose CoC differs by more than a pixel towards the
+/// viewer (nearer) and whose colour explains part of this pixel's colour.
+fn edge_split(
+    g: &GBuffer,
+    x: usize,
+    y: usize,
+    signed_coc: &dyn Fn(f32) -> f32,
+    depth_at: &dyn Fn(usize) -> f32,
+) -> Option<(f32, usize)> {
+    let (w, h) = (g.width, g.height);
+    let i = y * w + x;
+    let d = depth_at(i);
+    // The nearest neighbour in the 3x3 window.
+    let mut best: Option<(usize, i32, i32, f32)> = None;
+    for dy in -1i32..=1 {
+        for dx in -1i32..=1 {
+            let (nx, ny) = (x as i32 + dx, y as i32 + dy);
+            if (dx == 0 && dy == 0) || nx < 0 || ny < 0 || nx >= w as i32 || ny >= h as i32 {
+                continue;
+            }
+            let j = ny as usize * w + nx as usize;
+            let dj = depth_at(j);
+            if dj < best.map_or(d, |b| b.3) {
+                best = Some((j, dx, dy, dj));
+            }
+        }
+    }
+    let (j, dx, dy, dj) = best?;
+    let coc_gap = (signed_coc(dj) - signed_coc(d)).abs();
+    // Only where the depth step is visible as a difference in blur (or, for a pinhole with
+    // motion, a large relative depth step).
+    if coc_gap < 1.0 && !(signed_coc(d) == 0.0 && dj < 0.8 * d) {
+        return None;
+    }
+    // Background colour: the pixel opposite the foreground neighbour, if it is background-like
+    // (depth close to this pixel's), else none (no split).
+    let (ox, oy) = (x as i32 - dx, y as i32 - dy);
+    if ox < 0 || oy < 0 || ox >= w as i32 || oy >= h as i32 {
+        return None;
+    }
+    let o = oy as usize * w + ox as usize;
+    let dob = depth_at(o);
+    if (signed_coc(dob) - signed_coc(d)).abs() > 0.5 * coc_gap.max(1.0) {
+        return None;
+    }
+    let (cp, cf, cb) = (g.color[i], g.color[j], g.color[o]);
+    let mut num = 0.0f32;
+    let mut den = 0.0f32;
+    for c in 0..3 {
+        let a = cf[c] - cb[c];
+        num += (cp[c] - cb[c]) * a;
+        den += a * a;
+    }
+    // A colour difference too small to tell the parts apart: leave the pixel whole.
+    let scale = cf[..3].iter().chain(&cb[..3]).fold(0.0f32, |m, v| m.max(v.abs()));
+    if den <= (0.05 * scale).powi(2) || den <= 1e-12 {
+        return None;
+    }
+    let alpha = (num / den).clamp(0.0, 1.0);
+    if alpha < 0.02 {
+        return None;
+    }
+    Some((alpha, j))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn camera(w: u32, h: u32, lens: bool, shutter: f64) -> Camera {
+        Camera {
+            width: w,
+            height: h,
+            focal_length_mm: 50.0,
+            sensor_width_mm: 36.0,
+            f_stop: lens.then_some(2.0),
+            focus_distance: lens.then_some(1.0),
+            aperture_blades: 0,
+            shutter_frames: shutter,
+            scene_unit_mm: 1000.0,
+        }
+    }
+
+    #[test]
+    fn pinhole_still_is_all_copies_in_one_layer_without_a_database() {
+        let g = GBuffer::from_planes(
+            3,
+            2,
+            vec![[0.5, 0.25, 1.0, 1.0]; 6],
+            Some(vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0]),
+            None,
+        )
+        .expect("g");
+        let c = classify(&g, &camera(3, 2, false, 0.0), None, &ClassifyOptions::default())
+            .expect("classify");
+        assert_eq!(c.counts.copied, 6);
+        assert_eq!(c.records.len(), 6);
+        assert_eq!(c.frame.pad, ClassifyOptions::default().pad_margin);
+        assert!(c.records.iter().all(|r| r.path == SplatPath::Copy as u32));
+    }
+
+    #[test]
+    fn defocus_needs_a_thin_lens_database_and_rejects_motion() {
+        let g = GBuffer::from_planes(2, 1, vec![[1.0; 4]; 2], Some(vec![0.5, 3.0]), None)
+            .expect("g");
+        let err = classify(&g, &camera(2, 1, true, 0.0), None, &ClassifyOptions::default())
+            .expect_err("no db");
+        assert!(err.to_string().contains("thin-lens"));
+        assert_eq!(
+            Effects::of(&camera(2, 1, true, 0.0), &g).cheapest_model(),
+            Some(PsfModel::ThinLens)
+        );
+        let err = classify(&g, &camera(3, 1, true, 0.0), None, &ClassifyOptions::default())
+            .expect_err("size");
+        assert!(err.to_string().contains("3x1"));
+    }
+
+    #[test]
+    fn soft_layer_weights_sum_to_one_per_pixel() {
+        let n = 64;
+        let depth: Vec<f32> = (0..n).map(|i| 0.5 + i as f32 * 0.05).collect();
+        let g = GBuffer::from_planes(n, 1, vec![[1.0; 4]; n], Some(depth), None).expect("g");
+        let space =
+            psf_db::ParamSpace::for_model(PsfModel::ThinLens, &[[0.0, 64.0]], 8).expect("space");
+        let mut b = psf_db::DatabaseBuilder::new(psf_db::DbHeader::new(
+            PsfModel::ThinLens,
+            space.clone(),
+            16,
+        ));
+        for _ in 0..space.psf_count() {
+            b.push_sparse(&[[0, 0]], &[-1.0]).expect("push");
+        }
+        let db = b.finish().expect("db");
+        let opts = ClassifyOptions {
+            layers: 4,
+            soft_layers: Some(1.0),
+            edge_split: false,
+            ..ClassifyOptions::default()
+        };
+        let c = classify(&g, &camera(n as u32, 1, true, 0.0), Some(&db), &opts).expect("c");
+        let mut sums = vec![0.0f32; n];
+        for r in &c.records {
+            sums[(r.center_x as u32 - c.frame.pad) as usize] += r.weight;
+        }
+        for s in sums {
+            assert!((s - 1.0).abs() < 1e-6, "{s}");
+        }
+        assert!(c.counts.soft_split > 0);
+        // Sorted by layer, nearest pixel (smallest depth) in the last layer.
+        assert!(c.records.windows(2).all(|p| p[0].layer <= p[1].layer));
+        let last = c.records.last().expect("records");
+        assert_eq!(last.layer, 3);
+    }
+}

@@ -1,0 +1,70 @@
+//! Stage 3, integration: each Laplacian plane is turned back into an image (convolution
+//! pyramid or the exact lattice inverse, both from `poisson`), then the layer's direct plane
+//! (fast-track PSFs and copies) is added.
+
+use poisson::{ExactIntegrator, Plane, PyramidWorkspace};
+use rayon::prelude::*;
+
+use super::splat::LayerStack;
+use super::types::FrameParams;
+
+/// Which Poisson integrator to use.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Integrator {
+    /// Convolution pyramid (Farbman et al. 2011), fast, approximate.
+    #[default]
+    Pyramid,
+    /// The lattice Green's function by FFT (f64): exact to rounding.
+    Exact,
+}
+
+/// Primal layers: per layer four planes (R, G, B, A), padded.
+#[derive(Clone, Debug, PartialEq)]
+pub struct IntegratedLayers {
+    /// Frame constants.
+    pub frame: FrameParams,
+    /// Index `layer * 4 + channel`, `padded_width x padded_height`, or empty (0x0) for an
+    /// empty layer.
+    pub planes: Vec<Plane>,
+}
+
+/// Integrates every non-empty Laplacian plane with `integrator` and adds the direct planes.
+pub fn integrate(stack: &LayerStack, integrator: Integrator) -> IntegratedLayers {
+    let frame = stack.frame;
+    let (pw, ph) = (frame.padded_width as usize, frame.padded_height as usize);
+    let exact = (integrator == Integrator::Exact
+        && stack.laplacian.iter().any(|p| !p.is_empty()))
+    .then(|| ExactIntegrator::new(pw, ph));
+    let mut planes: Vec<Plane> = stack
+        .laplacian
+        .par_iter()
+        .map_init(
+            || None::<PyramidWorkspace>,
+            |workspace, lap| {
+                if lap.is_empty() {
+                    return Plane::default();
+                }
+                match &exact {
+                    Some(e) => e.integrate(lap),
+                    None => workspace
+                        .get_or_insert_with(|| PyramidWorkspace::new(pw, ph))
+                        .integrate(lap),
+                }
+            },
+        )
+        .collect();
+    for (primal, direct) in planes.iter_mut().zip(&stack.direct) {
+        if direct.is_empty() {
+            continue;
+        }
+        if primal.is_empty() {
+            *primal = direct.clone();
+        } else {
+            for (a, b) in primal.data.iter_mut().zip(&direct.data) {
+                *a += b;
+            }
+        }
+    }
+    IntegratedLayers { frame, planes }
+}

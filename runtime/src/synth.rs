@@ -1,0 +1,141 @@
+//! Synthesis on the CPU: the four pipeline stages in order, timed, with the statistics that
+//! `--stats` writes. A pinhole, still input is returned unchanged without touching any stage.
+
+use std::time::Instant;
+
+use psf_db::PsfDatabase;
+use serde::Serialize;
+
+use crate::camera::Camera;
+use crate::gbuffer::GBuffer;
+use crate::pipeline::{
+    classify, composite, integrate, splat, ClassifyOptions, CompositeOptions, Effects,
+    Integrator, PathCounts, SplatOptions,
+};
+use crate::rgba::RgbaImage;
+
+/// All knobs of synthesis.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SynthOptions {
+    /// Classification (layers, soft layering, edge fix, copy threshold).
+    pub classify: ClassifyOptions,
+    /// Splatting (rotation sampling).
+    pub splat: SplatOptions,
+    /// Integration method.
+    pub integrator: Integrator,
+    /// Compositing.
+    pub composite: CompositeOptions,
+}
+
+/// Wall-clock time of each stage, milliseconds.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct StageTimes {
+    /// Classification.
+    pub classify_ms: f64,
+    /// Splatting (sparse and dense).
+    pub splat_ms: f64,
+    /// Integration.
+    pub integrate_ms: f64,
+    /// Compositing.
+    pub composite_ms: f64,
+    /// The four together.
+    pub total_ms: f64,
+}
+
+/// What a synthesis did: effects, database, counts per path, layers, times.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct SynthStats {
+    /// Depth of field simulated.
+    pub defocus: bool,
+    /// Motion blur simulated.
+    pub motion: bool,
+    /// The model of the database used, `None` when nothing was simulated.
+    pub model: Option<&'static str>,
+    /// Image width, pixels.
+    pub width: usize,
+    /// Image height, pixels.
+    pub height: usize,
+    /// Records per path (and dropped, clamped, split counts).
+    pub counts: PathCounts,
+    /// Layers requested.
+    pub layers: u32,
+    /// Layers holding at least one record.
+    pub layers_used: u32,
+    /// Padding of each layer, pixels.
+    pub pad_px: u32,
+    /// Integration method.
+    pub integrator: Integrator,
+    /// Stage times.
+    pub times: StageTimes,
+}
+
+fn ms_since(t: Instant) -> f64 {
+    t.elapsed().as_secs_f64() * 1e3
+}
+
+/// Synthesises depth of field and motion blur from a pinhole G-buffer. `db` must be given when
+/// the camera and input call for an effect ([`Effects::cheapest_model`]); it is ignored
+/// otherwise.
+pub fn synthesize(
+    gbuffer: &GBuffer,
+    camera: &Camera,
+    db: Option<&PsfDatabase>,
+    options: &SynthOptions,
+) -> Result<(RgbaImage, SynthStats), crate::pipeline::classify::ClassifyError> {
+    let effects = Effects::of(camera, gbuffer);
+    let mut stats = SynthStats {
+        defocus: effects.defocus,
+        motion: effects.motion,
+        width: gbuffer.width,
+        height: gbuffer.height,
+        layers: options.classify.layers,
+        integrator: options.integrator,
+        ..SynthStats::default()
+    };
+    let total = Instant::now();
+    if effects.cheapest_model().is_none() {
+        // Nothing to simulate: every PSF is a single pixel; the input comes back as it is.
+        let t = Instant::now();
+        classify::classify_sizes(gbuffer, camera)?;
+        stats.counts = PathCounts {
+            copied: gbuffer.color.iter().filter(|c| **c != [0.0; 4]).count(),
+            dropped: gbuffer.dropped_pixels,
+            ..PathCounts::default()
+        };
+        stats.layers_used = 1;
+        let image = RgbaImage {
+            width: gbuffer.width,
+            height: gbuffer.height,
+            pixels: gbuffer.color.clone(),
+        };
+        stats.times.classify_ms = ms_since(t);
+        stats.times.total_ms = ms_since(total);
+        return Ok((image, stats));
+    }
+    let t = Instant::now();
+    let classified = classify(gbuffer, camera, db, &options.classify)?;
+    stats.times.classify_ms = ms_since(t);
+    stats.model = db.map(|d| d.model().name());
+    stats.counts = classified.counts;
+    stats.pad_px = classified.frame.pad;
+    stats.layers_used = classified
+        .layers
+        .iter()
+        .filter(|l| l.record_count > 0)
+        .count() as u32;
+
+    let t = Instant::now();
+    let stack = splat(&classified, db, &options.splat);
+    stats.times.splat_ms = ms_since(t);
+
+    let t = Instant::now();
+    let layers = integrate(&stack, options.integrator);
+    stats.times.integrate_ms = ms_since(t);
+    drop(stack);
+
+    let t = Instant::now();
+    let image = composite(&layers, &options.composite);
+    stats.times.composite_ms = ms_since(t);
+    stats.times.total_ms = ms_since(total);
+    Ok((image, stats))
+}

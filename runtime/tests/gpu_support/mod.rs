@@ -1,0 +1,42 @@
+//! Helpers shared by the GPU test binaries.
+#![allow(dead_code)]
+
+use std::sync::OnceLock;
+
+use poisson::Plane;
+use runtime::gpu::GpuContext;
+
+/// The process-wide GPU context; `None` (test skipped, with a message) when there is no
+/// adapter and `SPREADLET_REQUIRE_GPU` is not `1`; a panic (test failure) when it is.
+pub fn context() -> Option<&'static GpuContext> {
+    static CTX: OnceLock<Option<GpuContext>> = OnceLock::new();
+    let ctx = CTX
+        .get_or_init(|| match GpuContext::new() {
+            Ok(c) => c,
+            Err(e) => panic!("GPU required but unavailable: {e}"),
+        })
+        .as_ref();
+    if ctx.is_none() {
+        eprintln!("no GPU adapter: test skipped (SPREADLET_REQUIRE_GPU=1 makes this a failure)");
+    }
+    ctx
+}
+
+/// A deterministic pseudo-random plane with values in [-1, 1) (xorshift, seeded).
+pub fn noise_plane(width: usize, height: usize, seed: u64) -> Plane {
+    let mut s = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+    Plane::from_fn(width, height, |_, _| {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        ((s >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
+    })
+}
+
+/// Largest absolute difference and largest absolute value of `b`.
+pub fn max_diff(a: &[f32], b: &[f32]) -> (f32, f32) {
+    assert_eq!(a.len(), b.len());
+    let d = a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f32::max);
+    let m = b.iter().map(|v| v.abs()).fold(0.0, f32::max);
+    (d, m)
+}

@@ -1,0 +1,74 @@
+//! Shared fixtures of the runtime's integration tests: Test-profile databases built once per
+//! test binary, and small G-buffers.
+
+#![allow(dead_code)]
+
+use std::sync::OnceLock;
+
+use precompute::{build_database, BuildConfig, Profile};
+use psf_db::{PsfDatabase, PsfModel};
+use runtime::camera::Camera;
+use runtime::gbuffer::GBuffer;
+
+/// The Test-profile database of `model`, built once per test binary.
+pub fn test_db(model: PsfModel) -> &'static PsfDatabase {
+    static DBS: [OnceLock<PsfDatabase>; 3] = [OnceLock::new(), OnceLock::new(), OnceLock::new()];
+    let slot = match model {
+        PsfModel::ThinLens => &DBS[0],
+        PsfModel::LensMotion => &DBS[1],
+        PsfModel::PhysicalLens => &DBS[2],
+    };
+    slot.get_or_init(|| {
+        let cfg = BuildConfig::new(model, Profile::Test);
+        match build_database(&cfg, false) {
+            Ok((db, _)) => db,
+            Err(e) => panic!("building the {} test database failed: {e}", model.name()),
+        }
+    })
+}
+
+/// A camera of `w x h` pixels: 50 mm on a 36 mm sensor, f/2 focused at 1 m when `lens`.
+pub fn camera(w: u32, h: u32, lens: bool, shutter: f64) -> Camera {
+    Camera {
+        width: w,
+        height: h,
+        focal_length_mm: 50.0,
+        sensor_width_mm: 36.0,
+        f_stop: lens.then_some(2.0),
+        focus_distance: lens.then_some(1.0),
+        aperture_blades: 0,
+        shutter_frames: shutter,
+        scene_unit_mm: 1000.0,
+    }
+}
+
+/// The depth (scene units) at which `camera` gives a CoC radius of `coc_px` behind the focus
+/// plane.
+pub fn depth_for_coc(camera: &Camera, coc_px: f64) -> f64 {
+    let lens = camera.thin_lens().expect("lens");
+    // r = k (1 - s/d)  =>  d = s / (1 - r/k)
+    lens.focus_distance / (1.0 - coc_px / lens.coc_scale_px)
+}
+
+/// A black, transparent `w x h` G-buffer with one pixel of colour `c` at `(x, y)`, all at
+/// depth `depth`, motion `motion` everywhere.
+pub fn one_pixel(
+    w: usize,
+    h: usize,
+    x: usize,
+    y: usize,
+    c: [f32; 4],
+    depth: f32,
+    motion: [f32; 2],
+) -> GBuffer {
+    let mut color = vec![[0.0; 4]; w * h];
+    color[y * w + x] = c;
+    GBuffer::from_planes(
+        w,
+        h,
+        color,
+        Some(vec![depth; w * h]),
+        Some(vec![motion; w * h]),
+    )
+    .expect("valid g-buffer")
+}

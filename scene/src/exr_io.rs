@@ -1,0 +1,144 @@
+//! Thin EXR helpers: single-part scanline files of named f32 channels, written atomically
+//! (temporary file in the target folder, then rename) and read with size checks first.
+
+use std::collections::BTreeMap;
+use std::io::BufWriter;
+use std::path::Path;
+
+use exr::prelude::*;
+
+use crate::error::{Error, Result};
+
+/// Largest number of samples per channel a reader accepts (2^30: about 4 GiB of f32).
+pub const MAX_CHANNEL_SAMPLES: usize = 1 << 30;
+
+/// Channels read from a file: name to row-major samples (row 0 at the top).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Channels {
+    /// Width of the data window in pixels.
+    pub width: usize,
+    /// Height of the data window in pixels.
+    pub height: usize,
+    /// Every channel, as f32.
+    pub data: BTreeMap<String, Vec<f32>>,
+    /// Text attributes of the layer that this crate writes (key to value).
+    pub text_attributes: BTreeMap<String, String>,
+}
+
+impl Channels {
+    /// The channel `name`, or a layout error naming the file.
+    pub fn take(&mut self, name: &str, path: &Path) -> Result<Vec<f32>> {
+        self.data.remove(name).ok_or_else(|| Error::Layout {
+            path: path.to_path_buf(),
+            message: format!(
+                "missing channel {name:?} (has: {})",
+                self.data.keys().cloned().collect::<Vec<_>>().join(", ")
+            ),
+        })
+    }
+}
+
+/// Writes `channels` (name, row-major samples of `width * height`) as one ZIP-compressed
+/// scanline part, plus at most one text attribute (one, so the header bytes never depend on
+/// hash-map order). The file appears only when complete.
+pub fn write_channels(
+    path: &Path,
+    width: usize,
+    height: usize,
+    channels: Vec<(String, Vec<f32>)>,
+    text_attribute: Option<(&str, String)>,
+) -> Result<()> {
+    let exr_error = |source| Error::Exr {
+        path: path.to_path_buf(),
+        source,
+    };
+    let io_error = |source| Error::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let mut list: SmallVec<[AnyChannel<FlatSamples>; 4]> = SmallVec::new();
+    for (name, samples) in channels {
+        debug_assert_eq!(samples.len(), width * height, "channel {name}");
+        let text = Text::new_or_none(&name).ok_or_else(|| Error::Layout {
+            path: path.to_path_buf(),
+            message: format!("channel name {name:?} is not valid EXR text"),
+        })?;
+        list.push(AnyChannel::new(text, FlatSamples::F32(samples)));
+    }
+    let mut attributes = LayerAttributes::default();
+    if let Some((key, value)) = text_attribute {
+        let key = Text::new_or_none(key);
+        let value = Text::new_or_none(&value);
+        if let (Some(key), Some(value)) = (key, value) {
+            attributes.other.insert(key, AttributeValue::Text(value));
+        }
+    }
+    let layer = Layer::new(
+        (width, height),
+        attributes,
+        Encoding::SMALL_LOSSLESS,
+        AnyChannels::sort(list),
+    );
+    let image = Image::from_layer(layer);
+    let dir = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => std::path::PathBuf::from("."),
+    };
+    let temp = tempfile::Builder::new()
+        .prefix(".spreadlet-")
+        .suffix(".exr.tmp")
+        .tempfile_in(&dir)
+        .map_err(io_error)?;
+    {
+        let writer = BufWriter::new(temp.as_file());
+        image.write().to_buffered(writer).map_err(exr_error)?;
+    }
+    temp.as_file().sync_all().map_err(io_error)?;
+    temp.persist(path).map_err(|e| io_error(e.error))?;
+    Ok(())
+}
+
+/// Reads the first part of an EXR file: checks the header's size against
+/// [`MAX_CHANNEL_SAMPLES`] before any pixel is decoded.
+pub fn read_channels(path: &Path) -> Result<Channels> {
+    let exr_error = |source| Error::Exr {
+        path: path.to_path_buf(),
+        source,
+    };
+    let meta = exr::meta::MetaData::read_from_file(path, false).map_err(exr_error)?;
+    let header = meta.headers.first().ok_or_else(|| Error::Layout {
+        path: path.to_path_buf(),
+        message: "no image part".to_string(),
+    })?;
+    let size = header.layer_size;
+    if size.0.checked_mul(size.1).is_none_or(|n| n > MAX_CHANNEL_SAMPLES) {
+        return Err(Error::Layout {
+            path: path.to_path_buf(),
+            message: format!("image of {}x{} pixels is too large", size.0, size.1),
+        });
+    }
+    if header.deep {
+        return Err(Error::Layout {
+            path: path.to_path_buf(),
+            message: "deep images are not supported".to_string(),
+        });
+    }
+    let image = read_first_flat_layer_from_file(path).map_err(exr_error)?;
+    let layer = image.layer_data;
+    let mut out = Channels {
+        width: layer.size.0,
+        height: layer.size.1,
+        ..Channels::default()
+    };
+    for (key, value) in &layer.attributes.other {
+        if let AttributeValue::Text(text) = value {
+            out.text_attributes
+                .insert(key.to_string(), text.to_string());
+        }
+    }
+    for channel in layer.channel_data.list {
+        let samples: Vec<f32> = channel.sample_data.values_as_f32().collect();
+        out.data.insert(channel.name.to_string(), samples);
+    }
+    Ok(out)
+}

@@ -1,0 +1,285 @@
+//! The three renders: the pinhole G-buffer, stochastic frames and the converged reference.
+//! Rows render in parallel with rayon; every pixel draws from its own generator seeded by
+//! (seed, render kind, pixel index), so output bits do not depend on the thread count.
+
+use glam::DVec2;
+use indicatif::{ProgressBar, ProgressStyle};
+use rayon::prelude::*;
+
+use crate::error::{invalid, Result};
+use crate::gbuffer::GBuffer;
+use crate::image::{srgb_encode, RgbaImage};
+use crate::sampling::{latin_hypercube, pixel_rng, uniform, Stream};
+use crate::scene::{Scene, MISS_DEPTH};
+use crate::stochastic::{Sample, StochasticFrames};
+
+/// Largest samples per pixel accepted by any render.
+pub const MAX_SPP: usize = 1 << 20;
+/// Largest number of stored samples in stochastic frames (48 bytes each: 3 GiB).
+pub const MAX_STOCHASTIC_SAMPLES: usize = 1 << 26;
+
+/// Settings shared by the renders.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RenderOptions {
+    /// Seed of every random number (same seed, same bits).
+    pub seed: u64,
+    /// Show an indicatif progress bar on stderr.
+    pub progress: bool,
+    /// Stochastic frames only: jitter each sample's sensor position uniformly over its pixel
+    /// (true) or shoot through the pixel centre (false).
+    pub jitter: bool,
+}
+
+impl Default for RenderOptions {
+    fn default() -> Self {
+        Self {
+            seed: 0,
+            progress: false,
+            jitter: true,
+        }
+    }
+}
+
+fn progress_bar(options: &RenderOptions, rows: usize, what: &str) -> ProgressBar {
+    if !options.progress {
+        return ProgressBar::hidden();
+    }
+    let bar = ProgressBar::new(rows as u64);
+    if let Ok(style) = ProgressStyle::with_template(
+        "{msg:>22} [{elapsed_precise}] {wide_bar} {pos}/{len} rows (eta {eta})",
+    ) {
+        bar.set_style(style);
+    }
+    bar.set_message(what.to_string());
+    bar
+}
+
+fn check_spp(spp: usize, what: &str) -> Result<()> {
+    if spp == 0 || spp > MAX_SPP {
+        return Err(invalid(
+            what,
+            format!("samples per pixel must be in 1..={MAX_SPP}, got {spp}"),
+        ));
+    }
+    Ok(())
+}
+
+/// Renders `row`-closures in parallel and concatenates them in row order.
+fn render_rows<T: Send>(
+    height: usize,
+    bar: &ProgressBar,
+    row: impl Fn(usize) -> Vec<T> + Sync + Send,
+) -> Vec<T> {
+    let rows: Vec<Vec<T>> = (0..height)
+        .into_par_iter()
+        .map(|y| {
+            let out = row(y);
+            bar.inc(1);
+            out
+        })
+        .collect();
+    bar.finish_and_clear();
+    rows.into_iter().flatten().collect()
+}
+
+/// The pinhole G-buffer at the frame time: colour averaged over `aa_samples` stratified
+/// positions in each pixel's area, depth and Blender Vector pass of the nearest hit at the
+/// pixel centre (motion from the frame before and after, through the lens centre).
+pub fn render_gbuffer(scene: &Scene, aa_samples: usize, options: &RenderOptions) -> Result<GBuffer> {
+    check_spp(aa_samples, "G-buffer anti-aliasing")?;
+    let camera = &scene.camera;
+    let (width, height) = (camera.spec.width as usize, camera.spec.height as usize);
+    let bar = progress_bar(options, height, "pinhole G-buffer");
+    let pixels = render_rows(height, &bar, |y| {
+        (0..width)
+            .map(|x| {
+                let index = (y * width + x) as u64;
+                let mut rng = pixel_rng(options.seed, Stream::GBuffer, index);
+                let set = latin_hypercube(&mut rng, aa_samples, 2);
+                let mut sum = [0.0f64; 4];
+                for i in 0..aa_samples {
+                    let pixel = DVec2::new(x as f64 + set[i], y as f64 + set[aa_samples + i]);
+                    let trace = scene.trace(&camera.ray(pixel, DVec2::ZERO, 0.0));
+                    for (s, c) in sum.iter_mut().zip(trace.color) {
+                        *s += f64::from(c);
+                    }
+                }
+                let color = sum.map(|s| (s / aa_samples as f64) as f32);
+                let centre = DVec2::new(x as f64 + 0.5, y as f64 + 0.5);
+                let trace = scene.trace(&camera.ray(centre, DVec2::ZERO, 0.0));
+                let (depth, vector) = match &trace.hit {
+                    Some(hit) => {
+                        let now = scene.image_position(hit, 0.0).unwrap_or(centre);
+                        let previous = scene.image_position(hit, -1.0).unwrap_or(now);
+                        let next = scene.image_position(hit, 1.0).unwrap_or(now);
+                        (
+                            trace.depth as f32,
+                            GBuffer::blender_vector(previous, now, next),
+                        )
+                    }
+                    None => (MISS_DEPTH, [0.0; 4]),
+                };
+                (color, depth, vector)
+            })
+            .collect()
+    });
+    let mut gbuffer = GBuffer {
+        width,
+        height,
+        color: Vec::with_capacity(pixels.len()),
+        depth: Vec::with_capacity(pixels.len()),
+        vector: Vec::with_capacity(pixels.len()),
+    };
+    for (color, depth, vector) in pixels {
+        gbuffer.color.push(color);
+        gbuffer.depth.push(depth);
+        gbuffer.vector.push(vector);
+    }
+    Ok(gbuffer)
+}
+
+/// Stochastic frames: `spp` independent samples per pixel, each one ray at a uniformly random
+/// lens position, time in the shutter and (with `options.jitter`) position in the pixel.
+pub fn render_stochastic(
+    scene: &Scene,
+    spp: usize,
+    options: &RenderOptions,
+) -> Result<StochasticFrames> {
+    check_spp(spp, "stochastic frames")?;
+    let camera = &scene.camera;
+    let (width, height) = (camera.spec.width as usize, camera.spec.height as usize);
+    let total = width * height * spp;
+    if total > MAX_STOCHASTIC_SAMPLES {
+        return Err(invalid(
+            "stochastic frames",
+            format!("{width}x{height} pixels at {spp} spp exceed {MAX_STOCHASTIC_SAMPLES} samples"),
+        ));
+    }
+    let shutter = camera.spec.shutter_frames;
+    let bar = progress_bar(options, height, "stochastic frames");
+    let samples = render_rows(height, &bar, |y| {
+        let mut row = Vec::with_capacity(width * spp);
+        for x in 0..width {
+            let index = (y * width + x) as u64;
+            let mut rng = pixel_rng(options.seed, Stream::Stochastic, index);
+            for _ in 0..spp {
+                let jitter = if options.jitter {
+                    DVec2::new(uniform(&mut rng) - 0.5, uniform(&mut rng) - 0.5)
+                } else {
+                    DVec2::ZERO
+                };
+                let xi = DVec2::new(uniform(&mut rng), uniform(&mut rng));
+                let time = (uniform(&mut rng) - 0.5) * shutter;
+                let pixel = DVec2::new(x as f64 + 0.5, y as f64 + 0.5) + jitter;
+                let (ray, lens) = camera.ray_with_lens_sample(pixel, xi, time);
+                let trace = scene.trace(&ray);
+                let motion = trace
+                    .hit
+                    .map(|hit| scene.image_velocity(&hit, time))
+                    .unwrap_or(DVec2::ZERO);
+                row.push(Sample {
+                    color: trace.color,
+                    depth: trace.depth as f32,
+                    lens: [lens.x as f32, lens.y as f32],
+                    time: time as f32,
+                    motion: [motion.x as f32, motion.y as f32],
+                    jitter: [jitter.x as f32, jitter.y as f32],
+                });
+            }
+        }
+        row
+    });
+    Ok(StochasticFrames {
+        width,
+        height,
+        spp,
+        samples,
+    })
+}
+
+/// The converged reference: per pixel the mean of `spp` rays whose pixel position, lens
+/// position and time form a Latin hypercube (stratified in every dimension).
+pub fn render_reference(scene: &Scene, spp: usize, options: &RenderOptions) -> Result<RgbaImage> {
+    check_spp(spp, "reference")?;
+    let camera = &scene.camera;
+    let (width, height) = (camera.spec.width as usize, camera.spec.height as usize);
+    let shutter = camera.spec.shutter_frames;
+    let bar = progress_bar(options, height, "reference");
+    let pixels = render_rows(height, &bar, |y| {
+        (0..width)
+            .map(|x| {
+                let index = (y * width + x) as u64;
+                let mut rng = pixel_rng(options.seed, Stream::Reference, index);
+                let set = latin_hypercube(&mut rng, spp, 5);
+                let dim = |d: usize, i: usize| set[d * spp + i];
+                let mut sum = [0.0f64; 4];
+                for i in 0..spp {
+                    let pixel = DVec2::new(x as f64 + dim(0, i), y as f64 + dim(1, i));
+                    let xi = DVec2::new(dim(2, i), dim(3, i));
+                    let time = (dim(4, i) - 0.5) * shutter;
+                    let (ray, _) = camera.ray_with_lens_sample(pixel, xi, time);
+                    let trace = scene.trace(&ray);
+                    for (s, c) in sum.iter_mut().zip(trace.color) {
+                        *s += f64::from(c);
+                    }
+                }
+                sum.map(|s| (s / spp as f64) as f32)
+            })
+            .collect()
+    });
+    Ok(RgbaImage {
+        width,
+        height,
+        pixels,
+    })
+}
+
+/// How noisy a reference of `spp` samples is, from two independent half renders.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NoiseEstimate {
+    /// Samples per pixel of the full reference (each half has spp / 2).
+    pub spp: usize,
+    /// RMS over pixels and RGB of the full reference's noise in linear units:
+    /// RMS(half_a - half_b) / 2 (the mean of two halves has half their difference's spread).
+    pub rms_linear: f64,
+    /// The same on sRGB-encoded values clamped to [0, 1] (the scale SSIM sees).
+    pub rms_srgb: f64,
+    /// Largest |half_a - half_b| / 2 over pixels and RGB, sRGB-encoded.
+    pub max_srgb: f64,
+}
+
+/// Estimates the noise of a `spp` reference by rendering two `spp / 2` halves with seeds
+/// `seed` and `seed + 1` and comparing them.
+pub fn estimate_reference_noise(
+    scene: &Scene,
+    spp: usize,
+    options: &RenderOptions,
+) -> Result<NoiseEstimate> {
+    let half = (spp / 2).max(1);
+    let a = render_reference(scene, half, options)?;
+    let b = render_reference(
+        scene,
+        half,
+        &RenderOptions {
+            seed: options.seed.wrapping_add(1),
+            ..*options
+        },
+    )?;
+    let (mut lin, mut srgb, mut max) = (0.0f64, 0.0f64, 0.0f64);
+    for (p, q) in a.pixels.iter().zip(&b.pixels) {
+        for c in 0..3 {
+            let d = f64::from(p[c] - q[c]);
+            lin += d * d;
+            let e = f64::from(srgb_encode(p[c]) - srgb_encode(q[c]));
+            srgb += e * e;
+            max = max.max(e.abs());
+        }
+    }
+    let n = (a.pixels.len() * 3).max(1) as f64;
+    Ok(NoiseEstimate {
+        spp: 2 * half,
+        rms_linear: (lin / n).sqrt() / 2.0,
+        rms_srgb: (srgb / n).sqrt() / 2.0,
+        max_srgb: max / 2.0,
+    })
+}

@@ -1,0 +1,440 @@
+//! Scene files (JSON, serde) and the prepared scene: closest-hit queries at a time, shadows,
+//! view-independent shading and the pinhole image motion of surface points.
+
+use std::path::Path;
+
+use glam::{DVec2, DVec3};
+use serde::{Deserialize, Serialize};
+
+use crate::camera::{Camera, CameraPose, CameraSpec, Ray};
+use crate::error::{invalid, Error, Result};
+use crate::material::{Light, Material};
+use crate::shapes::{Motion, PreparedShape, Shape, Spin};
+
+/// Depth written where a ray hits nothing (Blender's convention).
+pub const MISS_DEPTH: f32 = 1e10;
+
+/// Most objects a scene may hold (the tracer is brute force).
+pub const MAX_OBJECTS: usize = 10_000;
+
+/// The scene file's top level.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SceneDescription {
+    /// Scene name (written into `camera.json` as `scene`).
+    pub name: String,
+    /// What the scene stresses, for people.
+    #[serde(default)]
+    pub description: String,
+    /// The lens and shutter, exactly in `camera.json`'s format.
+    pub camera: CameraSpec,
+    /// Where the camera is and how it moves.
+    pub camera_pose: CameraPose,
+    /// Linear RGB radiance of rays that hit nothing (alpha stays 0 there).
+    #[serde(default)]
+    pub background: [f32; 3],
+    /// Ambient term added to every surface's irradiance (linear RGB).
+    #[serde(default)]
+    pub ambient: [f32; 3],
+    /// Lights.
+    #[serde(default)]
+    pub lights: Vec<Light>,
+    /// Objects.
+    pub objects: Vec<ObjectDescription>,
+}
+
+/// One object of the scene file.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ObjectDescription {
+    /// Optional name used in error messages.
+    #[serde(default)]
+    pub name: String,
+    /// Geometry at the frame time.
+    pub shape: Shape,
+    /// Surface.
+    #[serde(default)]
+    pub material: Material,
+    /// Linear velocity in metres per frame.
+    #[serde(default)]
+    pub velocity: DVec3,
+    /// Optional spin (rotation over the shutter).
+    #[serde(default)]
+    pub spin: Option<Spin>,
+    /// Whether the object blocks lights (default true; emitters usually should not).
+    #[serde(default = "yes")]
+    pub casts_shadow: bool,
+}
+
+fn yes() -> bool {
+    true
+}
+
+/// A prepared object.
+#[derive(Clone, Debug)]
+pub struct Object {
+    /// Name (or `object N`).
+    pub name: String,
+    /// Geometry.
+    pub shape: PreparedShape,
+    /// Surface.
+    pub material: Material,
+    /// Motion over the shutter.
+    pub motion: Motion,
+    /// Whether it blocks lights.
+    pub casts_shadow: bool,
+}
+
+/// A surface hit in world space.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    /// Index into [`Scene::objects`].
+    pub object: usize,
+    /// Ray distance, metres.
+    pub distance: f64,
+    /// World point, metres.
+    pub point: DVec3,
+    /// The same point in the object's rest frame (t = 0), metres.
+    pub rest_point: DVec3,
+    /// World unit normal (facing the ray for two-sided shapes).
+    pub normal: DVec3,
+    /// Texture coordinates.
+    pub uv: DVec2,
+}
+
+/// What one camera ray sees.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Trace {
+    /// Premultiplied linear RGBA: alpha 1 on a hit, 0 on a miss (RGB = background then).
+    pub color: [f32; 4],
+    /// Planar depth of the hit from the camera at the ray's time, metres; [`MISS_DEPTH`] on a miss.
+    pub depth: f64,
+    /// The hit, if any.
+    pub hit: Option<Hit>,
+}
+
+/// A validated scene ready to render.
+#[derive(Clone, Debug)]
+pub struct Scene {
+    /// Scene name.
+    pub name: String,
+    /// The camera.
+    pub camera: Camera,
+    /// Background radiance.
+    pub background: [f32; 3],
+    /// Ambient term.
+    pub ambient: [f32; 3],
+    /// Lights.
+    pub lights: Vec<Light>,
+    /// Objects.
+    pub objects: Vec<Object>,
+    description: SceneDescription,
+}
+
+/// Names of the scenes embedded in the library.
+pub const BUILTIN_NAMES: [&str; 5] = ["bokeh", "crossing", "occluder", "rotating", "physical"];
+
+/// The JSON text of a builtin scene.
+pub fn builtin_json(name: &str) -> Option<&'static str> {
+    Some(match name {
+        "bokeh" => include_str!("../scenes/bokeh.json"),
+        "crossing" => include_str!("../scenes/crossing.json"),
+        "occluder" => include_str!("../scenes/occluder.json"),
+        "rotating" => include_str!("../scenes/rotating.json"),
+        "physical" => include_str!("../scenes/physical.json"),
+        _ => return None,
+    })
+}
+
+/// A builtin scene by name (see [`BUILTIN_NAMES`]).
+pub fn builtin(name: &str) -> Result<Scene> {
+    let text = builtin_json(name).ok_or_else(|| Error::UnknownBuiltin {
+        name: name.to_string(),
+        known: BUILTIN_NAMES.join(", "),
+    })?;
+    Scene::from_json(text, &format!("builtin scene {name}"))
+}
+
+impl Scene {
+    /// Parses and validates a scene document; `source_name` names it in error messages.
+    pub fn from_json(text: &str, source_name: &str) -> Result<Self> {
+        let description: SceneDescription =
+            serde_json::from_str(text).map_err(|source| Error::Json {
+                source_name: source_name.to_string(),
+                source,
+            })?;
+        Self::new(description, source_name)
+    }
+
+    /// Reads a scene file, or a builtin scene when `path` names one and no such file exists.
+    pub fn load(path: &Path) -> Result<Self> {
+        if !path.exists() {
+            if let Some(name) = path.to_str().filter(|n| builtin_json(n).is_some()) {
+                return builtin(name);
+            }
+        }
+        let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Self::from_json(&text, &path.display().to_string())
+    }
+
+    /// Validates a parsed description.
+    pub fn new(description: SceneDescription, source_name: &str) -> Result<Self> {
+        let camera = Camera::new(
+            description.camera.clone(),
+            description.camera_pose.clone(),
+            source_name,
+        )?;
+        let colour_ok = |c: &[f32; 3]| c.iter().all(|v| v.is_finite() && *v >= 0.0);
+        if !colour_ok(&description.background) || !colour_ok(&description.ambient) {
+            return Err(invalid(
+                source_name,
+                "background and ambient must be finite and >= 0",
+            ));
+        }
+        if description.objects.len() > MAX_OBJECTS {
+            return Err(invalid(
+                source_name,
+                format!("at most {MAX_OBJECTS} objects are supported"),
+            ));
+        }
+        for (i, light) in description.lights.iter().enumerate() {
+            light.validate(&format!("{source_name}: light {i}"))?;
+        }
+        let mut objects = Vec::with_capacity(description.objects.len());
+        for (i, object) in description.objects.iter().enumerate() {
+            let name = if object.name.is_empty() {
+                format!("object {i}")
+            } else {
+                object.name.clone()
+            };
+            let context = format!("{source_name}: {name}");
+            let shape = PreparedShape::new(object.shape.clone(), &context)?;
+            object.material.validate(&context)?;
+            let motion = Motion::new(
+                object.velocity,
+                object.spin.as_ref(),
+                shape.centre(),
+                &context,
+            )?;
+            objects.push(Object {
+                name,
+                shape,
+                material: object.material.clone(),
+                motion,
+                casts_shadow: object.casts_shadow,
+            });
+        }
+        Ok(Self {
+            name: description.name.clone(),
+            camera,
+            background: description.background,
+            ambient: description.ambient,
+            lights: description.lights.clone(),
+            objects,
+            description,
+        })
+    }
+
+    /// The description this scene was built from.
+    pub fn description(&self) -> &SceneDescription {
+        &self.description
+    }
+
+    /// The camera's lens and shutter.
+    pub fn camera_spec(&self) -> &CameraSpec {
+        &self.camera.spec
+    }
+
+    /// The same scene with another camera spec (image size, lens or shutter); the field of view
+    /// follows from the focal length and sensor width, so changing only the size keeps the view.
+    pub fn with_camera_spec(&self, spec: CameraSpec) -> Result<Self> {
+        let mut description = self.description.clone();
+        description.camera = spec;
+        Self::new(description, &self.name)
+    }
+
+    /// The same scene at another image size (pixels), keeping the field of view.
+    pub fn with_size(&self, width: u32, height: u32) -> Result<Self> {
+        let mut spec = self.camera.spec.clone();
+        spec.width = width;
+        spec.height = height;
+        self.with_camera_spec(spec)
+    }
+
+    /// `camera.json` for this scene: the camera spec plus `"scene": name`.
+    pub fn camera_json(&self) -> String {
+        let mut value = serde_json::to_value(&self.camera.spec).unwrap_or(serde_json::Value::Null);
+        if let serde_json::Value::Object(map) = &mut value {
+            map.insert(
+                "scene".to_string(),
+                serde_json::Value::String(self.name.clone()),
+            );
+            map.insert(
+                "renderer".to_string(),
+                serde_json::Value::String("spreadlet-scene".to_string()),
+            );
+        }
+        serde_json::to_string_pretty(&value).unwrap_or_default()
+    }
+
+    /// Closest hit of a world ray at time `ray.time` with distance in (1e-9, t_max).
+    pub fn intersect(&self, ray: &Ray, t_max: f64) -> Option<Hit> {
+        let mut best: Option<(usize, crate::shapes::RestHit)> = None;
+        let mut limit = t_max;
+        for (i, object) in self.objects.iter().enumerate() {
+            let rest_ray = object.motion.to_rest(ray);
+            if let Some(hit) = object.shape.intersect(&rest_ray, 1e-9, limit) {
+                limit = hit.distance;
+                best = Some((i, hit));
+            }
+        }
+        best.map(|(i, rest)| {
+            let motion = &self.objects[i].motion;
+            Hit {
+                object: i,
+                distance: rest.distance,
+                point: ray.origin + ray.direction * rest.distance,
+                rest_point: rest.point,
+                normal: motion.rotate(rest.normal, ray.time),
+                uv: rest.uv,
+            }
+        })
+    }
+
+    /// True if a shadow-casting object blocks the segment of `ray` up to `t_max`.
+    fn occluded(&self, ray: &Ray, t_max: f64) -> bool {
+        self.objects.iter().any(|object| {
+            object.casts_shadow
+                && object
+                    .shape
+                    .intersect(&object.motion.to_rest(ray), 1e-9, t_max)
+                    .is_some()
+        })
+    }
+
+    /// Outgoing radiance of a hit at `time`: emission + albedo * (ambient + shadowed lights).
+    pub fn shade(&self, hit: &Hit, time: f64) -> [f32; 3] {
+        let material = &self.objects[hit.object].material;
+        let albedo = material.albedo_at(hit.uv);
+        let mut irradiance = [
+            f64::from(self.ambient[0]),
+            f64::from(self.ambient[1]),
+            f64::from(self.ambient[2]),
+        ];
+        let origin = hit.point + hit.normal * 1e-7;
+        for light in &self.lights {
+            let (to_light, distance, scale, intensity) = match light {
+                Light::Point {
+                    position,
+                    intensity,
+                } => {
+                    let d = *position - hit.point;
+                    let dist = d.length();
+                    if dist <= 0.0 {
+                        continue;
+                    }
+                    (d / dist, dist, 1.0 / (dist * dist), intensity)
+                }
+                Light::Directional {
+                    direction,
+                    intensity,
+                } => (-direction.normalize(), f64::INFINITY, 1.0, intensity),
+            };
+            let cosine = hit.normal.dot(to_light);
+            if cosine <= 0.0 {
+                continue;
+            }
+            let shadow = Ray {
+                origin,
+                direction: to_light,
+                time,
+            };
+            if self.occluded(&shadow, distance) {
+                continue;
+            }
+            for (e, i) in irradiance.iter_mut().zip(intensity) {
+                *e += f64::from(*i) * cosine * scale;
+            }
+        }
+        std::array::from_fn(|c| {
+            (f64::from(material.emission[c]) + f64::from(albedo[c]) * irradiance[c]) as f32
+        })
+    }
+
+    /// Traces one camera ray: colour, alpha and planar depth.
+    pub fn trace(&self, ray: &Ray) -> Trace {
+        match self.intersect(ray, f64::INFINITY) {
+            Some(hit) => {
+                let [r, g, b] = self.shade(&hit, ray.time);
+                Trace {
+                    color: [r, g, b, 1.0],
+                    depth: self.camera.planar_depth(hit.point, ray.time),
+                    hit: Some(hit),
+                }
+            }
+            None => {
+                let [r, g, b] = self.background;
+                Trace {
+                    color: [r, g, b, 0.0],
+                    depth: f64::from(MISS_DEPTH),
+                    hit: None,
+                }
+            }
+        }
+    }
+
+    /// Pinhole image position (pixels) at `time` of the surface point of `hit`, following the
+    /// object's motion and the camera's.
+    pub fn image_position(&self, hit: &Hit, time: f64) -> Option<DVec2> {
+        let world = self.objects[hit.object]
+            .motion
+            .place(hit.rest_point, time);
+        self.camera.project(world, time)
+    }
+
+    /// Instantaneous forward image motion (pixels per frame, x right, y down) of the hit's
+    /// surface point at `time`, by a central difference of +-1e-4 frames; zero if the point
+    /// leaves the front of the camera.
+    pub fn image_velocity(&self, hit: &Hit, time: f64) -> DVec2 {
+        const H: f64 = 1e-4;
+        match (
+            self.image_position(hit, time + H),
+            self.image_position(hit, time - H),
+        ) {
+            (Some(a), Some(b)) => (a - b) / (2.0 * H),
+            _ => DVec2::ZERO,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn builtins_parse() {
+        for name in BUILTIN_NAMES {
+            let scene = builtin(name).unwrap_or_else(|e| panic!("{name}: {e}"));
+            assert_eq!(scene.name, name);
+            assert!(!scene.objects.is_empty());
+        }
+        let err = builtin("nope").expect_err("unknown");
+        assert!(err.to_string().contains("bokeh"));
+    }
+
+    #[test]
+    fn errors_name_the_problem() {
+        let text = builtin_json("bokeh").expect("bokeh");
+        let typo = text.replacen("\"objects\"", "\"objcts\"", 1);
+        let err = Scene::from_json(&typo, "typo.json").expect_err("typo");
+        assert!(err.to_string().contains("objcts"), "{err}");
+        let bad = text.replacen("\"radius\": ", "\"radius\": -", 1);
+        let err = Scene::from_json(&bad, "neg.json").expect_err("negative radius");
+        assert!(err.to_string().contains("radius"), "{err}");
+        let err = Scene::from_json("{", "trunc.json").expect_err("truncated");
+        assert!(err.to_string().contains("trunc.json"), "{err}");
+    }
+}

@@ -1,0 +1,96 @@
+// Shared structs of the GPU path. Every struct here has a Rust twin with the same field order
+// (`runtime::pipeline::types` for the records, `runtime::gpu::layout` for the pass parameters,
+// `psf_db::DenseEntry` for dense PSFs); `runtime/tests/gpu_layout.rs` checks sizes and offsets.
+// This file is prepended to every stage's source.
+
+// One classified pixel (twin of runtime::pipeline::types::SplatRecord, 48 bytes).
+struct SplatRecord {
+    center_x: i32,
+    center_y: i32,
+    psf_index: u32,
+    layer: u32,
+    rot_cos: f32,
+    rot_sin: f32,
+    weight: f32,
+    path: u32,
+    color: vec4<f32>,
+}
+
+// Per-frame constants (twin of runtime::pipeline::types::FrameParams, 32 bytes).
+struct FrameParams {
+    width: u32,
+    height: u32,
+    pad: u32,
+    layers: u32,
+    padded_width: u32,
+    padded_height: u32,
+    record_count: u32,
+    db_channels: u32,
+}
+
+// Twin of psf_db::DenseEntry (12 bytes): WGSL has no 16-bit integers, so the u16/i16 pairs are
+// read as packed words, low half first (little endian).
+struct DenseEntry {
+    offset: u32,
+    // width (low 16 bits, u16) and height (high 16 bits, u16), px.
+    size_packed: u32,
+    // origin_x (low, i16) and origin_y (high, i16), px from the PSF centre.
+    origin_packed: u32,
+}
+
+// A set of equally sized planes inside one f32 buffer (twin of runtime::gpu::layout::PlaneSet):
+// plane p, pixel (x, y) is element `offset + p * stride + y * width + x`.
+struct PlaneSet {
+    width: u32,
+    height: u32,
+    offset: u32,
+    stride: u32,
+}
+
+// Parameters of one pass over planes (twin of runtime::gpu::layout::PassParams, 64 bytes).
+struct PassParams {
+    src: PlaneSet,
+    dst: PlaneSet,
+    aux: PlaneSet,
+    planes: u32,
+    scale: f32,
+    border: u32,
+    // Pass-specific flags (composite: bit 0 = renormalise coverage).
+    flags: u32,
+}
+
+// Splat path codes (twin of runtime::pipeline::types::SplatPath).
+const PATH_SPARSE: u32 = 0u;
+const PATH_DENSE: u32 = 1u;
+const PATH_COPY: u32 = 2u;
+// psf_db::SPARSE_SLOT.
+const SPARSE_SLOT: u32 = 0xffffffffu;
+
+fn plane_index(s: PlaneSet, p: u32, x: u32, y: u32) -> u32 {
+    return s.offset + p * s.stride + y * s.width + x;
+}
+
+// Low and high signed 16-bit halves of a packed word.
+fn unpack_i16_lo(w: u32) -> i32 {
+    return (bitcast<i32>(w) << 16u) >> 16u;
+}
+fn unpack_i16_hi(w: u32) -> i32 {
+    return bitcast<i32>(w) >> 16u;
+}
+
+// Where the splat stage writes (twin of runtime::gpu::layout::SplatTargets, 48 bytes).
+struct SplatTargets {
+    // Laplacian planes (layer * 4 + channel): analysis level 0 of the pyramid, whose pixel
+    // (border, border) is the padded layer's pixel (0, 0).
+    laplacian: PlaneSet,
+    // Direct planes (layer * 4 + channel), padded-layer size.
+    direct: PlaneSet,
+    // Border of the Laplacian planes, px (poisson::pyramid::PAD).
+    border: u32,
+    // Rotated offsets: 0 = bilinear split, 1 = nearest pixel (runtime::pipeline::RotationSampling).
+    rotation: u32,
+    // Number of PSFs in the database (records with a larger index draw nothing).
+    psf_count: u32,
+    // Spreadlet values (and dense pixels) per position: 1 or 3.
+    channels: u32,
+}

@@ -1,0 +1,43 @@
+// Compositing back to front (mirror of runtime::pipeline::composite): one invocation per output
+// pixel, over the layers from 0 (farthest) to the nearest, "over" with premultiplied alpha; a
+// layer whose coverage exceeds one is normalised by it, and (flag bit 0) the result's coverage is
+// raised to the summed coverage, capped at one (Lee et al. 2008). Negative values clamp to 0.
+// params.src: the layer images (padded layers); params.planes: layers; params.border: pad.
+
+@group(0) @binding(0) var<uniform> params: PassParams;
+@group(0) @binding(1) var<storage, read> layer_images: array<f32>;
+@group(0) @binding(2) var<storage, read_write> output: array<vec4<f32>>;
+
+@compute @workgroup_size(16, 16, 1)
+fn composite(@builtin(global_invocation_id) id: vec3<u32>) {
+    let w = params.dst.width;
+    if id.x >= w || id.y >= params.dst.height {
+        return;
+    }
+    let s = params.src;
+    let x = id.x + params.border;
+    let y = id.y + params.border;
+    var acc = vec4<f32>(0.0);
+    var total = 0.0;
+    for (var l = 0u; l < params.planes; l++) {
+        var c = vec4<f32>(
+            layer_images[plane_index(s, l * 4u, x, y)],
+            layer_images[plane_index(s, l * 4u + 1u, x, y)],
+            layer_images[plane_index(s, l * 4u + 2u, x, y)],
+            max(layer_images[plane_index(s, l * 4u + 3u, x, y)], 0.0),
+        );
+        if c.w > 1.0 {
+            c = c * (1.0 / c.w);
+        }
+        total += c.w;
+        acc = c + (1.0 - c.w) * acc;
+    }
+    if (params.flags & 1u) != 0u {
+        let target_alpha = min(total, 1.0);
+        if acc.w > 1e-6 && target_alpha > acc.w {
+            acc = acc * (target_alpha / acc.w);
+            acc.w = target_alpha;
+        }
+    }
+    output[id.y * w + id.x] = max(acc, vec4<f32>(0.0));
+}

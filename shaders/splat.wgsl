@@ -1,0 +1,151 @@
+// Splatting (mirror of runtime::pipeline::splat): each workgroup of 64 invocations takes
+// 64 / LANES records, LANES invocations per record striding over the record's spreadlets
+// (sparse path, into the Laplacian planes) or dense PSF pixels / copied colour (`dense.wgsl`, into the direct planes). Accumulation is atomic
+// (`atomic_f32.wgsl` or `atomic_cas.wgsl`, prepended), so the sum order, unlike the CPU's, is
+// not fixed: results agree to float rounding.
+
+const GROUP: u32 = 64u;
+// Invocations per record (a power of two dividing GROUP; set from Rust).
+override LANES: u32 = 8u;
+
+@group(0) @binding(0) var<uniform> frame: FrameParams;
+@group(0) @binding(1) var<uniform> targets: SplatTargets;
+@group(0) @binding(2) var<storage, read> records: array<SplatRecord>;
+@group(0) @binding(3) var<storage, read> cumulative: array<u32>;
+// psf_db positions: [i16; 2] per spreadlet, packed (x low, y high).
+@group(0) @binding(4) var<storage, read> positions: array<u32>;
+@group(0) @binding(5) var<storage, read> values: array<f32>;
+// One DenseEntry per PSF (size 0 for sparse PSFs): dense_slot resolved at upload.
+@group(0) @binding(6) var<storage, read> dense_table: array<DenseEntry>;
+@group(0) @binding(7) var<storage, read> dense_data: array<f32>;
+
+// The RGBA a PSF sample contributes: grey databases scale every channel by the one value, RGB
+// databases give alpha the mean of R, G, B (as the CPU's `weighted`).
+fn weighted(color: vec4<f32>, data_index: u32, from_dense: bool) -> vec4<f32> {
+    if targets.channels == 3u {
+        var r: f32;
+        var g: f32;
+        var b: f32;
+        if from_dense {
+            r = dense_data[data_index];
+            g = dense_data[data_index + 1u];
+            b = dense_data[data_index + 2u];
+        } else {
+            r = values[data_index];
+            g = values[data_index + 1u];
+            b = values[data_index + 2u];
+        }
+        return vec4<f32>(color.x * r, color.y * g, color.z * b, color.w * (r + g + b) / 3.0);
+    }
+    var v: f32;
+    if from_dense {
+        v = dense_data[data_index];
+    } else {
+        v = values[data_index];
+    }
+    return color * v;
+}
+
+// Adds `v` at padded-layer pixel (x, y) of `layer` (dropped outside the padded layer).
+fn add_rgba(to_laplacian: bool, layer: u32, x: i32, y: i32, v: vec4<f32>) {
+    if x < 0 || y < 0 || x >= i32(frame.padded_width) || y >= i32(frame.padded_height) {
+        return;
+    }
+    for (var c = 0u; c < 4u; c++) {
+        if v[c] == 0.0 {
+            continue;
+        }
+        if to_laplacian {
+            let s = targets.laplacian;
+            let b = targets.border;
+            add_laplacian(plane_index(s, layer * 4u + c, u32(x) + b, u32(y) + b), v[c]);
+        } else {
+            add_direct(plane_index(targets.direct, layer * 4u + c, u32(x), u32(y)), v[c]);
+        }
+    }
+}
+
+// Rust's f32::round: half away from zero (WGSL's round() is half to even).
+fn round_away(v: f32) -> f32 {
+    return sign(v) * floor(abs(v) + 0.5);
+}
+
+// Adds `v` at offset (ox, oy) from the record's centre, rotated by the record's rotation.
+fn place(to_laplacian: bool, r: SplatRecord, ox: i32, oy: i32, v: vec4<f32>) {
+    if r.rot_cos == 1.0 && r.rot_sin == 0.0 {
+        add_rgba(to_laplacian, r.layer, r.center_x + ox, r.center_y + oy, v);
+        return;
+    }
+    let fx = f32(ox);
+    let fy = f32(oy);
+    let rx = r.rot_cos * fx - r.rot_sin * fy;
+    let ry = r.rot_sin * fx + r.rot_cos * fy;
+    if targets.rotation == 1u {
+        add_rgba(to_laplacian, r.layer, r.center_x + i32(round_away(rx)), r.center_y + i32(round_away(ry)), v);
+        return;
+    }
+    let flx = floor(rx);
+    let fly = floor(ry);
+    let tx = rx - flx;
+    let ty = ry - fly;
+    let x0 = r.center_x + i32(flx);
+    let y0 = r.center_y + i32(fly);
+    let w00 = (1.0 - tx) * (1.0 - ty);
+    let w10 = tx * (1.0 - ty);
+    let w01 = (1.0 - tx) * ty;
+    let w11 = tx * ty;
+    if w00 != 0.0 {
+        add_rgba(to_laplacian, r.layer, x0, y0, v * w00);
+    }
+    if w10 != 0.0 {
+        add_rgba(to_laplacian, r.layer, x0 + 1, y0, v * w10);
+    }
+    if w01 != 0.0 {
+        add_rgba(to_laplacian, r.layer, x0, y0 + 1, v * w01);
+    }
+    if w11 != 0.0 {
+        add_rgba(to_laplacian, r.layer, x0 + 1, y0 + 1, v * w11);
+    }
+}
+
+// Sparse path: the record's spreadlets into its layer's Laplacian planes.
+fn draw_sparse(r: SplatRecord, lane: u32) {
+    let start = cumulative[r.psf_index];
+    let end = cumulative[r.psf_index + 1u];
+    for (var k = start + lane; k < end; k += LANES) {
+        let p = positions[k];
+        let v = weighted(r.color, k * targets.channels, false);
+        place(true, r, unpack_i16_lo(p), unpack_i16_hi(p), v);
+    }
+}
+
+@compute @workgroup_size(64, 1, 1)
+fn splat_records(
+    @builtin(workgroup_id) wid: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+    @builtin(local_invocation_index) local: u32,
+) {
+    let i = (wid.y * groups.x + wid.x) * (GROUP / LANES) + local / LANES;
+    let lane = local % LANES;
+    if i >= frame.record_count {
+        return;
+    }
+    let r = records[i];
+    if r.layer >= frame.layers {
+        return;
+    }
+    if r.path == PATH_COPY {
+        if lane == 0u {
+            add_rgba(false, r.layer, r.center_x, r.center_y, r.color);
+        }
+        return;
+    }
+    if r.psf_index >= targets.psf_count {
+        return;
+    }
+    if r.path == PATH_SPARSE {
+        draw_sparse(r, lane);
+    } else if r.path == PATH_DENSE {
+        draw_dense(r, lane);
+    }
+}
