@@ -27,6 +27,21 @@ override pad: u32;
 // images.
 @group(0) @binding(3) var<storage, read_write> layer_images: array<f32>;
 
+// Analysis level value at signed (x, y) of the plane starting at `base`, zero outside.
+fn a_at(base: u32, w: u32, h: u32, x: i32, y: i32) -> f32 {
+    if x < 0 || y < 0 || x >= i32(w) || y >= i32(h) {
+        return 0.0;
+    }
+    return analysis[base + u32(y) * w + u32(x)];
+}
+
+// H1 along x at (cx, y), zero outside (the CPU's `filter5_row`).
+fn h1_row(base: u32, w: u32, h: u32, cx: i32, y: i32) -> f32 {
+    return h1_0 * a_at(base, w, h, cx - 2, y) + h1_1 * a_at(base, w, h, cx - 1, y)
+        + h1_2 * a_at(base, w, h, cx, y) + h1_3 * a_at(base, w, h, cx + 1, y)
+        + h1_4 * a_at(base, w, h, cx + 2, y);
+}
+
 // analysis_step: a_{i+1} = pad(even samples of H1 (x) H1 * a_i). src, dst: analysis levels.
 @compute @workgroup_size(16, 16, 1)
 fn analysis_step(@builtin(global_invocation_id) id: vec3<u32>) {
@@ -35,29 +50,18 @@ fn analysis_step(@builtin(global_invocation_id) id: vec3<u32>) {
     if id.x >= dst.width || id.y >= dst.height || id.z >= params.planes {
         return;
     }
-    let h1 = array<f32, 5>(h1_0, h1_1, h1_2, h1_3, h1_4);
     var v = 0.0;
     let xi = i32(id.x) - i32(pad);
     let yi = i32(id.y) - i32(pad);
     if xi >= 0 && yi >= 0 && xi < i32(dst.width - 2u * pad) && yi < i32(dst.height - 2u * pad) {
         let cx = 2 * xi;
         let cy = 2 * yi;
-        let base = src.offset + id.z * src.stride;
-        for (var ky = 0; ky < 5; ky++) {
-            let sy = cy + ky - 2;
-            if sy < 0 || sy >= i32(src.height) {
-                continue;
-            }
-            let row = base + u32(sy) * src.width;
-            var t = 0.0;
-            for (var kx = 0; kx < 5; kx++) {
-                let sx = cx + kx - 2;
-                if sx >= 0 && sx < i32(src.width) {
-                    t += h1[kx] * analysis[row + u32(sx)];
-                }
-            }
-            v += h1[ky] * t;
-        }
+        let b = src.offset + id.z * src.stride;
+        let w = src.width;
+        let h = src.height;
+        v = h1_0 * h1_row(b, w, h, cx, cy - 2) + h1_1 * h1_row(b, w, h, cx, cy - 1)
+            + h1_2 * h1_row(b, w, h, cx, cy) + h1_3 * h1_row(b, w, h, cx, cy + 1)
+            + h1_4 * h1_row(b, w, h, cx, cy + 2);
     }
     analysis[plane_index(dst, id.z, id.x, id.y)] = v;
 }
@@ -99,6 +103,32 @@ fn top_step(@builtin(global_invocation_id) id: vec3<u32>) {
     synthesis[plane_index(dst, id.z, id.x, id.y)] = add_g(params.src, id.z, id.x, id.y, 0.0);
 }
 
+// H2 along x of the zero-inserted coarse row `yc` at fine column x: only the taps landing on
+// even positions count (x even: taps 0, 2, 4; x odd: taps 1, 3), in the CPU's tap order.
+fn up_row(row: u32, cw: u32, x: u32) -> f32 {
+    var s = 0.0;
+    let xc = x / 2u;
+    if (x & 1u) == 0u {
+        if xc >= 1u && xc - 1u < cw {
+            s += h2_0 * synthesis[row + xc - 1u];
+        }
+        if xc < cw {
+            s += h2_2 * synthesis[row + xc];
+        }
+        if xc + 1u < cw {
+            s += h2_4 * synthesis[row + xc + 1u];
+        }
+    } else {
+        if xc < cw {
+            s += h2_1 * synthesis[row + xc];
+        }
+        if xc + 1u < cw {
+            s += h2_3 * synthesis[row + xc + 1u];
+        }
+    }
+    return s;
+}
+
 // synthesis_step: f_i = H2 (x) H2 * zero_insert(crop_pad(f_{i+1})) + G (x) G * a_i.
 // src: synthesis level i+1, aux: analysis level i, dst: synthesis level i.
 @compute @workgroup_size(16, 16, 1)
@@ -108,25 +138,30 @@ fn synthesis_step(@builtin(global_invocation_id) id: vec3<u32>) {
     if id.x >= dst.width || id.y >= dst.height || id.z >= params.planes {
         return;
     }
-    let h2 = array<f32, 5>(h2_0, h2_1, h2_2, h2_3, h2_4);
     let cw = (dst.width + 1u) / 2u;
     let ch = (dst.height + 1u) / 2u;
-    let base = coarse.offset + id.z * coarse.stride;
+    // Coarse row yc (inside the coarse level's PAD border) starts at row_start(yc).
+    let base = coarse.offset + id.z * coarse.stride + pad * coarse.width + pad;
+    let y = id.y;
+    let yc = y / 2u;
     var up = 0.0;
-    for (var ky = 0; ky < 5; ky++) {
-        let i = i32(id.y) + ky - 2;
-        if i < 0 || (i & 1) != 0 || u32(i / 2) >= ch {
-            continue;
+    if (y & 1u) == 0u {
+        if yc >= 1u && yc - 1u < ch {
+            up += h2_0 * up_row(base + (yc - 1u) * coarse.width, cw, id.x);
         }
-        let row = base + (u32(i / 2) + pad) * coarse.width + pad;
-        var t = 0.0;
-        for (var kx = 0; kx < 5; kx++) {
-            let j = i32(id.x) + kx - 2;
-            if j >= 0 && (j & 1) == 0 && u32(j / 2) < cw {
-                t += h2[kx] * synthesis[row + u32(j / 2)];
-            }
+        if yc < ch {
+            up += h2_2 * up_row(base + yc * coarse.width, cw, id.x);
         }
-        up += h2[ky] * t;
+        if yc + 1u < ch {
+            up += h2_4 * up_row(base + (yc + 1u) * coarse.width, cw, id.x);
+        }
+    } else {
+        if yc < ch {
+            up += h2_1 * up_row(base + yc * coarse.width, cw, id.x);
+        }
+        if yc + 1u < ch {
+            up += h2_3 * up_row(base + (yc + 1u) * coarse.width, cw, id.x);
+        }
     }
     synthesis[plane_index(dst, id.z, id.x, id.y)] = add_g(params.aux, id.z, id.x, id.y, up);
 }

@@ -92,23 +92,27 @@ impl GBufferView<'_> {
 }
 
 /// One stochastic sample of a distribution-effects render (one ray: a lens position and a time).
+/// The fields follow `scene::stochastic::Sample`, plus the signed CoC that the camera gives
+/// for the depth (`CameraSpec::signed_coc_radius_px`).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Sample {
-    /// Position within its pixel, each component in [0, 1] (0 = left/top edge).
-    pub offset: [f32; 2],
+    /// Sensor position of the ray relative to its pixel's centre, pixels, each component in
+    /// [-0.5, 0.5].
+    pub jitter: [f32; 2],
     /// Premultiplied linear RGBA that the ray returned.
     pub color: [f32; 4],
     /// Planar depth of the hit in scene units (> 0; large finite values for misses).
     pub depth: f32,
-    /// Lens position on the unit disk (|lens| <= 1), x right, y down.
+    /// Lens position on the unit disk (|lens| <= 1), u right, v down.
     pub lens: [f32; 2],
     /// Time of the ray in frames, relative to the frame's centre (|t| <= shutter_frames / 2).
     pub time: f32,
     /// Screen motion of the hit point in pixels per frame, x right, y down.
     pub motion: [f32; 2],
     /// Signed circle of confusion radius of the hit in pixels: negative in front of the focus
-    /// plane, positive behind. Convention: the hit point's pinhole image (lens centre,
-    /// time 0) lies at `pixel + offset + coc * lens - motion * time`.
+    /// plane, positive behind. Convention (the scene crate's): the ray lands at the hit
+    /// point's pinhole image plus `coc * lens`, so that pinhole image at time 0 lies at
+    /// `pixel centre + jitter - coc * lens - motion * time`.
     pub coc: f32,
 }
 
@@ -151,7 +155,7 @@ impl SampleView<'_> {
         )?;
         for (i, s) in self.samples.iter().enumerate() {
             let finite = s.color.iter().all(|v| v.is_finite())
-                && s.offset.iter().all(|v| v.is_finite())
+                && s.jitter.iter().all(|v| v.is_finite())
                 && s.lens.iter().all(|v| v.is_finite())
                 && s.motion.iter().all(|v| v.is_finite())
                 && s.time.is_finite()
@@ -171,11 +175,11 @@ impl SampleView<'_> {
                     why: "must be > 0",
                 });
             }
-            if s.offset.iter().any(|v| !(0.0..=1.0).contains(v)) {
+            if s.jitter.iter().any(|v| !(-0.5..=0.5).contains(v)) {
                 return Err(PeerError::BadValue {
-                    name: "samples.offset",
+                    name: "samples.jitter",
                     index: i,
-                    why: "must be in [0, 1]",
+                    why: "must be in [-0.5, 0.5]",
                 });
             }
             if s.lens[0] * s.lens[0] + s.lens[1] * s.lens[1] > 1.0 + 1e-4 {

@@ -280,7 +280,10 @@ where
         for px in wx0..wx1 {
             let base = (py * w + px) * s.spp;
             for smp in &s.samples[base..base + s.spp] {
-                let pos = [px as f32 + smp.offset[0], py as f32 + smp.offset[1]];
+                let pos = [
+                    px as f32 + 0.5 + smp.jitter[0],
+                    py as f32 + 0.5 + smp.jitter[1],
+                ];
                 window.push((*smp, pos, partitions.index(smp.coc)));
             }
         }
@@ -310,8 +313,11 @@ where
             if *k < layer {
                 continue;
             }
-            let lu = ca * smp.lens[0] + sa * smp.lens[1];
-            let lv = -sa * smp.lens[0] + ca * smp.lens[1];
+            // The papers write the pinhole position as `x + c u`; our samples (the scene
+            // crate's convention) land at pinhole + c lens, so their `u` is `-lens`.
+            let (u, v) = (-smp.lens[0], -smp.lens[1]);
+            let lu = ca * u + sa * v;
+            let lv = -sa * u + ca * v;
             let along = f.eta * lu + f.xi * smp.time;
             let perp = f.rho * lv;
             let qx = pos[0] + along * ca - perp * sa;

@@ -4,9 +4,10 @@
 //! (lens, shutter or pixel bandlimit) and a rotated separable screen filter.
 //!
 //! Choices where the paper leaves a detail open (see `docs/PEERS.md`):
-//! - per-sample slopes: `k_u = coc` (px per lens unit) and `k_t = -(motion . a)` (px per frame
-//!   along the frame's axis `a`), so one slope pair reprojects a sample to its pinhole
-//!   position at t = 0 (`pixel + offset + coc lens - motion t`);
+//! - per-sample slopes: `k_u = coc` (px per unit of the papers' lens coordinate `u = -lens`)
+//!   and `k_t = -(motion . a)` (px per frame along the frame's axis `a`), so one slope pair
+//!   reprojects a sample to its pinhole position at t = 0
+//!   (`pixel centre + jitter - coc lens - motion t`);
 //! - motion frame: `psi = atan2` of the layer's mean motion (0 when the mean moves less than
 //!   0.05 px over the shutter); the motion range `[d_min, d_max]` of the along components is
 //!   widened on both sides by the largest perpendicular component (Fig. 4, right);

@@ -157,8 +157,8 @@ fn gather(s: &SampleView, p: &ShirleyParams, x: usize, y: usize, reach: usize) -
                     0.0
                 };
                 out.push(Local {
-                    dx: px as f32 + smp.offset[0] - (x as f32 + 0.5),
-                    dy: py as f32 + smp.offset[1] - (y as f32 + 0.5),
+                    dx: px as f32 - x as f32 + smp.jitter[0],
+                    dy: py as f32 - y as f32 + smp.jitter[1],
                     depth: smp.depth,
                     diameter: (2.0 * smp.coc.abs()).max(motion_len),
                     coc: smp.coc,

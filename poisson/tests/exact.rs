@@ -28,6 +28,7 @@ fn f64_round_trip_to_rounding_error() {
             .zip(&back)
             .map(|(a, b)| (a - b).abs())
             .fold(0.0, f64::max);
+        println!("{w}x{h}: max error {err:e}");
         assert!(err < 1e-12, "{w}x{h}: max error {err:e}");
     }
 }
@@ -45,6 +46,7 @@ fn f32_round_trip_to_single_precision() {
         .zip(&back.data)
         .map(|(a, b)| (a - b).abs() as f64)
         .fold(0.0, f64::max);
+    println!("f32 relative error {:e}", err / max_abs);
     assert!(err / max_abs < 1e-5, "relative error {:e}", err / max_abs);
 }
 

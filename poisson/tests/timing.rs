@@ -35,3 +35,34 @@ fn timings() {
         );
     }
 }
+
+#[test]
+#[ignore]
+fn pyramid_step_timings() {
+    use poisson::pyramid::{analysis_step, level_sizes, pad_input, synthesis_step, top_step};
+    let (w, h) = (1920, 1080);
+    let lap = Plane::from_fn(w, h, |x, y| ((x ^ y) % 7) as f32 - 3.0);
+    let sizes = level_sizes(w, h);
+    let mut a: Vec<Plane> = sizes.iter().map(|&(w, h)| Plane::new(w, h)).collect();
+    let mut f = a.clone();
+    let mut scratch = Vec::new();
+    let l = sizes.len();
+    let pad = median_ms(|| pad_input(&lap, &mut a[0]), 9);
+    let mut an = 0.0;
+    for i in 1..l {
+        let (lo, hi) = a.split_at_mut(i);
+        an += median_ms(|| analysis_step(&lo[i - 1], &mut hi[0], &mut scratch), 9);
+    }
+    let top = median_ms(|| top_step(&a[l - 1], &mut f[l - 1], &mut scratch), 9);
+    let mut syn0 = 0.0;
+    let mut syn = 0.0;
+    for i in (0..l - 1).rev() {
+        let (lo, hi) = f.split_at_mut(i + 1);
+        let t = median_ms(|| synthesis_step(&hi[0], &a[i], &mut lo[i], &mut scratch), 9);
+        if i == 0 {
+            syn0 = t;
+        }
+        syn += t;
+    }
+    println!("{w}x{h}: pad {pad:.2} ms, analysis {an:.2} ms, top {top:.3} ms, synthesis {syn:.2} ms (level 0: {syn0:.2} ms)");
+}

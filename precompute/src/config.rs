@@ -50,7 +50,7 @@ impl Profile {
         };
         let (rays_per_px, min_rays, max_rays, image_width_px) = match self {
             Test => (48.0, 20_000, 400_000, 480),
-            Quick => (192.0, 200_000, 24_000_000, 1920),
+            Quick => (2048.0, 1_000_000, 200_000_000, 1920),
             Paper => (4096.0, 4_000_000, 1_200_000_000, 3840),
         };
         ProfileSpec {

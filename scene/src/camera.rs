@@ -207,7 +207,10 @@ impl Camera {
             && pose.up.is_finite()
             && pose.velocity.is_finite();
         if !finite {
-            return Err(invalid(ctx, "position, look_at, up and velocity must be finite"));
+            return Err(invalid(
+                ctx,
+                "position, look_at, up and velocity must be finite",
+            ));
         }
         let forward = (pose.look_at - pose.position).normalize_or_zero();
         if forward == DVec3::ZERO {
@@ -215,7 +218,10 @@ impl Camera {
         }
         let right = forward.cross(pose.up).normalize_or_zero();
         if right == DVec3::ZERO {
-            return Err(invalid(ctx, "up must not be parallel to the viewing direction"));
+            return Err(invalid(
+                ctx,
+                "up must not be parallel to the viewing direction",
+            ));
         }
         let down = forward.cross(right);
         Ok(Self {
@@ -349,7 +355,9 @@ mod tests {
         assert!(!spec.is_pinhole());
         let pinhole = r#"{"width":8,"height":8,"focal_length_mm":50,"sensor_width_mm":36,
             "f_stop":null,"focus_distance":null,"aperture_blades":0,"shutter_frames":0}"#;
-        assert!(CameraSpec::from_json(pinhole, "p").expect("pinhole").is_pinhole());
+        assert!(CameraSpec::from_json(pinhole, "p")
+            .expect("pinhole")
+            .is_pinhole());
         let bad = r#"{"width":0,"height":8,"focal_length_mm":50,"sensor_width_mm":36}"#;
         let err = CameraSpec::from_json(bad, "bad.json").expect_err("zero width");
         assert!(err.to_string().contains("width"), "{err}");
@@ -358,10 +366,10 @@ mod tests {
     #[test]
     fn coc_matches_textbook_formula() {
         let s = spec();
-        let (f, n, focus) = (0.05, 2.0, 1.0);
+        let (f, n, focus): (f64, f64, f64) = (0.05, 2.0, 1.0);
         let a = f / n;
         for d in [0.3, 0.8, 1.0, 2.5, 40.0] {
-            let diameter_m = a * f * (d - focus as f64).abs() / (d * (focus - f));
+            let diameter_m = a * f * (d - focus).abs() / (d * (focus - f));
             let expected = 0.5 * diameter_m * 1e3 * 200.0 / 36.0;
             assert!((s.coc_radius_px(d) - expected).abs() < 1e-9 * expected.max(1.0));
         }

@@ -111,7 +111,11 @@ pub fn read_channels(path: &Path) -> Result<Channels> {
         message: "no image part".to_string(),
     })?;
     let size = header.layer_size;
-    if size.0.checked_mul(size.1).is_none_or(|n| n > MAX_CHANNEL_SAMPLES) {
+    if size
+        .0
+        .checked_mul(size.1)
+        .is_none_or(|n| n > MAX_CHANNEL_SAMPLES)
+    {
         return Err(Error::Layout {
             path: path.to_path_buf(),
             message: format!("image of {}x{} pixels is too large", size.0, size.1),

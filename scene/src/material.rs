@@ -42,7 +42,10 @@ impl Material {
     pub fn validate(&self, context: &str) -> Result<()> {
         let ok = |c: &[f32; 3]| c.iter().all(|v| v.is_finite() && *v >= 0.0);
         if !ok(&self.albedo) || !ok(&self.emission) {
-            return Err(invalid(context, "albedo and emission must be finite and >= 0"));
+            return Err(invalid(
+                context,
+                "albedo and emission must be finite and >= 0",
+            ));
         }
         if let Some(checker) = &self.checker {
             checker.validate(context)?;
@@ -92,13 +95,19 @@ impl Light {
                 intensity,
             } => {
                 if direction.length_squared() == 0.0 {
-                    return Err(invalid(context, "directional light needs a non-zero direction"));
+                    return Err(invalid(
+                        context,
+                        "directional light needs a non-zero direction",
+                    ));
                 }
                 (*direction, intensity)
             }
         };
         if !v.is_finite() || i.iter().any(|c| !c.is_finite() || *c < 0.0) {
-            return Err(invalid(context, "light values must be finite (intensity >= 0)"));
+            return Err(invalid(
+                context,
+                "light values must be finite (intensity >= 0)",
+            ));
         }
         Ok(())
     }

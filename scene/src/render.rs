@@ -85,7 +85,11 @@ fn render_rows<T: Send>(
 /// The pinhole G-buffer at the frame time: colour averaged over `aa_samples` stratified
 /// positions in each pixel's area, depth and Blender Vector pass of the nearest hit at the
 /// pixel centre (motion from the frame before and after, through the lens centre).
-pub fn render_gbuffer(scene: &Scene, aa_samples: usize, options: &RenderOptions) -> Result<GBuffer> {
+pub fn render_gbuffer(
+    scene: &Scene,
+    aa_samples: usize,
+    options: &RenderOptions,
+) -> Result<GBuffer> {
     check_spp(aa_samples, "G-buffer anti-aliasing")?;
     let camera = &scene.camera;
     let (width, height) = (camera.spec.width as usize, camera.spec.height as usize);
@@ -246,6 +250,9 @@ pub struct NoiseEstimate {
     pub rms_srgb: f64,
     /// Largest |half_a - half_b| / 2 over pixels and RGB, sRGB-encoded.
     pub max_srgb: f64,
+    /// SSIM (the project's definition, `metrics::ssim_rgb`) between the two half renders: a
+    /// lower bound on the full reference's SSIM against the converged image.
+    pub ssim_halves: f64,
 }
 
 /// Estimates the noise of a `spp` reference by rendering two `spp / 2` halves with seeds
@@ -276,10 +283,14 @@ pub fn estimate_reference_noise(
         }
     }
     let n = (a.pixels.len() * 3).max(1) as f64;
+    let flat = |image: &RgbaImage| image.pixels.iter().flatten().copied().collect::<Vec<f32>>();
+    let ssim_halves = metrics::ssim_rgb(&flat(&a), &flat(&b), a.width, a.height)
+        .map_err(|e| invalid("reference noise", format!("SSIM: {e}")))?;
     Ok(NoiseEstimate {
         spp: 2 * half,
         rms_linear: (lin / n).sqrt() / 2.0,
         rms_srgb: (srgb / n).sqrt() / 2.0,
         max_srgb: max / 2.0,
+        ssim_halves,
     })
 }

@@ -121,7 +121,10 @@ mod tests {
             };
             let frac = inside_half as f64 / n as f64;
             let expected = PI * 0.25 / area;
-            assert!((frac - expected).abs() < 0.015, "blades {blades}: {frac} vs {expected}");
+            assert!(
+                (frac - expected).abs() < 0.015,
+                "blades {blades}: {frac} vs {expected}"
+            );
             assert!((mean / n as f64).length() < 0.02);
         }
     }

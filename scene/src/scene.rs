@@ -389,9 +389,7 @@ impl Scene {
     /// Pinhole image position (pixels) at `time` of the surface point of `hit`, following the
     /// object's motion and the camera's.
     pub fn image_position(&self, hit: &Hit, time: f64) -> Option<DVec2> {
-        let world = self.objects[hit.object]
-            .motion
-            .place(hit.rest_point, time);
+        let world = self.objects[hit.object].motion.place(hit.rest_point, time);
         self.camera.project(world, time)
     }
 

@@ -187,8 +187,11 @@ impl PreparedShape {
         let mut plane_normal = DVec3::Z;
         match &shape {
             Shape::Sphere { center, radius } => {
-                if !center.is_finite() || !(radius.is_finite() && *radius > 0.0) {
-                    return Err(invalid(context, "sphere needs a finite centre and radius > 0"));
+                if !(center.is_finite() && radius.is_finite() && *radius > 0.0) {
+                    return Err(invalid(
+                        context,
+                        "sphere needs a finite centre and radius > 0",
+                    ));
                 }
             }
             Shape::Box {
@@ -196,8 +199,7 @@ impl PreparedShape {
                 half_size,
                 rotation,
             } => {
-                if !center.is_finite() || !half_size.is_finite() || half_size.min_element() <= 0.0
-                {
+                if !center.is_finite() || !half_size.is_finite() || half_size.min_element() <= 0.0 {
                     return Err(invalid(
                         context,
                         "box needs a finite centre and half_size > 0 along every axis",
@@ -228,7 +230,10 @@ impl PreparedShape {
             Shape::Plane { point, normal } => {
                 let n = normal.normalize_or_zero();
                 if !point.is_finite() || n == DVec3::ZERO || !n.is_finite() {
-                    return Err(invalid(context, "plane needs a finite point and non-zero normal"));
+                    return Err(invalid(
+                        context,
+                        "plane needs a finite point and non-zero normal",
+                    ));
                 }
                 plane_normal = n;
             }

@@ -95,8 +95,8 @@ impl StochasticFrames {
         for (i, out) in image.pixels.iter_mut().enumerate() {
             let mut sum = [0.0f64; 4];
             for s in &self.samples[i * self.spp..(i + 1) * self.spp] {
-                for c in 0..4 {
-                    sum[c] += f64::from(s.color[c]);
+                for (acc, c) in sum.iter_mut().zip(s.color) {
+                    *acc += f64::from(c);
                 }
             }
             *out = sum.map(|v| (v * inv) as f32);
@@ -240,7 +240,10 @@ mod tests {
             samples: vec![],
         };
         assert_eq!(parse_attribute(&frames.attribute_value()), Some((3, 2, 5)));
-        assert_eq!(parse_attribute("stochastic-frames version=2 width=1 height=1 spp=1"), None);
+        assert_eq!(
+            parse_attribute("stochastic-frames version=2 width=1 height=1 spp=1"),
+            None
+        );
         assert_eq!(parse_attribute("other"), None);
     }
 }

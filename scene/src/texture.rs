@@ -23,7 +23,10 @@ impl Checker {
             return Err(invalid(context, "checker scale must be a positive number"));
         }
         if self.color.iter().any(|c| !c.is_finite() || *c < 0.0) {
-            return Err(invalid(context, "checker color must be finite and non-negative"));
+            return Err(invalid(
+                context,
+                "checker color must be finite and non-negative",
+            ));
         }
         Ok(())
     }

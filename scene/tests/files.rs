@@ -84,10 +84,7 @@ fn stochastic_reader_round_trips_the_writer() {
     assert_eq!(time[(k * 16 + y) * 24 + x], frames.pixel(x, y)[k].time);
     // Stochastic samples are spread over the shutter and the lens.
     let shutter = scene.camera.spec.shutter_frames as f32;
-    assert!(frames
-        .samples
-        .iter()
-        .all(|s| s.time.abs() <= 0.5 * shutter));
+    assert!(frames.samples.iter().all(|s| s.time.abs() <= 0.5 * shutter));
     assert!(frames.samples.iter().any(|s| s.time > 0.3 * shutter));
     assert!(frames.samples.iter().any(|s| s.time < -0.3 * shutter));
 }
@@ -150,7 +147,11 @@ fn builtin_scenes_render_something() {
     for name in BUILTIN_NAMES {
         let scene = small(name);
         let r = render_reference(&scene, 8, &RenderOptions::default()).expect("render");
-        let lit = r.pixels.iter().filter(|p| p[0] + p[1] + p[2] > 0.01).count();
+        let lit = r
+            .pixels
+            .iter()
+            .filter(|p| p[0] + p[1] + p[2] > 0.01)
+            .count();
         assert!(lit > r.pixels.len() / 4, "{name}: only {lit} lit pixels");
         assert!(r.pixels.iter().all(|p| p.iter().all(|v| v.is_finite())));
     }

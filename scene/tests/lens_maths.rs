@@ -169,8 +169,7 @@ fn moving_point_streak_is_motion_times_shutter() {
     let (still, _) = render(DVec3::ZERO);
     // Analytic image motion (y down) of the point's front, hit by the pixel-centre ray at
     // depth d - r: px_per_m * d / (d - r) * (vx, -vy) pixels per frame.
-    let motion =
-        DVec2::new(velocity.x, -velocity.y) * px_per_m * depth / (depth - point_radius);
+    let motion = DVec2::new(velocity.x, -velocity.y) * px_per_m * depth / (depth - point_radius);
     // The G-buffer's forward motion at the point's pixel (32, 32) is that motion.
     let from_gbuffer = gbuffer.forward_motion(32, 32);
     assert!(
@@ -178,11 +177,12 @@ fn moving_point_streak_is_motion_times_shutter() {
         "G-buffer motion {from_gbuffer} vs analytic {motion}"
     );
     let dir = motion.normalize();
-    let along = |m: [f64; 3]| dir.x * dir.x * m[0] + 2.0 * dir.x * dir.y * m[1] + dir.y * dir.y * m[2];
+    let along =
+        |m: [f64; 3]| dir.x * dir.x * m[0] + 2.0 * dir.x * dir.y * m[1] + dir.y * dir.y * m[2];
     let across =
         |m: [f64; 3]| dir.y * dir.y * m[0] - 2.0 * dir.x * dir.y * m[1] + dir.x * dir.x * m[2];
     let (_, c_moving, m_moving) = moments(&moving);
-    let (_, c_still, m_still) = moments(&still);
+    let (_, c_still, _) = moments(&still);
     // Sampled at pixel centres, a smooth streak's second moment along the motion is that of
     // the box of length L (L^2 / 12), the point's own disk image of radius a (a^2 / 4) and the
     // pixel box (1 / 12); across the motion only the last two remain.
@@ -198,8 +198,14 @@ fn moving_point_streak_is_motion_times_shutter() {
     assert!((across(m_moving) - blur).abs() < 0.03);
     // A centred shutter: the streak is centred on the frame-time position (up to the
     // sampling of its ends by the pixel grid).
-    assert!((c_moving - c_still).length() < 0.1, "{c_moving} vs {c_still}");
-    assert!((c_still - DVec2::new(32.5, 32.5)).length() < 0.05, "{c_still}");
+    assert!(
+        (c_moving - c_still).length() < 0.1,
+        "{c_moving} vs {c_still}"
+    );
+    assert!(
+        (c_still - DVec2::new(32.5, 32.5)).length() < 0.05,
+        "{c_still}"
+    );
 }
 
 /// Independent pinhole projection for a camera at `cam` looking down -z, y up, square pixels.
@@ -335,7 +341,10 @@ fn stochastic_labels_map_samples_back_to_the_pinhole_image() {
     for y in 0..frames.height {
         for x in 0..frames.width {
             for s in frames.pixel(x, y) {
-                assert!(s.time.abs() <= 0.5 && DVec2::new(s.lens[0].into(), s.lens[1].into()).length() <= 1.0 + 1e-6);
+                assert!(
+                    s.time.abs() <= 0.5
+                        && DVec2::new(s.lens[0].into(), s.lens[1].into()).length() <= 1.0 + 1e-6
+                );
                 assert!(s.jitter[0].abs() <= 0.5 && s.jitter[1].abs() <= 0.5);
                 if s.color[3] == 0.0 {
                     assert_eq!(s.depth, 1e10);
@@ -360,5 +369,8 @@ fn stochastic_labels_map_samples_back_to_the_pinhole_image() {
             }
         }
     }
-    assert!(hits > 600 && lens_used > 0.8, "{hits} hits, lens {lens_used}");
+    assert!(
+        hits > 600 && lens_used > 0.8,
+        "{hits} hits, lens {lens_used}"
+    );
 }

@@ -59,9 +59,10 @@ impl Scene {
     pub fn trace(&self, pos: [f32; 2], u: [f32; 2], t: f32) -> ([f32; 4], f32, [f32; 2], f32) {
         for pl in &self.planes {
             let c = self.lens.coc(pl.depth);
+            // The scene crate's convention: the ray lands at pinhole + c * lens.
             let p0 = [
-                pos[0] + c * u[0] - pl.motion[0] * t,
-                pos[1] + c * u[1] - pl.motion[1] * t,
+                pos[0] - c * u[0] - pl.motion[0] * t,
+                pos[1] - c * u[1] - pl.motion[1] * t,
             ];
             if pl.mask.covers(p0) {
                 return (pl.color(p0), pl.depth, pl.motion, c);
@@ -77,15 +78,15 @@ impl Scene {
         for y in 0..self.height {
             for x in 0..self.width {
                 for _ in 0..spp {
-                    let offset = [rng.random::<f32>(), rng.random::<f32>()];
+                    let jitter = [rng.random::<f32>() - 0.5, rng.random::<f32>() - 0.5];
                     let r = rng.random::<f32>().sqrt();
                     let a = rng.random::<f32>() * std::f32::consts::TAU;
                     let lens = [r * a.cos(), r * a.sin()];
                     let time = (rng.random::<f32>() - 0.5) * self.shutter_frames;
-                    let pos = [x as f32 + offset[0], y as f32 + offset[1]];
+                    let pos = [x as f32 + 0.5 + jitter[0], y as f32 + 0.5 + jitter[1]];
                     let (color, depth, motion, coc) = self.trace(pos, lens, time);
                     out.push(Sample {
-                        offset,
+                        jitter,
                         color,
                         depth,
                         lens,

@@ -18,3 +18,4 @@ pub use classify::{classify, Classified, ClassifyOptions, Effects, LayerInfo, Pa
 pub use composite::{composite, CompositeOptions};
 pub use integrate::{integrate, IntegratedLayers, Integrator};
 pub use splat::{splat, LayerStack, RotationSampling, SplatOptions};
+pub use types::{FrameParams, SplatPath, SplatRecord};

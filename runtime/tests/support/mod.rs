@@ -42,12 +42,12 @@ pub fn camera(w: u32, h: u32, lens: bool, shutter: f64) -> Camera {
     }
 }
 
-/// The depth (scene units) at which `camera` gives a CoC radius of `coc_px` behind the focus
-/// plane.
+/// The depth (scene units) at which `camera` gives a CoC radius of `coc_px` in front of the
+/// focus plane (any radius is reachable there).
 pub fn depth_for_coc(camera: &Camera, coc_px: f64) -> f64 {
     let lens = camera.thin_lens().expect("lens");
-    // r = k (1 - s/d)  =>  d = s / (1 - r/k)
-    lens.focus_distance / (1.0 - coc_px / lens.coc_scale_px)
+    // signed r = k (1 - s/d) = -coc  =>  d = s / (1 + coc/k)
+    lens.focus_distance / (1.0 + coc_px / lens.coc_scale_px)
 }
 
 /// A black, transparent `w x h` G-buffer with one pixel of colour `c` at `(x, y)`, all at

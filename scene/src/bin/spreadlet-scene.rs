@@ -207,7 +207,7 @@ fn main() -> Result<()> {
             let start = Instant::now();
             let noise = estimate_reference_noise(&scene, args.ref_spp, &options)?;
             println!(
-                "{{\"scene\": \"{}\", \"width\": {}, \"height\": {}, \"spp\": {}, \"rms_linear\": {:.6}, \"rms_srgb\": {:.6}, \"max_srgb\": {:.6}, \"seconds\": {:.2}}}",
+                "{{\"scene\": \"{}\", \"width\": {}, \"height\": {}, \"spp\": {}, \"rms_linear\": {:.6}, \"rms_srgb\": {:.6}, \"max_srgb\": {:.6}, \"ssim_halves\": {:.5}, \"seconds\": {:.2}}}",
                 scene.name,
                 scene.camera.spec.width,
                 scene.camera.spec.height,
@@ -215,6 +215,7 @@ fn main() -> Result<()> {
                 noise.rms_linear,
                 noise.rms_srgb,
                 noise.max_srgb,
+                noise.ssim_halves,
                 start.elapsed().as_secs_f64()
             );
             Ok(())

@@ -1,0 +1,381 @@
+//! The CPU synthesis pipeline against independent references: the precompute's own
+//! pre-filtered PSFs, energy conservation, the exact integrator, and the input itself.
+
+mod support;
+
+use poisson::Plane;
+use precompute::{BuildConfig, BuildPlan, Profile};
+use psf_db::{PsfDatabase, PsfModel};
+use runtime::camera::Camera;
+use runtime::gbuffer::GBuffer;
+use runtime::pipeline::{
+    classify, composite, integrate, splat, ClassifyOptions, CompositeOptions, Effects,
+    Integrator, SplatOptions, SplatPath,
+};
+use runtime::synth::{synthesize, SynthOptions};
+use support::{camera, depth_for_coc, one_pixel, test_db};
+
+/// Single layer, hard, no edge fix: the plain splat-and-integrate path.
+fn plain_options(integrator: Integrator) -> SynthOptions {
+    SynthOptions {
+        classify: ClassifyOptions {
+            layers: 1,
+            soft_layers: None,
+            edge_split: false,
+            ..ClassifyOptions::default()
+        },
+        integrator,
+        ..SynthOptions::default()
+    }
+}
+
+/// Integrated primal plane of channel `c` of layer 0 (padded), for a one-pixel input.
+fn splat_one(
+    g: &GBuffer,
+    cam: &Camera,
+    db: &PsfDatabase,
+    integrator: Integrator,
+) -> (Plane, u32, runtime::pipeline::types::SplatRecord) {
+    let opts = plain_options(integrator);
+    let c = classify(g, cam, Some(db), &opts.classify).expect("classify");
+    assert_eq!(c.records.len(), 1, "one record for one pixel");
+    let rec = c.records[0];
+    let stack = splat(&c, Some(db), &SplatOptions::default());
+    let layers = integrate(&stack, integrator);
+    (layers.planes[0].clone(), c.frame.pad, rec)
+}
+
+/// L1 (sum of |a - b| over pixels) between the integrated splat around `(cx, cy)` of `plane`
+/// and the PSF image `psf` (channel `ch`) placed with its centre there, rotated by
+/// `quarter_turns` x 90 degrees (y down), plus the plane's mass outside the PSF image.
+fn l1_against_psf(
+    plane: &Plane,
+    cx: usize,
+    cy: usize,
+    psf: &precompute::PsfImage,
+    ch: usize,
+    quarter_turns: u32,
+) -> f64 {
+    let mut covered = vec![false; plane.data.len()];
+    let mut l1 = 0.0f64;
+    for v in 0..psf.height {
+        for u in 0..psf.width {
+            let (mut dx, mut dy) = (
+                u as i64 - psf.centre[0] as i64,
+                v as i64 - psf.centre[1] as i64,
+            );
+            for _ in 0..quarter_turns {
+                // (x, y) -> (-y, x): +x turns to +y (y down).
+                (dx, dy) = (-dy, dx);
+            }
+            let (x, y) = (cx as i64 + dx, cy as i64 + dy);
+            let expected = f64::from(psf.planes[ch][v * psf.width + u]);
+            if x < 0 || y < 0 || x >= plane.width as i64 || y >= plane.height as i64 {
+                l1 += expected.abs();
+                continue;
+            }
+            let i = y as usize * plane.width + x as usize;
+            covered[i] = true;
+            l1 += (f64::from(plane.data[i]) - expected).abs();
+        }
+    }
+    for (i, &v) in plane.data.iter().enumerate() {
+        if !covered[i] {
+            l1 += f64::from(v).abs();
+        }
+    }
+    l1
+}
+
+/// One bright pixel of PSF `index` (thin-lens or lens-motion) reproduces the pre-filtered PSF
+/// within the database's recorded L1 (plus a small allowance for f32 accumulation).
+fn check_one_pixel(model: PsfModel, index: u32, quarter_turns: u32) {
+    let db = test_db(model);
+    let plan = BuildPlan::new(&BuildConfig::new(model, Profile::Test)).expect("plan");
+    let s = plan.space.cell_center(index).expect("cell");
+    let processed = plan.process(index).expect("process");
+    let recorded_l1 = f64::from(db.header().stats[index as usize].l1);
+    let dense = db.dense(index as usize).is_some();
+
+    let (w, h) = (48usize, 48usize);
+    let cam = camera(w as u32, h as u32, true, 1.0);
+    let depth = depth_for_coc(&cam, s[0]) as f32;
+    let len = s[1] as f32;
+    let motion = match quarter_turns {
+        0 => [len, 0.0],
+        1 => [0.0, len],
+        2 => [-len, 0.0],
+        _ => [0.0, -len],
+    };
+    let (px, py) = (w / 2, h / 2);
+    let g = one_pixel(w, h, px, py, [1.0, 1.0, 1.0, 1.0], depth, motion);
+    let (plane, pad, rec) = splat_one(&g, &cam, db, Integrator::Exact);
+    if rec.path == SplatPath::Copy as u32 {
+        return; // a PSF under a pixel: nothing to compare
+    }
+    assert_eq!(rec.psf_index, index, "lookup of the cell centre gives the cell");
+    let l1 = l1_against_psf(
+        &plane,
+        px + pad as usize,
+        py + pad as usize,
+        &processed.image,
+        0,
+        quarter_turns,
+    );
+    let bound = if dense { 1e-4 } else { recorded_l1 * 1.02 + 2e-3 };
+    assert!(
+        l1 <= bound,
+        "{} PSF {index} (s = {s:?}, dense {dense}, turns {quarter_turns}): L1 {l1:.5} > bound \
+         {bound:.5} (recorded {recorded_l1:.5})",
+        model.name()
+    );
+}
+
+#[test]
+fn one_pixel_reproduces_every_thin_lens_psf() {
+    let db = test_db(PsfModel::ThinLens);
+    for i in 0..db.psf_count() as u32 {
+        check_one_pixel(PsfModel::ThinLens, i, 0);
+    }
+}
+
+#[test]
+fn one_pixel_reproduces_lens_motion_psfs_in_all_four_directions() {
+    let db = test_db(PsfModel::LensMotion);
+    for i in 0..db.psf_count() as u32 {
+        for turns in 0..4 {
+            check_one_pixel(PsfModel::LensMotion, i, turns);
+        }
+    }
+}
+
+#[test]
+fn one_pixel_reproduces_physical_lens_psfs() {
+    let model = PsfModel::PhysicalLens;
+    let db = test_db(model);
+    let plan = BuildPlan::new(&BuildConfig::new(model, Profile::Test)).expect("plan");
+    let lens = db.header().lens.clone().expect("prescription");
+    let ppm = f64::from(lens.image_width_px) / lens.sensor_width_mm;
+    for index in 0..db.psf_count() as u32 {
+        let s = plan.space.cell_center(index).expect("cell");
+        let cell = plan.space.cell_box(index).expect("box");
+        let processed = plan.process(index).expect("process");
+        let recorded_l1 = f64::from(db.header().stats[index as usize].l1);
+        // A pixel on the row through the centre whose eccentricity lies in the cell, +x side.
+        let (w, h) = (lens.image_width_px as usize, 8usize);
+        let cam = Camera {
+            width: w as u32,
+            height: h as u32,
+            focal_length_mm: lens.focal_length_mm,
+            sensor_width_mm: lens.sensor_width_mm,
+            f_stop: Some(4.0),
+            focus_distance: Some(lens.focus_distance),
+            aperture_blades: 0,
+            shutter_frames: 0.0,
+            scene_unit_mm: lens.scene_unit_mm,
+        };
+        let target_px = s[1] * ppm;
+        let px = (w as f64 / 2.0 + target_px - 0.5).round().max(0.0) as usize;
+        let px = px.min(w - 1);
+        let ecc_mm = (px as f64 + 0.5 - w as f64 / 2.0).abs() / ppm;
+        if ecc_mm < cell.min[1] || ecc_mm > cell.max[1] {
+            continue; // no pixel centre inside this (thin) cell at this image size
+        }
+        let (py, h_even) = (h / 2, h);
+        // The pixel sits half a pixel below the centre row: eccentricity is dominated by x.
+        let g = one_pixel(w, h_even, px, py, [1.0, 1.0, 1.0, 1.0], s[0] as f32, [0.0; 2]);
+        let (plane_r, pad, rec) = splat_one(&g, &cam, db, Integrator::Exact);
+        assert_eq!(rec.psf_index, index);
+        let _ = plane_r;
+        // Compare every colour channel (R, G, B planes of the layer).
+        let opts = plain_options(Integrator::Exact);
+        let c = classify(&g, &cam, Some(db), &opts.classify).expect("classify");
+        let layers = integrate(&splat(&c, Some(db), &SplatOptions::default()), Integrator::Exact);
+        let mut l1 = 0.0;
+        for ch in 0..3 {
+            l1 += l1_against_psf(
+                &layers.planes[ch],
+                px + pad as usize,
+                py + pad as usize,
+                &processed.image,
+                ch,
+                0,
+            );
+        }
+        l1 /= 3.0;
+        // The record's rotation is towards the pixel, not exactly +x (half a pixel off the
+        // centre row): allow for that small turn.
+        let bound = recorded_l1 * 1.05 + 2e-2;
+        assert!(
+            l1 <= bound,
+            "physical PSF {index} (s = {s:?}): L1 {l1:.5} > {bound:.5} (recorded {recorded_l1:.5})"
+        );
+    }
+}
+
+/// A test image: a smooth colourful pattern in the middle, black (but opaque) border wider
+/// than the largest PSF, depths spread over the test database's CoC range.
+fn pattern(w: usize, h: usize, border: usize, cam: &Camera, max_coc: f64) -> GBuffer {
+    let mut color = vec![[0.0, 0.0, 0.0, 1.0]; w * h];
+    let mut depth = vec![1.0f32; w * h];
+    for y in border..h - border {
+        for x in border..w - border {
+            let i = y * w + x;
+            let t = (x as f32 * 0.37 + y as f32 * 0.11).sin() * 0.5 + 0.5;
+            color[i] = [t, 1.0 - t, (x % 7) as f32 / 7.0, 1.0];
+            let coc = max_coc * ((x + 3 * y) % 17) as f64 / 17.0;
+            depth[i] = depth_for_coc(cam, coc) as f32;
+        }
+    }
+    GBuffer::from_planes(w, h, color, Some(depth), None).expect("g")
+}
+
+#[test]
+fn single_layer_conserves_energy() {
+    let db = test_db(PsfModel::ThinLens);
+    let max_coc = db.space().dims()[0].max * 0.95;
+    let border = db.max_extent_px() as usize + 2;
+    let (w, h) = (2 * border + 24, 2 * border + 20);
+    let cam = camera(w as u32, h as u32, true, 0.0);
+    let g = pattern(w, h, border, &cam, max_coc);
+    let (out, stats) =
+        synthesize(&g, &cam, Some(db), &plain_options(Integrator::Exact)).expect("synth");
+    assert!(stats.counts.sparse > 0, "{:?}", stats.counts);
+    let input: f64 = g.color.iter().map(|c| f64::from(c[0] + c[1] + c[2])).sum();
+    let output: f64 = out.pixels.iter().map(|c| f64::from(c[0] + c[1] + c[2])).sum();
+    let rel = (output - input).abs() / input;
+    assert!(rel < 1e-3, "energy: in {input}, out {output}, relative {rel:e}");
+}
+
+#[test]
+fn pyramid_stays_close_to_the_exact_integrator() {
+    let db = test_db(PsfModel::ThinLens);
+    let max_coc = db.space().dims()[0].max * 0.95;
+    let border = db.max_extent_px() as usize + 2;
+    let (w, h) = (2 * border + 40, 2 * border + 40);
+    let cam = camera(w as u32, h as u32, true, 0.0);
+    let g = pattern(w, h, border, &cam, max_coc);
+    let (exact, _) = synthesize(&g, &cam, Some(db), &plain_options(Integrator::Exact)).expect("e");
+    let (pyr, _) =
+        synthesize(&g, &cam, Some(db), &plain_options(Integrator::Pyramid)).expect("p");
+    let mut max = 0.0f32;
+    let mut sum = 0.0f64;
+    for (a, b) in exact.pixels.iter().zip(&pyr.pixels) {
+        for c in 0..3 {
+            let d = (a[c] - b[c]).abs();
+            max = max.max(d);
+            sum += f64::from(d);
+        }
+    }
+    let mean = sum / (3 * w * h) as f64;
+    // Colours are at most 1: the pyramid's documented error is ~0.004 mean, ~0.12 max on
+    // impulse responses; on images of splats it averages out.
+    assert!(mean < 0.01 && max < 0.15, "pyramid vs exact: mean {mean}, max {max}");
+}
+
+#[test]
+fn still_pinhole_input_returns_unchanged() {
+    let (w, h) = (37, 23);
+    let color: Vec<[f32; 4]> = (0..w * h)
+        .map(|i| [i as f32 * 0.01, 1.0 / (1 + i) as f32, -0.5, 0.5])
+        .collect();
+    let depth: Vec<f32> = (0..w * h).map(|i| 0.1 + i as f32).collect();
+    let motion = vec![[3.0f32, -2.0]; w * h];
+    let g = GBuffer::from_planes(w, h, color.clone(), Some(depth), Some(motion)).expect("g");
+    for shutter in [0.0, 0.5] {
+        // Pinhole; with shutter 0.5 and motion it is not still, so only shutter 0 here.
+        let cam = camera(w as u32, h as u32, false, shutter);
+        if shutter > 0.0 {
+            assert!(Effects::of(&cam, &g).motion);
+            continue;
+        }
+        let (out, stats) = synthesize(&g, &cam, None, &SynthOptions::default()).expect("synth");
+        assert_eq!(out.pixels, color, "bit-identical");
+        assert_eq!(stats.counts.copied, w * h);
+        assert!(stats.model.is_none());
+    }
+}
+
+#[test]
+fn still_defocus_needs_only_the_thin_lens_model() {
+    let g = GBuffer::from_planes(
+        4,
+        4,
+        vec![[1.0; 4]; 16],
+        Some(vec![2.0; 16]),
+        Some(vec![[5.0, 1.0]; 16]),
+    )
+    .expect("g");
+    // Shutter closed: motion vectors are ignored.
+    let cam = camera(4, 4, true, 0.0);
+    assert_eq!(
+        Effects::of(&cam, &g).cheapest_model(),
+        Some(PsfModel::ThinLens)
+    );
+    // Shutter open but nothing moves.
+    let still = GBuffer::from_planes(4, 4, vec![[1.0; 4]; 16], Some(vec![2.0; 16]), None)
+        .expect("g");
+    let still = GBuffer {
+        motion: Some(vec![[0.0; 2]; 16]),
+        ..still
+    };
+    assert_eq!(
+        Effects::of(&camera(4, 4, true, 1.0), &still).cheapest_model(),
+        Some(PsfModel::ThinLens)
+    );
+    // And synthesis runs with the thin-lens database alone.
+    let (_, stats) = synthesize(&g, &cam, Some(test_db(PsfModel::ThinLens)), &SynthOptions::default())
+        .expect("synth");
+    assert_eq!(stats.model, Some("thin-lens"));
+}
+
+#[test]
+fn synthesis_is_bit_identical_across_runs_and_thread_counts() {
+    let db = test_db(PsfModel::LensMotion);
+    let (w, h) = (64usize, 48usize);
+    let cam = camera(w as u32, h as u32, true, 1.0);
+    let max_coc = db.space().dims()[0].max * 0.9;
+    let mut g = pattern(w, h, 4, &cam, max_coc);
+    g.motion = Some(
+        (0..w * h)
+            .map(|i| {
+                let a = i as f32 * 0.1;
+                [6.0 * a.cos(), 6.0 * a.sin()]
+            })
+            .collect(),
+    );
+    let run = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .expect("pool");
+        pool.install(|| synthesize(&g, &cam, Some(db), &SynthOptions::default()))
+            .expect("synth")
+            .0
+    };
+    let a = run(1);
+    let b = run(2);
+    let c = run(3);
+    let bits = |img: &runtime::rgba::RgbaImage| {
+        img.pixels
+            .iter()
+            .flat_map(|p| p.map(f32::to_bits))
+            .collect::<Vec<u32>>()
+    };
+    assert_eq!(bits(&a), bits(&b));
+    assert_eq!(bits(&a), bits(&c));
+}
+
+#[test]
+fn compositing_a_single_opaque_layer_of_copies_is_the_identity() {
+    // The stages one by one on copies only: integrate adds the direct planes, composite crops.
+    let (w, h) = (9usize, 7usize);
+    let color: Vec<[f32; 4]> = (0..w * h).map(|i| [i as f32, 1.0, 2.0, 1.0]).collect();
+    let g = GBuffer::from_planes(w, h, color.clone(), Some(vec![1.0; w * h]), None).expect("g");
+    let cam = camera(w as u32, h as u32, false, 0.0);
+    let c = classify(&g, &cam, None, &ClassifyOptions::default()).expect("c");
+    let stack = splat(&c, None, &SplatOptions::default());
+    let layers = integrate(&stack, Integrator::Pyramid);
+    let out = composite(&layers, &CompositeOptions::default());
+    assert_eq!(out.pixels, color);
+}
