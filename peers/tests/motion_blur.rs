@@ -151,3 +151,42 @@ fn deterministic_and_rejects_bad_input() {
     };
     assert!(guertin(&view(&c, &d, &m), &p).is_err());
 }
+
+#[test]
+fn guertin_blurs_along_a_motion_that_the_dominant_velocity_hides() {
+    // Thesis Sec. 3.4.1: a horizontal bar moving down (12 px) shares its tile neighbourhood
+    // with a fast horizontal mover (60 px), so v_max is horizontal. McGuire samples only along
+    // v_max and cannot blur the bar vertically; Guertin's second (perpendicular) direction
+    // does.
+    let (w, h) = (80usize, 80usize);
+    let mut color = vec![[0.1f32, 0.1, 0.1, 1.0]; w * h];
+    let mut depth = vec![10.0f32; w * h];
+    let mut motion = vec![[0.0f32; 2]; w * h];
+    for y in 5..15 {
+        for x in 50..60 {
+            color[y * w + x] = [0.0, 0.0, 1.0, 1.0];
+            depth[y * w + x] = 5.0;
+            motion[y * w + x] = [60.0, 0.0];
+        }
+    }
+    for y in 30..32 {
+        for x in 10..40 {
+            color[y * w + x] = [1.0, 0.0, 0.0, 1.0];
+            depth[y * w + x] = 5.0;
+            motion[y * w + x] = [0.0, 12.0];
+        }
+    }
+    let g = GBufferView { width: w, height: h, color: &color, depth: &depth, motion: &motion };
+    let gu = guertin(&g, &GuertinParams::default()).expect("guertin");
+    let mc = mcguire(&g, &McGuireParams::default()).expect("mcguire");
+    // Red excess in the rows the bar sweeps over (3 px above and below it).
+    let red = |img: &[[f32; 4]], y: usize| -> f32 {
+        (15..35).map(|x| img[y * w + x][0] - img[y * w + x][1]).sum::<f32>() / 20.0
+    };
+    for y in [27usize, 28, 33, 34] {
+        let (rg, rm) = (red(&gu, y), red(&mc, y));
+        eprintln!("row {y}: guertin red {rg:.3}, mcguire red {rm:.3}");
+        assert!(rg > 0.05, "guertin does not blur the bar onto row {y}: {rg}");
+        assert!(rm < 0.01, "mcguire unexpectedly blurs the bar onto row {y}: {rm}");
+    }
+}

@@ -8,7 +8,8 @@
 //! applied as a "same"-size correlation with zero outside the plane: for a 5-tap filter
 //! `out[x] = sum_{k=0..4} h[k] in[x + k - 2]` (3-tap: `in[x + k - 1]`). `PAD = 5`.
 //!
-//! Levels: `L = max(1, ceil(log2(max(w, h))))` for a `w x h` input.
+//! Levels: `L = max(1, ceil(log2(max(w, h)))) + EXTRA_LEVELS` for a `w x h` input
+//! (`evalf.m` has no extra levels; see [`EXTRA_LEVELS`]).
 //! * Level 0 analysis `a0` = the input with `PAD` zeros on every side: `(w + 10) x (h + 10)`
 //!   ([`pad_input`]).
 //! * Analysis step ([`analysis_step`]), level i -> i+1 for i = 0..L-2: filter `a_i` with `H1`
@@ -40,14 +41,21 @@ pub const PAD: usize = 5;
 /// (least squares against `integrate_exact` on an impulse response; see the module tests).
 pub const PYRAMID_SCALE: f32 = -0.988_937;
 
-/// Number of levels for a `w x h` input: `max(1, ceil(log2(max(w, h))))`.
+/// Levels added beyond the reference code's `ceil(log2(max(w, h)))`. The coarsest levels are
+/// a few pixels wide and cost nothing, but they carry the far field of large PSFs: for a disk of
+/// radius 30 px in a 160x160 plane the mean absolute error against the exact inverse drops from
+/// 0.0141 to 0.0049 (the far-field bias from -0.0126 to -0.0027), while a small PSF in a large
+/// plane is unchanged (measured with a NumPy transcription of this module).
+pub const EXTRA_LEVELS: usize = 2;
+
+/// Number of levels for a `w x h` input: `max(1, ceil(log2(max(w, h)))) + EXTRA_LEVELS`.
 pub fn level_count(w: usize, h: usize) -> usize {
     let m = w.max(h).max(1);
     let mut l = 0;
     while (1usize << l) < m {
         l += 1;
     }
-    l.max(1)
+    l.max(1) + EXTRA_LEVELS
 }
 
 /// Sizes (px, padding included) of the analysis planes `a_0 .. a_{L-1}` for a `w x h` input;

@@ -155,7 +155,8 @@ fn naive_pyramid(input: &Plane) -> Vec<f64> {
         (*w, *h, o)
     };
     let (w, h) = (input.width, input.height);
-    let max_level = (w.max(h) as f64).log2().ceil().max(1.0) as usize;
+    let max_level =
+        (w.max(h) as f64).log2().ceil().max(1.0) as usize + poisson::pyramid::EXTRA_LEVELS;
     let fs = 5;
     let mut pyr = vec![pad(
         &(w, h, input.data.iter().map(|&v| v as f64).collect()),

@@ -139,6 +139,7 @@ impl BuildPlan {
                 .ok()
                 .and_then(|v| v.parse().ok())
                 .unwrap_or(crate::sparsify::darts::DART_SPACING_PX),
+            // (PRECOMPUTE_DART_SPACING: an experiment knob, not part of the interface.)
             procedure: self.config.procedure,
             ..SparsifyOptions::default()
         }
@@ -162,7 +163,10 @@ impl BuildPlan {
             None
         };
         let support = image.support();
-        let dense = sparse.len() as f64 > f64::from(self.config.dense_ratio) * support as f64;
+        let cfg = &self.config;
+        let dense = sparse.len() as f64 > f64::from(cfg.dense_ratio) * support as f64
+            || (sim < f64::from(cfg.dense_below_similarity)
+                && support <= cfg.dense_max_support as usize);
         let range = params.range();
         let report = PsfReport {
             index,
@@ -307,6 +311,9 @@ pub fn build_database(
         mean_sparsity: 0.0,
         mean_similarity: 0.0,
         mean_l1: 0.0,
+        sparse_stored_mean_sparsity: 0.0,
+        sparse_stored_mean_similarity: 0.0,
+        aggregate_cost_ratio: 0.0,
         dense_count: 0,
         stored_spreadlets: 0,
         build_seconds: 0.0,

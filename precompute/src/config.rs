@@ -249,11 +249,17 @@ pub struct BuildConfig {
     pub ranges: Option<Vec<[f64; 2]>>,
     /// A PSF is stored dense when its spreadlets exceed this fraction of its dense support.
     pub dense_ratio: f32,
+    /// A PSF of at most [`Self::dense_max_support`] pixels is also stored dense when its
+    /// spreadlets' similarity falls below this (small PSFs are cheap to draw directly).
+    pub dense_below_similarity: f32,
+    /// Largest dense support (pixels) the similarity rule applies to.
+    pub dense_max_support: u32,
 }
 
 impl BuildConfig {
     /// Defaults for `model` and `profile`: seed 1, rays from the profile, budget 1,
-    /// pre-filtering on, circular aperture, default lens, improved procedure, dense above 0.5.
+    /// pre-filtering on, circular aperture, default lens, improved procedure; stored dense
+    /// above 0.5 spreadlets per support pixel, or below similarity 0.9 when at most 4096 px.
     pub fn new(model: PsfModel, profile: Profile) -> Self {
         BuildConfig {
             model,
@@ -270,6 +276,8 @@ impl BuildConfig {
             psf_count: None,
             ranges: None,
             dense_ratio: 0.5,
+            dense_below_similarity: 0.9,
+            dense_max_support: 4096,
         }
     }
 

@@ -164,13 +164,17 @@ fn main() -> Result<()> {
     }
     eprintln!(
         "{model} {profile}: {} PSFs ({} dense), {} spreadlets stored, mean sparsity {:.2} %, \
-         mean similarity {:.4}, mean L1 {:.4}, {:.1} s -> {}",
+         mean similarity {:.4}, mean L1 {:.4} (stored sparse: {:.2} %, {:.4}; cost ratio \
+         {:.2} %), {:.1} s -> {}",
         report.psfs.len(),
         report.dense_count,
         report.stored_spreadlets,
         100.0 * report.mean_sparsity,
         report.mean_similarity,
         report.mean_l1,
+        100.0 * report.sparse_stored_mean_sparsity,
+        report.sparse_stored_mean_similarity,
+        100.0 * report.aggregate_cost_ratio,
         report.build_seconds,
         args.out.display()
     );

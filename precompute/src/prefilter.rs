@@ -31,6 +31,17 @@ impl ParamBox {
         })
     }
 
+    /// Fixed parameters `s` (physical units) in a space of `dims` dimensions: no pre-filtering.
+    pub fn fixed(space: &ParamSpace, s: [f64; 2]) -> Self {
+        ParamBox {
+            space: space.clone(),
+            u_min: [0.0; 2],
+            u_max: [0.0; 2],
+            centre: s,
+            prefilter: false,
+        }
+    }
+
     /// Number of uniform numbers [`Self::sample`] takes (the space's dimensions, or 0 without
     /// pre-filtering).
     pub fn jitter_dims(&self) -> usize {

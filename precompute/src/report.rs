@@ -74,6 +74,13 @@ pub struct BuildReport {
     pub mean_similarity: f64,
     /// Mean L1 over all PSFs' sparse representations.
     pub mean_l1: f64,
+    /// Mean sparsity over the PSFs stored as spreadlets.
+    pub sparse_stored_mean_sparsity: f64,
+    /// Mean similarity over the PSFs stored as spreadlets.
+    pub sparse_stored_mean_similarity: f64,
+    /// Sum of spreadlets over the sum of dense supports, all PSFs (dense ones count their
+    /// support): the splatting work relative to dense splatting, each PSF used equally often.
+    pub aggregate_cost_ratio: f64,
     /// PSFs stored dense (fast track).
     pub dense_count: usize,
     /// Spreadlets stored in the database.
@@ -92,6 +99,17 @@ impl BuildReport {
         self.mean_similarity = self.psfs.iter().map(|p| p.similarity).sum::<f64>() / n;
         self.mean_l1 = self.psfs.iter().map(|p| p.l1).sum::<f64>() / n;
         self.dense_count = self.psfs.iter().filter(|p| p.dense).count();
+        let sparse: Vec<&PsfReport> = self.psfs.iter().filter(|p| !p.dense).collect();
+        let k = sparse.len().max(1) as f64;
+        self.sparse_stored_mean_sparsity = sparse.iter().map(|p| p.sparsity).sum::<f64>() / k;
+        self.sparse_stored_mean_similarity = sparse.iter().map(|p| p.similarity).sum::<f64>() / k;
+        let cost: f64 = self
+            .psfs
+            .iter()
+            .map(|p| if p.dense { p.dense_support } else { p.spreadlets } as f64)
+            .sum();
+        let support: f64 = self.psfs.iter().map(|p| p.dense_support as f64).sum();
+        self.aggregate_cost_ratio = cost / support.max(1.0);
         self.stored_spreadlets = self
             .psfs
             .iter()

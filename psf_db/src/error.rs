@@ -86,6 +86,14 @@ pub enum DbError {
     /// Content that is well-formed but not acceptable (builder misuse, non-finite values, ...).
     #[error("invalid database content: {0}")]
     Invalid(String),
+    /// The database was built for another PSF model than the caller needs.
+    #[error("database holds {found} PSFs, {expected} needed")]
+    WrongModel {
+        /// Model in the file.
+        found: crate::PsfModel,
+        /// Model the caller asked for.
+        expected: crate::PsfModel,
+    },
     /// The parameter space in the header is invalid.
     #[error("invalid parameter space: {0}")]
     Space(#[from] SpaceError),

@@ -260,6 +260,18 @@ impl PsfDatabase {
         self.header.model
     }
 
+    /// `Ok` when the database holds `expected` PSFs, else [`DbError::WrongModel`].
+    pub fn expect_model(&self, expected: PsfModel) -> Result<(), DbError> {
+        if self.header.model == expected {
+            Ok(())
+        } else {
+            Err(DbError::WrongModel {
+                found: self.header.model,
+                expected,
+            })
+        }
+    }
+
     /// The parameter space (shortcut for `header().space`).
     pub fn space(&self) -> &ParamSpace {
         &self.header.space

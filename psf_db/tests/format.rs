@@ -255,6 +255,13 @@ fn another_model_is_visible_in_the_header() {
     assert_eq!(db.header().model, PsfModel::PhysicalLens);
     assert_ne!(db.header().model, PsfModel::ThinLens);
     assert!(db.header().lens.is_some());
+    assert!(db.expect_model(PsfModel::PhysicalLens).is_ok());
+    let e = db.expect_model(PsfModel::LensMotion).unwrap_err();
+    assert!(matches!(e, DbError::WrongModel { .. }));
+    assert_eq!(
+        e.to_string(),
+        "database holds physical-lens PSFs, lens-motion needed"
+    );
 }
 
 #[test]

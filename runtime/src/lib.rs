@@ -7,6 +7,7 @@
 //! from [`dbcache`].
 
 pub mod camera;
+pub mod condition;
 pub mod dbcache;
 pub mod gbuffer;
 pub mod pipeline;

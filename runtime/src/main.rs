@@ -142,6 +142,10 @@ struct SynthArgs {
     /// Plain layout: the motion's y axis points up.
     #[arg(long)]
     motion_y_up: bool,
+    /// Use the database's spreadlets as stored (no monopole removal, no energy
+    /// normalisation).
+    #[arg(long)]
+    no_condition: bool,
     /// Print no progress.
     #[arg(long, short)]
     quiet: bool,
@@ -252,6 +256,15 @@ fn run_synth(args: SynthArgs) -> Result<()> {
             Some(db)
         }
     };
+    let mut condition_report = None;
+    let db = match db {
+        Some(db) if !args.no_condition => {
+            let (db, report) = runtime::condition::condition(&db)?;
+            condition_report = Some(report);
+            Some(db)
+        }
+        other => other,
+    };
     let db_ms = t.elapsed().as_secs_f64() * 1e3;
 
     let options = SynthOptions {
@@ -315,6 +328,7 @@ fn run_synth(args: SynthArgs) -> Result<()> {
                 "model": stats.model,
                 "path": s.path,
                 "built_now": s.built,
+                "conditioning": condition_report,
             })).collect::<Vec<_>>(),
             "synthesis": stats,
             "times_ms": {

@@ -58,3 +58,26 @@ fn pyramid_integrates_an_impulse_like_the_cpu() {
     let (d, m) = max_diff(&gpu[0].data, &cpu.data);
     assert!(m > 0.0 && d <= REL_TOL * m, "impulse: {d} (max {m})");
 }
+
+/// Timing probe (run on demand): the GPU pyramid alone against the CPU's, 32 planes.
+#[test]
+#[ignore]
+fn pyramid_timing_probe() {
+    let Some(ctx) = context() else { return };
+    let mut pyr = GpuPyramid::new(ctx).expect("pipelines");
+    let n: usize = std::env::var("PROBE_SIZE").ok().and_then(|s| s.parse().ok()).unwrap_or(310);
+    let laps: Vec<Plane> = (0..32).map(|i| noise_plane(n, n, i)).collect();
+    pyr.integrate(&laps).expect("warm-up");
+    for _ in 0..3 {
+        let t = std::time::Instant::now();
+        pyr.integrate(&laps).expect("gpu");
+        let g = t.elapsed().as_secs_f64() * 1e3;
+        let t = std::time::Instant::now();
+        let mut ws = PyramidWorkspace::new(n, n);
+        for l in &laps {
+            std::hint::black_box(ws.integrate(l));
+        }
+        let c = t.elapsed().as_secs_f64() * 1e3;
+        eprintln!("{n}x{n} x 32 planes: GPU {g:.1} ms (with upload and readback), CPU {c:.1} ms");
+    }
+}

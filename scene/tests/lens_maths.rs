@@ -374,3 +374,60 @@ fn stochastic_labels_map_samples_back_to_the_pinhole_image() {
         "{hits} hits, lens {lens_used}"
     );
 }
+
+#[test]
+fn spinning_square_motion_varies_across_it_as_a_rotation() {
+    // A square facing the camera spins about the viewing axis: every point's next-frame
+    // image position is its current one rotated about the centre's image by the angle.
+    let (width, omega) = (40usize, 0.2f64);
+    let text = format!(
+        r#"{{
+        "name": "spin",
+        "camera": {{"width": {width}, "height": {width}, "focal_length_mm": 50,
+                   "sensor_width_mm": 36, "f_stop": null, "focus_distance": null}},
+        "camera_pose": {{"position": [0, 0, 0], "look_at": [0, 0, -1]}},
+        "ambient": [1, 1, 1],
+        "objects": [{{"shape": {{"type": "quad", "corner": [-0.1, -0.1, -1.0],
+                                "edge_u": [0.2, 0, 0], "edge_v": [0, 0.2, 0]}},
+                     "spin": {{"axis": [0, 0, 1], "radians_per_frame": {omega}}}}}]
+    }}"#
+    );
+    let scene = Scene::from_json(&text, "spin").expect("scene");
+    let gbuffer = render_gbuffer(&scene, 1, &RenderOptions::default()).expect("gbuffer");
+    let scale_px = 50.0 * width as f64 / 36.0;
+    let centre = DVec2::splat(width as f64 / 2.0);
+    let mut speeds = Vec::new();
+    for y in 0..width {
+        for x in 0..width {
+            let i = y * width + x;
+            if gbuffer.depth[i] > 1e9 {
+                continue;
+            }
+            let now = DVec2::new(x as f64 + 0.5, y as f64 + 0.5);
+            // World rotation by +omega about +z (towards the camera) is clockwise on the
+            // y-down image: (dx, dy) -> (dx cos + dy sin, -dx sin + dy cos).
+            let rotate = |d: DVec2, a: f64| {
+                DVec2::new(d.x * a.cos() + d.y * a.sin(), -d.x * a.sin() + d.y * a.cos())
+            };
+            let d = now - centre;
+            let next = centre + rotate(d, omega);
+            let previous = centre + rotate(d, -omega);
+            let forward = gbuffer.forward_motion(x, y);
+            assert!((forward - (next - now)).length() < 1e-3, "{forward} vs {}", next - now);
+            let v = gbuffer.vector[i];
+            let backward = DVec2::new(f64::from(v[0]), -f64::from(v[1]));
+            assert!((backward - (previous - now)).length() < 1e-3);
+            // Depth is the plane's: 1 m everywhere.
+            assert!((f64::from(gbuffer.depth[i]) - 1.0).abs() < 1e-6);
+            speeds.push(forward.length());
+        }
+    }
+    let half_px = 0.1 * scale_px;
+    assert!(speeds.len() as f64 > 0.9 * (2.0 * half_px).powi(2));
+    let (min, max) = speeds
+        .iter()
+        .fold((f64::MAX, 0.0f64), |(a, b), &s| (a.min(s), b.max(s)));
+    // From near zero at the centre to 2 sin(omega / 2) times the corner radius.
+    let corner = 2.0 * (omega / 2.0).sin() * half_px * 2f64.sqrt();
+    assert!(min < 0.3 && max > 0.9 * corner && max <= corner + 1e-6, "{min} {max} {corner}");
+}

@@ -14,7 +14,7 @@ use super::target::Target;
 use super::voronoi::SiteIndex;
 
 /// Default dart radius at the reference importance, pixels, for budget 1.
-pub const DART_SPACING_PX: f64 = 2.0;
+pub const DART_SPACING_PX: f64 = 1.5;
 
 /// A spreadlet site: continuous pixel coordinates and its cell group.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -10,7 +10,8 @@ use psf_db::{PsfDatabase, PsfModel};
 use runtime::camera::Camera;
 use runtime::gbuffer::GBuffer;
 
-/// The Test-profile database of `model`, built once per test binary.
+/// The Test-profile database of `model`, built once per test binary and conditioned as the
+/// `spreadlet` binary conditions it.
 pub fn test_db(model: PsfModel) -> &'static PsfDatabase {
     static DBS: [OnceLock<PsfDatabase>; 3] = [OnceLock::new(), OnceLock::new(), OnceLock::new()];
     let slot = match model {
@@ -21,7 +22,7 @@ pub fn test_db(model: PsfModel) -> &'static PsfDatabase {
     slot.get_or_init(|| {
         let cfg = BuildConfig::new(model, Profile::Test);
         match build_database(&cfg, false) {
-            Ok((db, _)) => db,
+            Ok((db, _)) => runtime::condition::condition(&db).expect("condition").0,
             Err(e) => panic!("building the {} test database failed: {e}", model.name()),
         }
     })

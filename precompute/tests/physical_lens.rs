@@ -1,0 +1,109 @@
+//! The physical-lens PSFs show what a real singlet does: axial and lateral chromatic
+//! aberration (red and blue differ in size and position) and cat-eye vignetting off axis
+//! (the light is clipped by the lens rim, so the PSF gets narrower radially).
+
+use precompute::prefilter::ParamBox;
+use precompute::sampler::psf_rng;
+use precompute::trace::{trace_psf, RayCount};
+use precompute::{BuildConfig, BuildPlan, PsfImage, Profile};
+use psf_db::PsfModel;
+
+fn trace(plan: &BuildPlan, depth: f64, ecc: f64) -> (PsfImage, f64) {
+    let params = ParamBox::fixed(&plan.space, [depth, ecc]);
+    let mut rng = psf_rng(1, 0, 0);
+    let (img, stats) = trace_psf(
+        plan.tracer.as_ref(),
+        &params,
+        RayCount::Fixed(600_000),
+        &mut rng,
+        0,
+    )
+    .unwrap();
+    assert_eq!(stats.outside, 0, "rays fell outside the PSF image");
+    (img, stats.blocked as f64 / stats.rays as f64)
+}
+
+/// Standard deviation of channel `c` along x and y, pixels.
+fn spread(img: &PsfImage, c: usize) -> [f64; 2] {
+    let m = img.centroid(c);
+    let (mut sx, mut sy, mut s) = (0.0, 0.0, 0.0);
+    for y in 0..img.height {
+        for x in 0..img.width {
+            let v = f64::from(img.planes[c][y * img.width + x]);
+            let dx = x as f64 - img.centre[0] as f64 - m[0];
+            let dy = y as f64 - img.centre[1] as f64 - m[1];
+            sx += v * dx * dx;
+            sy += v * dy * dy;
+            s += v;
+        }
+    }
+    [(sx / s).sqrt(), (sy / s).sqrt()]
+}
+
+fn plan() -> BuildPlan {
+    BuildPlan::new(&BuildConfig::new(PsfModel::PhysicalLens, Profile::Quick)).unwrap()
+}
+
+#[test]
+fn in_focus_on_axis_is_small_and_centred() {
+    let plan = plan();
+    let (img, blocked) = trace(&plan, 1.0, 0.0);
+    // Focused (for the design wavelength) at 1 m: a few pixels of spherical and chromatic blur.
+    let g = img.rms_radius(1);
+    assert!(g < 6.0, "green rms radius {g} px");
+    let c = img.centroid(1);
+    assert!(c[0].abs() < 0.3 && c[1].abs() < 0.3, "{c:?}");
+    assert!(blocked < 1e-3, "on axis nothing is vignetted: {blocked}");
+}
+
+#[test]
+fn chromatic_aberration_red_and_blue_differ() {
+    let plan = plan();
+    // On axis, defocused (near): axial colour makes the red and blue disks differ in size.
+    let (near, _) = trace(&plan, 0.45, 0.0);
+    let (r, b) = (near.rms_radius(0), near.rms_radius(2));
+    println!("on axis at 0.45 m: rms radius R {r:.2} px, B {b:.2} px");
+    assert!((r - b).abs() > 0.03 * r.max(b), "R {r} B {b}");
+    // In focus: blue (shorter focal length) is the blurriest.
+    let (focus, _) = trace(&plan, 1.0, 0.0);
+    assert!(focus.rms_radius(2) > focus.rms_radius(1));
+    // Off axis: lateral colour moves the red and blue centroids apart radially.
+    let (off, _) = trace(&plan, 1.0, 16.0);
+    let (cr, cb) = (off.centroid(0), off.centroid(2));
+    println!("at 16 mm: centroid R {cr:?}, B {cb:?} px");
+    assert!((cr[0] - cb[0]).abs() > 0.5, "R {cr:?} B {cb:?}");
+    assert!((cr[1] - cb[1]).abs() < 0.2, "no tangential shift expected: R {cr:?} B {cb:?}");
+}
+
+#[test]
+fn cat_eye_vignetting_off_axis() {
+    let plan = plan();
+    let (centre, blocked_centre) = trace(&plan, 0.45, 0.0);
+    let (edge, blocked_edge) = trace(&plan, 0.45, 18.0);
+    let sc = spread(&centre, 1);
+    let se = spread(&edge, 1);
+    println!(
+        "defocused at 0.45 m: spread (x, y) on axis {sc:?} px, blocked {blocked_centre:.3}; \
+         at 18 mm {se:?} px, blocked {blocked_edge:.3}"
+    );
+    // On axis the blur is round; at the edge of the field the rim clips it radially (x).
+    assert!((sc[0] / sc[1] - 1.0).abs() < 0.03);
+    assert!(se[0] < 0.85 * se[1], "not a cat's eye: {se:?}");
+    assert!(blocked_edge > blocked_centre + 0.1);
+    // The support is narrower radially than tangentially too.
+    let width = |img: &PsfImage, axis: usize| {
+        let mut lo = i64::MAX;
+        let mut hi = i64::MIN;
+        for y in 0..img.height {
+            for x in 0..img.width {
+                if img.planes[1][y * img.width + x] > 0.0 {
+                    let v = if axis == 0 { x } else { y } as i64;
+                    lo = lo.min(v);
+                    hi = hi.max(v);
+                }
+            }
+        }
+        hi - lo + 1
+    };
+    assert!(width(&edge, 0) < width(&edge, 1), "{} vs {}", width(&edge, 0), width(&edge, 1));
+}
