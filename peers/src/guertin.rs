@@ -60,6 +60,20 @@ pub struct GuertinParams {
     pub halton_base: u64,
     /// Stochastic NeighborMax lookup near tile borders (Sec. 3.4.2). Default on.
     pub tile_jitter: bool,
+    /// How the N taps are split between `v_max` and the centre direction. Default even
+    /// (as all the thesis's results but Fig. 3.7).
+    pub split: SampleSplit,
+}
+
+/// Split of the taps between the dominant direction and the centre direction (Sec. 3.4.1).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum SampleSplit {
+    /// Odd taps along the centre direction, even taps along `v_max` (N/2 each).
+    Even,
+    /// `v N` taps along the centre direction, with the tile variance `v` of Eq. 3.2
+    /// (TileMax directions against the 3x3 neighbourhood, bilinearly interpolated between
+    /// tile centres as in Sec. 3.5); a zero TileMax counts as agreeing with its neighbours.
+    TileVariance,
 }
 
 impl Default for GuertinParams {
@@ -76,6 +90,7 @@ impl Default for GuertinParams {
             depth_compare: DepthCompare::Relative,
             halton_base: 2,
             tile_jitter: true,
+            split: SampleSplit::Even,
         }
     }
 }
@@ -156,7 +171,12 @@ pub fn guertin(g: &GBufferView, p: &GuertinParams) -> Result<Image, PeerError> {
     let (w, h) = (g.width, g.height);
     let r = p.r;
     let vel = half_velocities(g.motion, r as f32);
-    let nm = neighbor_max(&tile_max(w, h, &vel, r), p.diagonal_cos);
+    let tm = tile_max(w, h, &vel, r);
+    let nm = neighbor_max(&tm, p.diagonal_cos);
+    let variance = match p.split {
+        SampleSplit::Even => None,
+        SampleSplit::TileVariance => Some(tile_variance(&tm)),
+    };
     let n = p.n;
     let mut out = vec![[0.0f32; 4]; w * h];
     out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
@@ -198,9 +218,25 @@ pub fn guertin(g: &GBufferView, p: &GuertinParams) -> Result<Image, PeerError> {
             let mut total = n as f32 / (p.kappa * vc_len);
             let mut sum = c.map(|v| v * total);
             let jp = j * p.eta * p.phi / n as f32;
+            // Share of taps along the centre direction.
+            let share = match &variance {
+                None => 0.5,
+                Some(v) => sample_bilinear(
+                    v,
+                    nm.tw,
+                    nm.th,
+                    (x as f32 + 0.5) / r as f32 - 0.5,
+                    (y as f32 + 0.5) / r as f32 - 0.5,
+                ),
+            };
             for k in 0..n {
                 let t = -1.0 + 2.0 * (k as f32 + jp + 1.0) / (n as f32 + 1.0);
-                let d = if k % 2 == 1 { wc } else { wn };
+                let centre_tap = match variance {
+                    None => k % 2 == 1,
+                    // Spread the centre taps evenly: tap k is one when floor((k+1) v) steps.
+                    Some(_) => ((k + 1) as f32 * share).floor() > (k as f32 * share).floor(),
+                };
+                let d = if centre_tap { wc } else { wn };
                 let big_t = t * vmax_len;
                 let sx = (x as f32 + big_t * d[0]).round();
                 let sy = (y as f32 + big_t * d[1]).round();
@@ -233,9 +269,72 @@ pub fn guertin(g: &GBufferView, p: &GuertinParams) -> Result<Image, PeerError> {
     Ok(out)
 }
 
+/// Eq. 3.2: `v(t) = 1 - mean over the 3x3 neighbourhood (incl. t) of |cos(v_max(t), v_max(n))|`.
+fn tile_variance(tm: &crate::tiles::TileGrid) -> Vec<f32> {
+    let (tw, th) = (tm.tw as isize, tm.th as isize);
+    let unit = |v: [f32; 2]| {
+        let l = len2(v);
+        if l > 0.0 {
+            Some([v[0] / l, v[1] / l])
+        } else {
+            None
+        }
+    };
+    let mut out = vec![0.0f32; tm.v.len()];
+    for ty in 0..th {
+        for tx in 0..tw {
+            let Some(c) = unit(tm.v[(ty * tw + tx) as usize]) else {
+                continue;
+            };
+            let (mut sum, mut count) = (0.0f32, 0.0f32);
+            for dy in -1..=1 {
+                for dx in -1..=1 {
+                    let (nx, ny) = (tx + dx, ty + dy);
+                    if nx < 0 || ny < 0 || nx >= tw || ny >= th {
+                        continue;
+                    }
+                    sum += unit(tm.v[(ny * tw + nx) as usize])
+                        .map_or(1.0, |n| (c[0] * n[0] + c[1] * n[1]).abs());
+                    count += 1.0;
+                }
+            }
+            out[(ty * tw + tx) as usize] = (1.0 - sum / count).clamp(0.0, 1.0);
+        }
+    }
+    out
+}
+
+/// Bilinear lookup in a tile grid at tile coordinates (tile centres at integers), clamped.
+fn sample_bilinear(v: &[f32], tw: usize, th: usize, x: f32, y: f32) -> f32 {
+    let x = x.clamp(0.0, (tw - 1) as f32);
+    let y = y.clamp(0.0, (th - 1) as f32);
+    let (x0, y0) = (x.floor() as usize, y.floor() as usize);
+    let (x1, y1) = ((x0 + 1).min(tw - 1), (y0 + 1).min(th - 1));
+    let (fx, fy) = (x - x0 as f32, y - y0 as f32);
+    let top = v[y0 * tw + x0] * (1.0 - fx) + v[y0 * tw + x1] * fx;
+    let bottom = v[y1 * tw + x0] * (1.0 - fx) + v[y1 * tw + x1] * fx;
+    top * (1.0 - fy) + bottom * fy
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn tile_variance_is_zero_for_one_direction_and_grows_with_disagreement() {
+        let mut g = crate::tiles::TileGrid {
+            r: 8,
+            tw: 3,
+            th: 3,
+            v: vec![[5.0, 0.0]; 9],
+        };
+        assert!(tile_variance(&g).iter().all(|v| *v == 0.0));
+        g.v[4] = [0.0, 5.0];
+        let v = tile_variance(&g);
+        // Centre: 8 perpendicular neighbours and itself: 1 - 1/9.
+        assert!((v[4] - 8.0 / 9.0).abs() < 1e-6);
+        assert!(v[0] > 0.0 && v[0] < v[4]);
+    }
 
     #[test]
     fn tile_offset_never_diagonal_and_vanishes_mid_tile() {

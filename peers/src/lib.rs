@@ -1,10 +1,10 @@
 //! Peer methods measured against spreadlet (issue 8), on the CPU:
 //!
-//! - [`mcguire`]: McGuire et al. 2012, single-velocity tile-based motion blur (G-buffer);
-//! - [`guertin`]: Guertin et al. 2014, feature-aware motion blur (G-buffer);
-//! - [`shirley`]: Shirley et al. 2011, depth-sorted sweep reconstruction (stochastic samples);
-//! - [`vaidyanathan`]: Vaidyanathan et al. 2015, layered light field reconstruction, defocus;
-//! - [`munkberg`]: Munkberg et al. 2014, layered reconstruction, defocus and motion blur.
+//! - [`mcguire()`]: McGuire et al. 2012, single-velocity tile-based motion blur (G-buffer);
+//! - [`guertin()`]: Guertin et al. 2014, feature-aware motion blur (G-buffer);
+//! - [`shirley()`]: Shirley et al. 2011, depth-sorted sweep reconstruction (stochastic samples);
+//! - [`vaidyanathan()`]: Vaidyanathan et al. 2015, layered light field reconstruction, defocus;
+//! - [`munkberg()`]: Munkberg et al. 2014, layered reconstruction, defocus and motion blur.
 //!
 //! Every method is `fn(input, &Params) -> Result<Vec<[f32; 4]>, PeerError>`, deterministic and
 //! parallel over rows or tiles (rayon). Where a paper leaves a detail open, the choice is
@@ -23,7 +23,7 @@ mod tiles;
 pub mod vaidyanathan;
 
 pub use error::PeerError;
-pub use guertin::{guertin, GuertinParams};
+pub use guertin::{guertin, GuertinParams, SampleSplit};
 pub use inputs::{GBufferView, Image, LensModel, Sample, SampleView, MAX_SIDE};
 pub use layered::{FilterCase, LayerFilter, LayerReport, Partitions};
 pub use mcguire::{mcguire, DepthCompare, McGuireParams};

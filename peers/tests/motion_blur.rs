@@ -1,7 +1,7 @@
 //! Properties Guertin 2014 and McGuire 2012 state: still pixels stay sharp, and a moving thin
 //! bar's blur spans its motion.
 
-use peers::{guertin, mcguire, GBufferView, GuertinParams, McGuireParams};
+use peers::{guertin, mcguire, GBufferView, GuertinParams, McGuireParams, SampleSplit};
 
 const W: usize = 64;
 const H: usize = 64;
@@ -47,11 +47,22 @@ type Method = fn(&GBufferView) -> Vec<[f32; 4]>;
 fn run_guertin(g: &GBufferView) -> Vec<[f32; 4]> {
     guertin(g, &GuertinParams::default()).expect("valid input")
 }
+fn run_guertin_variance(g: &GBufferView) -> Vec<[f32; 4]> {
+    let p = GuertinParams {
+        split: SampleSplit::TileVariance,
+        ..Default::default()
+    };
+    guertin(g, &p).expect("valid input")
+}
 fn run_mcguire(g: &GBufferView) -> Vec<[f32; 4]> {
     mcguire(g, &McGuireParams::default()).expect("valid input")
 }
 
-const METHODS: [(&str, Method); 2] = [("guertin", run_guertin), ("mcguire", run_mcguire)];
+const METHODS: [(&str, Method); 3] = [
+    ("guertin", run_guertin),
+    ("guertin-variance", run_guertin_variance),
+    ("mcguire", run_mcguire),
+];
 
 #[test]
 fn a_fully_still_image_is_returned_unchanged() {
@@ -176,17 +187,34 @@ fn guertin_blurs_along_a_motion_that_the_dominant_velocity_hides() {
             motion[y * w + x] = [0.0, 12.0];
         }
     }
-    let g = GBufferView { width: w, height: h, color: &color, depth: &depth, motion: &motion };
+    let g = GBufferView {
+        width: w,
+        height: h,
+        color: &color,
+        depth: &depth,
+        motion: &motion,
+    };
     let gu = guertin(&g, &GuertinParams::default()).expect("guertin");
+    let gv = run_guertin_variance(&g);
     let mc = mcguire(&g, &McGuireParams::default()).expect("mcguire");
     // Red excess in the rows the bar sweeps over (3 px above and below it).
     let red = |img: &[[f32; 4]], y: usize| -> f32 {
-        (15..35).map(|x| img[y * w + x][0] - img[y * w + x][1]).sum::<f32>() / 20.0
+        (15..35)
+            .map(|x| img[y * w + x][0] - img[y * w + x][1])
+            .sum::<f32>()
+            / 20.0
     };
     for y in [27usize, 28, 33, 34] {
-        let (rg, rm) = (red(&gu, y), red(&mc, y));
-        eprintln!("row {y}: guertin red {rg:.3}, mcguire red {rm:.3}");
-        assert!(rg > 0.05, "guertin does not blur the bar onto row {y}: {rg}");
-        assert!(rm < 0.01, "mcguire unexpectedly blurs the bar onto row {y}: {rm}");
+        let (rg, rv, rm) = (red(&gu, y), red(&gv, y), red(&mc, y));
+        eprintln!("row {y}: guertin red {rg:.3} (variance split {rv:.3}), mcguire red {rm:.3}");
+        assert!(
+            rg > 0.05,
+            "guertin does not blur the bar onto row {y}: {rg}"
+        );
+        assert!(rv > 0.02, "guertin (variance split) misses row {y}: {rv}");
+        assert!(
+            rm < 0.01,
+            "mcguire unexpectedly blurs the bar onto row {y}: {rm}"
+        );
     }
 }

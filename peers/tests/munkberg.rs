@@ -239,3 +239,43 @@ fn bad_parameters_are_errors() {
         assert!(munkberg(&view, &p).is_err(), "{p:?}");
     }
 }
+
+#[test]
+fn motion_handling_pays_off_on_a_moving_scene() {
+    // Same samples, same reference: every sample method beats the box filter, and Munkberg's
+    // motion frame and time shear beat Vaidyanathan's defocus-only filter.
+    let scene = defocus_and_motion_scene();
+    let reference = scene.box_filter(256, &scene.render(256, 99));
+    let spp = 4;
+    let samples = scene.render(spp, 5);
+    let view = scene.view(spp, &samples);
+    let boxed = rmse(&scene.box_filter(spp, &samples), &reference);
+    let mut errors = Vec::new();
+    for m in peers::PeerMethod::ALL {
+        if m.input_kind() != peers::InputKind::Samples || !m.handles_motion() {
+            if m == peers::PeerMethod::Vaidyanathan {
+                let out = m.run(&peers::PeerInput::Samples(view)).expect("runs");
+                errors.push((m, rmse(&out, &reference)));
+            }
+            continue;
+        }
+        let out = m.run(&peers::PeerInput::Samples(view)).expect("runs");
+        errors.push((m, rmse(&out, &reference)));
+    }
+    for (m, e) in &errors {
+        eprintln!("{:>13}: RMSE {e:.4} (1x1 box {boxed:.4})", m.name());
+        assert!(
+            *e < boxed,
+            "{}: {e} not below the box filter's {boxed}",
+            m.name()
+        );
+    }
+    let get = |n: peers::PeerMethod| {
+        errors
+            .iter()
+            .find(|(m, _)| *m == n)
+            .map(|x| x.1)
+            .unwrap_or(f32::NAN)
+    };
+    assert!(get(peers::PeerMethod::Munkberg) < get(peers::PeerMethod::Vaidyanathan));
+}

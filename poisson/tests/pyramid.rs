@@ -83,7 +83,7 @@ fn calibrated_scale_matches_the_impulse_response() {
         (s - 1.0).abs() < 0.01,
         "PYRAMID_SCALE is off by a factor {s}"
     );
-    // Measured: mean 0.00043, max 0.0165.
+    // Measured (EXTRA_LEVELS = 2, PYRAMID_SCALE = -0.986035): mean 0.00037, max 0.0152.
     assert!(sum / n < 1e-3 && max < 0.03);
 }
 
@@ -112,8 +112,8 @@ fn disk_psf_error() {
     println!("disk best fit: extra scale {ds:.5} offset {doff:.5}");
     println!("disk r=30 in 160x160: mean |err| {mean:.5}, max |err| {max:.5} (disk value 1)");
     println!("levels {:?}", level_sizes(size, size));
-    // Measured: mean 0.0141, max 0.141.
-    assert!(mean < 0.02 && max < 0.2);
+    // Measured: mean 0.0051, max 0.130 (without the extra levels: mean 0.0141, max 0.141).
+    assert!(mean < 0.008 && max < 0.16);
 }
 
 /// The authors' `evalf.m` written literally in f64: 2D outer-product filters, "same" correlation

@@ -58,7 +58,10 @@ fn pyramid_step_timings() {
     let mut syn = 0.0;
     for i in (0..l - 1).rev() {
         let (lo, hi) = f.split_at_mut(i + 1);
-        let t = median_ms(|| synthesis_step(&hi[0], &a[i], &mut lo[i], &mut scratch), 9);
+        let t = median_ms(
+            || synthesis_step(&hi[0], &a[i], &mut lo[i], &mut scratch),
+            9,
+        );
         if i == 0 {
             syn0 = t;
         }

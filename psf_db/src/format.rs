@@ -28,6 +28,7 @@ use std::path::Path;
 use bytemuck::{Pod, Zeroable};
 use serde::{Deserialize, Serialize};
 
+use crate::shard::ShardRange;
 use crate::error::DbError;
 use crate::model::PsfModel;
 use crate::space::ParamSpace;
@@ -35,7 +36,7 @@ use crate::space::ParamSpace;
 /// The first 8 bytes of every database file.
 pub const MAGIC: [u8; 8] = *b"SPRDLT\0\x01";
 /// The format version this build writes and reads.
-pub const FORMAT_VERSION: u32 = 1;
+pub const FORMAT_VERSION: u32 = 2;
 /// `dense_slot` value of a PSF stored as spreadlets.
 pub const SPARSE_SLOT: u32 = u32::MAX;
 /// Largest header accepted, bytes (the header holds per-PSF statistics: a few MB at most).
@@ -173,6 +174,19 @@ pub struct DbHeader {
     pub stats: Vec<PsfStats>,
     /// Build information.
     pub build: BuildInfo,
+    /// `Some` for a partial file of a sharded build (`precompute --shard K/N`): it stores only
+    /// the PSFs of its range, and [`crate::merge_shards`] joins the parts into the database.
+    pub shard: Option<ShardRange>,
+}
+
+impl DbHeader {
+    /// Number of PSFs the file stores: the shard's range, else every PSF of the space.
+    pub fn stored_psf_count(&self) -> usize {
+        match &self.shard {
+            Some(r) => r.len as usize,
+            None => self.space.psf_count() as usize,
+        }
+    }
 }
 
 impl DbHeader {
@@ -193,6 +207,7 @@ impl DbHeader {
             lens: None,
             stats: Vec::new(),
             build: BuildInfo::default(),
+            shard: None,
         }
     }
 }
@@ -261,7 +276,14 @@ impl PsfDatabase {
     }
 
     /// `Ok` when the database holds `expected` PSFs, else [`DbError::WrongModel`].
+    /// A partial file of a sharded build is refused too ([`DbError::Partial`]): it lacks PSFs.
     pub fn expect_model(&self, expected: PsfModel) -> Result<(), DbError> {
+        if let Some(r) = &self.header.shard {
+            return Err(DbError::Partial {
+                index: r.index,
+                count: r.count,
+            });
+        }
         if self.header.model == expected {
             Ok(())
         } else {
@@ -569,11 +591,11 @@ impl PsfDatabase {
                 header_bytes.len()
             )));
         }
-        if u64::from(header.space.psf_count()) != n_psf {
+        if header.stored_psf_count() as u64 != n_psf {
             return Err(DbError::OutOfBounds {
                 what: format!(
-                    "{n_psf} PSFs stored, the header's space has {}",
-                    header.space.psf_count()
+                    "{n_psf} PSFs stored, the header says {}",
+                    header.stored_psf_count()
                 ),
             });
         }
@@ -646,7 +668,10 @@ impl PsfDatabase {
     fn validate(&mut self) -> Result<(), DbError> {
         let oob = |what: String| Err(DbError::OutOfBounds { what });
         let h = &self.header;
-        let n_psf = h.space.psf_count() as usize;
+        if let Some(r) = &h.shard {
+            r.validate(h.space.psf_count())?;
+        }
+        let n_psf = h.stored_psf_count();
         let ch = h.channels as usize;
         if h.space.dim_count() != h.model.dims() {
             return oob(format!(
@@ -764,7 +789,7 @@ pub struct DatabaseBuilder {
 impl DatabaseBuilder {
     /// A builder for `header` (its stats may be filled any time before [`Self::finish`]).
     pub fn new(header: DbHeader) -> Self {
-        let n = header.space.psf_count() as usize;
+        let n = header.stored_psf_count();
         DatabaseBuilder {
             db: PsfDatabase {
                 header,
@@ -794,10 +819,10 @@ impl DatabaseBuilder {
     }
 
     fn check_room(&self) -> Result<(), DbError> {
-        if self.pushed() >= self.db.header.space.psf_count() as usize {
+        if self.pushed() >= self.db.header.stored_psf_count() {
             return Err(DbError::Invalid(format!(
-                "more PSFs pushed than the space's {}",
-                self.db.header.space.psf_count()
+                "more PSFs pushed than the {} the header stores",
+                self.db.header.stored_psf_count()
             )));
         }
         Ok(())
@@ -862,7 +887,7 @@ impl DatabaseBuilder {
 
     /// Checks that every PSF was pushed and everything is in bounds, and returns the database.
     pub fn finish(self) -> Result<PsfDatabase, DbError> {
-        let n = self.db.header.space.psf_count() as usize;
+        let n = self.db.header.stored_psf_count();
         if self.pushed() != n {
             return Err(DbError::Invalid(format!(
                 "{} PSFs pushed, the space has {n}",

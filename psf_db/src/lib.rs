@@ -21,6 +21,7 @@ pub mod error;
 pub mod format;
 pub mod grid;
 pub mod model;
+pub mod shard;
 pub mod space;
 
 pub use error::{DbError, SpaceError};
@@ -30,4 +31,5 @@ pub use format::{
 };
 pub use grid::{CellBox, GridSpec, NestedGrid};
 pub use model::{ParseModelError, PsfModel};
+pub use shard::{merge_shards, ShardRange};
 pub use space::{Dimension, ParamSpace, ParamSpaceSpec};

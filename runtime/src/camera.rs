@@ -189,9 +189,12 @@ impl Camera {
         let (n, s) = (self.f_stop?, self.focus_distance?);
         let f = self.focal_length_scene();
         let aperture_mm = self.focal_length_mm / n;
-        // CoC diameter on the sensor (mm) = A f |d - s| / (d (s - f)); radius in pixels, signed:
-        // r(d) = k (1 - s/d), k = A f / (s - f) / 2 * px/mm. Linear in 1/d: constant parallax.
-        let k = 0.5 * aperture_mm * f / (s - f) * self.pixels_per_mm();
+        // Blender's thin lens keeps the pinhole's field of view (image scale f / depth, no focus
+        // breathing), so the CoC diameter on the sensor (mm) is A f |d - s| / (d s), not the
+        // textbook A f |d - s| / (d (s - f)), which over-blurs Cycles renders by s / (s - f).
+        // Radius in pixels, signed: r(d) = k (1 - s/d), k = A f / s / 2 * px/mm. Linear in 1/d:
+        // constant parallax.
+        let k = 0.5 * aperture_mm * f / s * self.pixels_per_mm();
         Some(ThinLens {
             focus_distance: s,
             coc_scale_px: k,
@@ -240,9 +243,9 @@ mod tests {
         let cam = comets();
         let lens = cam.thin_lens().expect("lens");
         // d = 1.4 m: A = 50/1.6 = 31.25 mm, f = 0.05 m, s = 0.7 m.
-        // diameter = 31.25 * 0.05 * 0.7 / (1.4 * 0.65) mm = 1.2019... mm; radius px = /2 * 512/36.
+        // diameter = 31.25 * 0.05 * 0.7 / (1.4 * 0.7) mm = 1.1161 mm; radius px = /2 * 512/36.
         let d = 1.4;
-        let diameter_mm: f64 = 31.25 * 0.05 * (d - 0.7) / (d * (0.7 - 0.05));
+        let diameter_mm: f64 = 31.25 * 0.05 * (d - 0.7) / (d * 0.7);
         let expected = diameter_mm / 2.0 * 512.0 / 36.0;
         assert!((lens.coc_px(d) - expected).abs() < 1e-9);
         assert!(lens.signed_coc_px(d) > 0.0);

@@ -9,6 +9,7 @@
 pub mod camera;
 pub mod condition;
 pub mod dbcache;
+pub mod dbset;
 pub mod gbuffer;
 pub mod pipeline;
 pub mod rgba;

@@ -10,6 +10,7 @@ use clap::{Args, Parser, Subcommand, ValueEnum};
 
 use runtime::camera::Camera;
 use runtime::dbcache;
+use runtime::dbset::DbSet;
 use runtime::gbuffer::{ChannelOptions, GBuffer, Layout};
 use runtime::pipeline::{
     ClassifyOptions, CompositeOptions, Effects, Integrator, RotationSampling, SplatOptions,
@@ -237,33 +238,45 @@ fn run_synth(args: SynthArgs) -> Result<()> {
 
     let effects = Effects::of(&camera, &gbuffer);
     let t = Instant::now();
-    let mut db_source = None;
-    let db = match (effects.cheapest_model(), &args.db) {
-        (None, _) => None,
+    let mut db_sources = Vec::new();
+    let mut condition_reports = Vec::new();
+    let mut prepare = |db: psf_db::PsfDatabase| -> Result<psf_db::PsfDatabase> {
+        if args.no_condition {
+            return Ok(db);
+        }
+        let (db, report) = runtime::condition::condition(&db)?;
+        condition_reports.push(serde_json::json!({ "model": db.model().name(), "report": report }));
+        Ok(db)
+    };
+    let dbs = match (effects.cheapest_model(), &args.db) {
+        (None, _) => DbSet::none(),
         (Some(needed), Some(path)) => {
             let db = dbcache::explicit_database(path, needed)?;
-            db_source = Some(dbcache::DbSource {
-                path: path.clone(),
-                built: false,
-            });
-            Some(db)
+            db_sources.push(serde_json::json!({
+                "model": db.model().name(), "path": path, "built_now": false,
+            }));
+            DbSet::single(prepare(db)?)?
         }
         (Some(needed), None) => {
             let profile: precompute::Profile = args.db_profile.parse()?;
-            let cfg = dbcache::build_config(needed, profile, camera.aperture_blades);
-            let (db, source) = dbcache::cached_database(&cfg, &dbcache::cache_dir(), !args.quiet)?;
-            db_source = Some(source);
-            Some(db)
+            // Still pixels always use the thin-lens database; moving ones the lens-motion one.
+            let mut models = vec![psf_db::PsfModel::ThinLens];
+            if needed == psf_db::PsfModel::LensMotion {
+                models.push(psf_db::PsfModel::LensMotion);
+            }
+            let mut loaded = Vec::new();
+            for model in models {
+                let cfg = dbcache::build_config(model, profile, camera.aperture_blades);
+                let (db, source) =
+                    dbcache::cached_database(&cfg, &dbcache::cache_dir(), !args.quiet)?;
+                db_sources.push(serde_json::json!({
+                    "model": model.name(), "path": source.path, "built_now": source.built,
+                }));
+                loaded.push(prepare(db)?);
+            }
+            let main = (loaded.len() > 1).then(|| loaded.remove(1));
+            DbSet::new(loaded.pop(), main)?
         }
-    };
-    let mut condition_report = None;
-    let db = match db {
-        Some(db) if !args.no_condition => {
-            let (db, report) = runtime::condition::condition(&db)?;
-            condition_report = Some(report);
-            Some(db)
-        }
-        other => other,
     };
     let db_ms = t.elapsed().as_secs_f64() * 1e3;
 
@@ -289,7 +302,7 @@ fn run_synth(args: SynthArgs) -> Result<()> {
         ),
         Backend::Auto | Backend::Cpu => "cpu",
     };
-    let (image, stats) = synthesize(&gbuffer, &camera, db.as_ref(), &options)?;
+    let (image, stats) = synthesize(&gbuffer, &camera, &dbs, &options)?;
     let t = Instant::now();
     image.write_exr(&args.out)?;
     if let Some(p) = &args.preview {
@@ -324,12 +337,8 @@ fn run_synth(args: SynthArgs) -> Result<()> {
             "output": args.out,
             "backend": backend,
             "effects": { "defocus": stats.defocus, "motion": stats.motion },
-            "databases": db_source.iter().map(|s| serde_json::json!({
-                "model": stats.model,
-                "path": s.path,
-                "built_now": s.built,
-                "conditioning": condition_report,
-            })).collect::<Vec<_>>(),
+            "databases": db_sources,
+            "conditioning": condition_reports,
             "synthesis": stats,
             "times_ms": {
                 "read_input": read_ms,

@@ -3,10 +3,10 @@
 
 use std::time::Instant;
 
-use psf_db::PsfDatabase;
 use serde::Serialize;
 
 use crate::camera::Camera;
+use crate::dbset::DbSet;
 use crate::gbuffer::GBuffer;
 use crate::pipeline::{
     classify, composite, integrate, splat, ClassifyOptions, CompositeOptions, Effects,
@@ -49,8 +49,8 @@ pub struct SynthStats {
     pub defocus: bool,
     /// Motion blur simulated.
     pub motion: bool,
-    /// The model of the database used, `None` when nothing was simulated.
-    pub model: Option<&'static str>,
+    /// The models of the databases used (empty when nothing was simulated).
+    pub models: Vec<&'static str>,
     /// Image width, pixels.
     pub width: usize,
     /// Image height, pixels.
@@ -73,13 +73,13 @@ fn ms_since(t: Instant) -> f64 {
     t.elapsed().as_secs_f64() * 1e3
 }
 
-/// Synthesises depth of field and motion blur from a pinhole G-buffer. `db` must be given when
-/// the camera and input call for an effect ([`Effects::cheapest_model`]); it is ignored
-/// otherwise.
+/// Synthesises depth of field and motion blur from a pinhole G-buffer. `dbs` must hold a
+/// database of the model the camera and input call for ([`Effects::cheapest_model`]); it is
+/// not touched when they call for nothing.
 pub fn synthesize(
     gbuffer: &GBuffer,
     camera: &Camera,
-    db: Option<&PsfDatabase>,
+    dbs: &DbSet,
     options: &SynthOptions,
 ) -> Result<(RgbaImage, SynthStats), crate::pipeline::classify::ClassifyError> {
     let effects = Effects::of(camera, gbuffer);
@@ -113,9 +113,9 @@ pub fn synthesize(
         return Ok((image, stats));
     }
     let t = Instant::now();
-    let classified = classify(gbuffer, camera, db, &options.classify)?;
+    let classified = classify(gbuffer, camera, dbs, &options.classify)?;
     stats.times.classify_ms = ms_since(t);
-    stats.model = db.map(|d| d.model().name());
+    stats.models = dbs.models();
     stats.counts = classified.counts;
     stats.pad_px = classified.frame.pad;
     stats.layers_used = classified
@@ -125,7 +125,7 @@ pub fn synthesize(
         .count() as u32;
 
     let t = Instant::now();
-    let stack = splat(&classified, db, &options.splat);
+    let stack = splat(&classified, dbs.combined.as_ref(), &options.splat);
     stats.times.splat_ms = ms_since(t);
 
     let t = Instant::now();

@@ -7,6 +7,7 @@ use poisson::Plane;
 use precompute::{BuildConfig, BuildPlan, Profile};
 use psf_db::{PsfDatabase, PsfModel};
 use runtime::camera::Camera;
+use runtime::dbset::DbSet;
 use runtime::gbuffer::GBuffer;
 use runtime::pipeline::{
     classify, composite, integrate, splat, ClassifyOptions, CompositeOptions, Effects,
@@ -14,6 +15,11 @@ use runtime::pipeline::{
 };
 use runtime::synth::{synthesize, SynthOptions};
 use support::{camera, depth_for_coc, one_pixel, test_db};
+
+/// A set of one database.
+fn set(db: &PsfDatabase) -> DbSet {
+    DbSet::single(db.clone()).expect("set")
+}
 
 /// Single layer, hard, no edge fix: the plain splat-and-integrate path.
 fn plain_options(integrator: Integrator) -> SynthOptions {
@@ -37,10 +43,11 @@ fn splat_one(
     integrator: Integrator,
 ) -> (Plane, u32, runtime::pipeline::types::SplatRecord) {
     let opts = plain_options(integrator);
-    let c = classify(g, cam, Some(db), &opts.classify).expect("classify");
+    let dbs = set(db);
+    let c = classify(g, cam, &dbs, &opts.classify).expect("classify");
     assert_eq!(c.records.len(), 1, "one record for one pixel");
     let rec = c.records[0];
-    let stack = splat(&c, Some(db), &SplatOptions::default());
+    let stack = splat(&c, dbs.combined.as_ref(), &SplatOptions::default());
     let layers = integrate(&stack, integrator);
     (layers.planes[0].clone(), c.frame.pad, rec)
 }
@@ -189,8 +196,10 @@ fn one_pixel_reproduces_physical_lens_psfs() {
         let _ = plane_r;
         // Compare every colour channel (R, G, B planes of the layer).
         let opts = plain_options(Integrator::Exact);
-        let c = classify(&g, &cam, Some(db), &opts.classify).expect("classify");
-        let layers = integrate(&splat(&c, Some(db), &SplatOptions::default()), Integrator::Exact);
+        let dbs = set(db);
+        let c = classify(&g, &cam, &dbs, &opts.classify).expect("classify");
+        let stack = splat(&c, dbs.combined.as_ref(), &SplatOptions::default());
+        let layers = integrate(&stack, Integrator::Exact);
         let mut l1 = 0.0;
         for ch in 0..3 {
             l1 += l1_against_psf(
@@ -239,7 +248,7 @@ fn single_layer_conserves_energy() {
     let cam = camera(w as u32, h as u32, true, 0.0);
     let g = pattern(w, h, border, &cam, max_coc);
     let (out, stats) =
-        synthesize(&g, &cam, Some(db), &plain_options(Integrator::Exact)).expect("synth");
+        synthesize(&g, &cam, &set(db), &plain_options(Integrator::Exact)).expect("synth");
     assert!(stats.counts.sparse > 0, "{:?}", stats.counts);
     let input: f64 = g.color.iter().map(|c| f64::from(c[0] + c[1] + c[2])).sum();
     let output: f64 = out.pixels.iter().map(|c| f64::from(c[0] + c[1] + c[2])).sum();
@@ -255,9 +264,9 @@ fn pyramid_stays_close_to_the_exact_integrator() {
     let (w, h) = (2 * border + 40, 2 * border + 40);
     let cam = camera(w as u32, h as u32, true, 0.0);
     let g = pattern(w, h, border, &cam, max_coc);
-    let (exact, _) = synthesize(&g, &cam, Some(db), &plain_options(Integrator::Exact)).expect("e");
+    let (exact, _) = synthesize(&g, &cam, &set(db), &plain_options(Integrator::Exact)).expect("e");
     let (pyr, _) =
-        synthesize(&g, &cam, Some(db), &plain_options(Integrator::Pyramid)).expect("p");
+        synthesize(&g, &cam, &set(db), &plain_options(Integrator::Pyramid)).expect("p");
     let mut max = 0.0f32;
     let mut sum = 0.0f64;
     for (a, b) in exact.pixels.iter().zip(&pyr.pixels) {
@@ -289,10 +298,10 @@ fn still_pinhole_input_returns_unchanged() {
             assert!(Effects::of(&cam, &g).motion);
             continue;
         }
-        let (out, stats) = synthesize(&g, &cam, None, &SynthOptions::default()).expect("synth");
+        let (out, stats) = synthesize(&g, &cam, &DbSet::none(), &SynthOptions::default()).expect("synth");
         assert_eq!(out.pixels, color, "bit-identical");
         assert_eq!(stats.counts.copied, w * h);
-        assert!(stats.model.is_none());
+        assert!(stats.models.is_empty());
     }
 }
 
@@ -324,9 +333,9 @@ fn still_defocus_needs_only_the_thin_lens_model() {
         Some(PsfModel::ThinLens)
     );
     // And synthesis runs with the thin-lens database alone.
-    let (_, stats) = synthesize(&g, &cam, Some(test_db(PsfModel::ThinLens)), &SynthOptions::default())
+    let (_, stats) = synthesize(&g, &cam, &set(test_db(PsfModel::ThinLens)), &SynthOptions::default())
         .expect("synth");
-    assert_eq!(stats.model, Some("thin-lens"));
+    assert_eq!(stats.models, vec!["thin-lens"]);
 }
 
 #[test]
@@ -344,12 +353,13 @@ fn synthesis_is_bit_identical_across_runs_and_thread_counts() {
             })
             .collect(),
     );
+    let dbs = DbSet::new(Some(test_db(PsfModel::ThinLens).clone()), Some(db.clone())).expect("set");
     let run = |threads: usize| {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
             .build()
             .expect("pool");
-        pool.install(|| synthesize(&g, &cam, Some(db), &SynthOptions::default()))
+        pool.install(|| synthesize(&g, &cam, &set(db), &SynthOptions::default()))
             .expect("synth")
             .0
     };
@@ -373,7 +383,7 @@ fn compositing_a_single_opaque_layer_of_copies_is_the_identity() {
     let color: Vec<[f32; 4]> = (0..w * h).map(|i| [i as f32, 1.0, 2.0, 1.0]).collect();
     let g = GBuffer::from_planes(w, h, color.clone(), Some(vec![1.0; w * h]), None).expect("g");
     let cam = camera(w as u32, h as u32, false, 0.0);
-    let c = classify(&g, &cam, None, &ClassifyOptions::default()).expect("c");
+    let c = classify(&g, &cam, &DbSet::none(), &ClassifyOptions::default()).expect("c");
     let stack = splat(&c, None, &SplatOptions::default());
     let layers = integrate(&stack, Integrator::Pyramid);
     let out = composite(&layers, &CompositeOptions::default());

@@ -9,8 +9,9 @@ use exr::prelude::*;
 
 use crate::error::{Error, Result};
 
-/// Largest number of samples per channel a reader accepts (2^30: about 4 GiB of f32).
-pub const MAX_CHANNEL_SAMPLES: usize = 1 << 30;
+/// Largest number of samples per channel a reader accepts (2^28 = 16384 x 16384, 1 GiB of f32):
+/// a small compressed file cannot make the reader allocate without bound.
+pub const MAX_CHANNEL_SAMPLES: usize = 1 << 28;
 
 /// Channels read from a file: name to row-major samples (row 0 at the top).
 #[derive(Clone, Debug, Default, PartialEq)]

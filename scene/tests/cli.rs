@@ -14,7 +14,9 @@ fn renders_every_output_and_camera_json() {
     let dir = tempfile::tempdir().expect("temp dir");
     let p = |name: &str| dir.path().join(name);
     let output = binary()
-        .args(["render", "rotating", "--width", "20", "--quiet", "--seed", "4"])
+        .args([
+            "render", "rotating", "--width", "20", "--quiet", "--seed", "4",
+        ])
         .args(["--spp", "2", "--ref-spp", "4", "--aa", "2", "--png"])
         .arg("--gbuffer")
         .arg(p("g.exr"))

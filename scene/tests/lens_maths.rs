@@ -92,13 +92,14 @@ fn defocused_point_light_is_a_disk_of_the_thin_lens_coc() {
             },
         )
         .expect("render");
-        // CoC diameter on the sensor: A f |d - s| / (d (s - f)), A = f / N, all in metres.
+        // CoC diameter on the sensor (Blender's fixed field of view): A f |d - s| / (d s),
+        // A = f / N, all in metres.
         let (f, a) = (f_mm * 1e-3, f_mm * 1e-3 / n);
-        let diameter_mm = a * f * (depth - s).abs() / (depth * (s - f)) * 1e3;
+        let diameter_mm = a * f * (depth - s).abs() / (depth * s) * 1e3;
         let expected_radius = 0.5 * diameter_mm * f64::from(width) / sensor;
         // The point's own pinhole image (radius k r / d px, k = image distance) and the pixel
         // box add their second moments to the disk's r^2 / 2.
-        let k_px = f_mm * s / (s - f) * f64::from(width) / sensor;
+        let k_px = f_mm * f64::from(width) / sensor;
         let point_px = k_px * point_radius / depth;
         let (total, centroid, m) = moments(&reference);
         let radial = m[0] + m[2];
@@ -249,8 +250,8 @@ fn gbuffer_vector_pass_matches_analytic_motion_with_blender_signs() {
     );
     let scene = Scene::from_json(&text, "vector scene").expect("scene");
     let gbuffer = render_gbuffer(&scene, 1, &RenderOptions::default()).expect("gbuffer");
-    // Thin lens: image distance f s / (s - f), in pixels.
-    let scale_px = f_mm * s / (s - f_mm * 1e-3) * width as f64 / sensor;
+    // Image scale: the focal length, in pixels (the field of view does not change with focus).
+    let scale_px = f_mm * width as f64 / sensor;
     let (w, h) = (width as f64, height as f64);
     let mut checked = 0;
     for y in 0..height {
@@ -407,13 +408,20 @@ fn spinning_square_motion_varies_across_it_as_a_rotation() {
             // World rotation by +omega about +z (towards the camera) is clockwise on the
             // y-down image: (dx, dy) -> (dx cos + dy sin, -dx sin + dy cos).
             let rotate = |d: DVec2, a: f64| {
-                DVec2::new(d.x * a.cos() + d.y * a.sin(), -d.x * a.sin() + d.y * a.cos())
+                DVec2::new(
+                    d.x * a.cos() + d.y * a.sin(),
+                    -d.x * a.sin() + d.y * a.cos(),
+                )
             };
             let d = now - centre;
             let next = centre + rotate(d, omega);
             let previous = centre + rotate(d, -omega);
             let forward = gbuffer.forward_motion(x, y);
-            assert!((forward - (next - now)).length() < 1e-3, "{forward} vs {}", next - now);
+            assert!(
+                (forward - (next - now)).length() < 1e-3,
+                "{forward} vs {}",
+                next - now
+            );
             let v = gbuffer.vector[i];
             let backward = DVec2::new(f64::from(v[0]), -f64::from(v[1]));
             assert!((backward - (previous - now)).length() < 1e-3);
@@ -429,5 +437,59 @@ fn spinning_square_motion_varies_across_it_as_a_rotation() {
         .fold((f64::MAX, 0.0f64), |(a, b), &s| (a.min(s), b.max(s)));
     // From near zero at the centre to 2 sin(omega / 2) times the corner radius.
     let corner = 2.0 * (omega / 2.0).sin() * half_px * 2f64.sqrt();
-    assert!(min < 0.3 && max > 0.9 * corner && max <= corner + 1e-6, "{min} {max} {corner}");
+    assert!(
+        min < 0.3 && max > 0.9 * corner && max <= corner + 1e-6,
+        "{min} {max} {corner}"
+    );
+}
+
+#[test]
+fn bladed_aperture_gives_a_polygon_with_a_vertex_on_plus_u() {
+    // Six blades, vertex 0 on +u (image +x): the defocused point is a hexagon whose chord
+    // through the centre is 2r along x (vertex to vertex) and sqrt(3) r along y (edge to edge).
+    let (width, sensor, depth) = (48u32, 13.5, 1.0f64);
+    let text = format!(
+        r#"{{
+        "name": "hexagon",
+        "camera": {{"width": {width}, "height": {width}, "focal_length_mm": 50,
+                   "sensor_width_mm": {sensor}, "f_stop": 1.4, "focus_distance": 0.3,
+                   "aperture_blades": 6}},
+        "camera_pose": {{"position": [0, 0, 0], "look_at": [0, 0, -1]}},
+        "objects": [{{"shape": {{"type": "sphere", "center": [0, 0, -{depth}], "radius": 0.006}},
+                     "material": {{"albedo": [0, 0, 0], "emission": [1, 1, 1]}}}}]
+    }}"#
+    );
+    let scene = Scene::from_json(&text, "hexagon").expect("scene");
+    let r = scene.camera.spec.coc_radius_px(depth);
+    let image = render_reference(
+        &scene,
+        4096,
+        &RenderOptions {
+            seed: 2,
+            ..Default::default()
+        },
+    )
+    .expect("render");
+    let (total, centroid, _) = moments(&image);
+    assert!((centroid - DVec2::splat(24.0)).length() < 0.1);
+    // Plateau from the hexagon's area (3 sqrt(3) / 2) r^2; chords as row and column sums.
+    let plateau = total / (1.5 * 3f64.sqrt() * r * r);
+    let sum_row = |y: usize| (0..48).map(|x| f64::from(image.at(x, y)[0])).sum::<f64>();
+    let sum_col = |x: usize| (0..48).map(|y| f64::from(image.at(x, y)[0])).sum::<f64>();
+    // Rows/columns 23 and 24 straddle the centre (24.0): average them.
+    let chord_x = 0.5 * (sum_row(23) + sum_row(24)) / plateau;
+    let chord_y = 0.5 * (sum_col(23) + sum_col(24)) / plateau;
+    // Row strips centred 0.5 px off the axis: the chord through the vertex shrinks there to
+    // 2 (r - 0.5 / sqrt(3)); the edge-to-edge chord stays sqrt(3) r.
+    let expected_x = 2.0 * (r - 0.5 / 3f64.sqrt());
+    let expected_y = 3f64.sqrt() * r;
+    println!(
+        "hexagon r {r:.2} px: chord x {chord_x:.2} (expected {expected_x:.2}), chord y {chord_y:.2} (expected {expected_y:.2})"
+    );
+    let ratio = chord_x / chord_y;
+    // Rotated by 90 degrees (vertex on +v) the ratio would be about 0.9.
+    assert!(
+        (ratio - expected_x / expected_y).abs() < 0.03,
+        "chord ratio {ratio}: the polygon is not oriented with a vertex on +u"
+    );
 }

@@ -4,10 +4,9 @@
 
 use std::time::Instant;
 
-use psf_db::PsfDatabase;
-
 use super::{GpuContext, GpuError, GpuSynthOptions, GpuSynthesizer, StageTimes};
 use crate::camera::Camera;
+use crate::dbset::DbSet;
 use crate::gbuffer::GBuffer;
 use crate::pipeline::{classify, Effects, PathCounts};
 use crate::rgba::RgbaImage;
@@ -25,16 +24,17 @@ impl GpuSynthOptions {
 }
 
 /// Synthesises like [`crate::synth::synthesize`], with the stages after classification on the
-/// GPU. `gpu` must have been made for the same `db` (see [`GpuSynthesizer::for_database`]);
-/// reuse it across frames. `stats.times` holds classification (CPU) and the GPU stages; the
+/// GPU. `gpu` must have been made for `dbs.combined` (see [`GpuSynthesizer::for_database`];
+/// a different database is an error); reuse it across frames. `stats.times` holds classification (CPU) and the GPU stages; the
 /// GPU's own breakdown (upload, readback, whether timestamps were used) comes back too.
 pub fn synthesize_gpu(
     gpu: &mut GpuSynthesizer,
     gbuffer: &GBuffer,
     camera: &Camera,
-    db: Option<&PsfDatabase>,
+    dbs: &DbSet,
     options: &SynthOptions,
 ) -> Result<(RgbaImage, SynthStats, StageTimes), GpuError> {
+    gpu.check_database(dbs.combined.as_ref())?;
     let effects = Effects::of(camera, gbuffer);
     let mut stats = SynthStats {
         defocus: effects.defocus,
@@ -61,9 +61,9 @@ pub fn synthesize_gpu(
     }
     let t = Instant::now();
     let classified =
-        classify(gbuffer, camera, db, &options.classify).map_err(|e| GpuError::Input(e.to_string()))?;
+        classify(gbuffer, camera, dbs, &options.classify).map_err(|e| GpuError::Input(e.to_string()))?;
     stats.times.classify_ms = t.elapsed().as_secs_f64() * 1e3;
-    stats.model = db.map(|d| d.model().name());
+    stats.models = dbs.models();
     stats.counts = classified.counts;
     stats.pad_px = classified.frame.pad;
     stats.layers_used = classified.layers.iter().filter(|l| l.record_count > 0).count() as u32;
@@ -76,10 +76,11 @@ pub fn synthesize_gpu(
 }
 
 impl GpuSynthesizer {
-    /// A synthesizer for `db` (`None`: copies only), the usual entry point of the binary.
+    /// A synthesizer for `db` (`None`: copies only), the usual entry point of the binary
+    /// (pass `DbSet::combined`).
     pub fn for_database(
         ctx: &GpuContext,
-        db: Option<&PsfDatabase>,
+        db: Option<&psf_db::PsfDatabase>,
         options: GpuSynthOptions,
     ) -> Result<Self, GpuError> {
         match db {

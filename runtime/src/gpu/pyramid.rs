@@ -102,15 +102,14 @@ pub(crate) struct PyramidFrame {
 
 impl PyramidFrame {
     /// Buffers for `planes` planes of `width x height`; the output pass adds `scale` times the
-    /// integral into `layer_images` (planes laid out as `layer_set`).
+    /// integral into the layer images (a buffer and where its planes lie).
     pub(crate) fn new(
         ctx: &GpuContext,
         pipelines: &PyramidPipelines,
         width: usize,
         height: usize,
         planes: usize,
-        layer_images: &wgpu::Buffer,
-        layer_set: PlaneSet,
+        (layer_images, layer_set): (&wgpu::Buffer, PlaneSet),
         scale: f32,
     ) -> Result<Self, GpuError> {
         let sizes = level_sizes(width, height);
@@ -217,7 +216,14 @@ pub struct PyramidLevels {
 pub struct GpuPyramid {
     ctx: GpuContext,
     pipelines: PyramidPipelines,
-    frame: Option<(PyramidFrame, wgpu::Buffer, PlaneSet)>,
+    frame: Option<StandaloneFrame>,
+}
+
+/// A pyramid frame with its own output planes.
+struct StandaloneFrame {
+    frame: PyramidFrame,
+    images: wgpu::Buffer,
+    set: PlaneSet,
 }
 
 impl GpuPyramid {
@@ -238,14 +244,14 @@ impl GpuPyramid {
         if laplacians.iter().any(|p| (p.width, p.height) != (w, h) || p.data.len() != w * h) {
             return Err(GpuError::Input("planes of different sizes".into()));
         }
-        let reuse = matches!(&self.frame, Some((f, _, _)) if (f.width, f.height, f.planes) == (w, h, n));
+        let reuse = matches!(&self.frame, Some(f) if (f.frame.width, f.frame.height, f.frame.planes) == (w, h, n));
         if !reuse {
             let set = PlaneSet::packed(w, h, 0);
             let images = storage_zeroed(&self.ctx, "pyramid output", 4 * (w * h * n) as u64)?;
-            let frame = PyramidFrame::new(&self.ctx, &self.pipelines, w, h, n, &images, set, PYRAMID_SCALE)?;
-            self.frame = Some((frame, images, set));
+            let frame = PyramidFrame::new(&self.ctx, &self.pipelines, w, h, n, (&images, set), PYRAMID_SCALE)?;
+            self.frame = Some(StandaloneFrame { frame, images, set });
         }
-        let Some((frame, images, set)) = &self.frame else {
+        let Some(StandaloneFrame { frame, images, set }) = &self.frame else {
             return Err(GpuError::Input("no frame".into()));
         };
         let refs: Vec<&Plane> = laplacians.iter().collect();
@@ -266,7 +272,7 @@ impl GpuPyramid {
 
     /// Every level of the last [`GpuPyramid::integrate`] call.
     pub fn levels(&self) -> Result<PyramidLevels, GpuError> {
-        let Some((frame, _, _)) = &self.frame else {
+        let Some(StandaloneFrame { frame, .. }) = &self.frame else {
             return Ok(PyramidLevels { analysis: Vec::new(), synthesis: Vec::new() });
         };
         let analysis = frame

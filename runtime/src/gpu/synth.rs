@@ -114,6 +114,8 @@ struct DbBuffers {
     dense_data: wgpu::Buffer,
     psf_count: u32,
     channels: u32,
+    /// (PSFs, spreadlets, dense values): to tell a different database apart.
+    fingerprint: (usize, usize, usize),
 }
 
 impl DbBuffers {
@@ -128,9 +130,10 @@ impl DbBuffers {
                 dense_data: empty("dense data"),
                 psf_count: 0,
                 channels: 1,
+                fingerprint: (0, 0, 0),
             });
         };
-        let limit = ctx.limits().max_storage_buffer_binding_size as u64;
+        let limit = ctx.limits().max_storage_buffer_binding_size;
         let check = |what: &'static str, bytes: usize| {
             if bytes as u64 > limit {
                 Err(GpuError::TooLarge { what, bytes: bytes as u64, limit })
@@ -162,6 +165,7 @@ impl DbBuffers {
             dense_data: storage_init(ctx, "dense data", bytemuck::cast_slice(db.dense_data())),
             psf_count: db.psf_count() as u32,
             channels: db.channels() as u32,
+            fingerprint: fingerprint(Some(db)),
         })
     }
 }
@@ -293,6 +297,21 @@ impl GpuSynthesizer {
         })
     }
 
+    /// An error unless this synthesizer was made for `db` (same PSF, spreadlet and dense
+    /// value counts).
+    pub fn check_database(&self, db: Option<&PsfDatabase>) -> Result<(), GpuError> {
+        if fingerprint(db) != self.db.fingerprint {
+            return Err(GpuError::Input(format!(
+                "the GPU synthesizer holds a database of {} PSFs / {} spreadlets, not {} / {}",
+                self.db.fingerprint.0,
+                self.db.fingerprint.1,
+                fingerprint(db).0,
+                fingerprint(db).1
+            )));
+        }
+        Ok(())
+    }
+
     /// Whether splats use native float atomics (else the compare-exchange loop).
     pub fn uses_float_atomics(&self) -> bool {
         self.float_atomics
@@ -399,7 +418,7 @@ impl GpuSynthesizer {
             let plane_bytes = 4 * (pw * ph) as u64;
             let layer_set = PlaneSet::packed(pw, ph, 0);
             let layer_images = storage_zeroed(ctx, "layer images", plane_bytes * planes as u64)?;
-            let pyramid = PyramidFrame::new(ctx, &self.pyramid, pw, ph, planes, &layer_images, layer_set, PYRAMID_SCALE)?;
+            let pyramid = PyramidFrame::new(ctx, &self.pyramid, pw, ph, planes, (&layer_images, layer_set), PYRAMID_SCALE)?;
             let (w, h) = (frame.width as usize, frame.height as usize);
             let output_bytes = 16 * (w * h) as u64;
             let output = storage_zeroed(ctx, "output image", output_bytes)?;
@@ -652,6 +671,10 @@ impl GpuSynthesizer {
         times.composite_ms = span(2);
         Ok(())
     }
+}
+
+fn fingerprint(db: Option<&PsfDatabase>) -> (usize, usize, usize) {
+    db.map_or((0, 0, 0), |d| (d.psf_count(), d.spreadlet_count(), d.dense_data().len()))
 }
 
 fn ms(t: Instant) -> f64 {

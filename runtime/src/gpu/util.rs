@@ -26,7 +26,7 @@ pub(crate) fn storage_zeroed(
     bytes: u64,
 ) -> Result<wgpu::Buffer, GpuError> {
     let bytes = bytes.max(16).next_multiple_of(4);
-    let limit = (ctx.limits().max_storage_buffer_binding_size as u64).min(ctx.limits().max_buffer_size);
+    let limit = ctx.limits().max_storage_buffer_binding_size.min(ctx.limits().max_buffer_size);
     if bytes > limit {
         return Err(GpuError::TooLarge { what, bytes, limit });
     }

@@ -19,8 +19,10 @@
 
 use psf_db::{PsfDatabase, PsfModel};
 
+
 use super::types::{FrameParams, SplatPath, SplatRecord};
 use crate::camera::Camera;
+use crate::dbset::DbSet;
 use crate::gbuffer::GBuffer;
 
 /// Errors of classification.
@@ -206,7 +208,7 @@ pub fn classify_sizes(gbuffer: &GBuffer, camera: &Camera) -> Result<(), Classify
 pub fn classify(
     gbuffer: &GBuffer,
     camera: &Camera,
-    db: Option<&PsfDatabase>,
+    dbs: &DbSet,
     options: &ClassifyOptions,
 ) -> Result<Classified, ClassifyError> {
     let (w, h) = (gbuffer.width, gbuffer.height);
@@ -230,13 +232,19 @@ pub fn classify(
             present: present(),
         });
     }
-    let model = match (db, effects.cheapest_model()) {
-        (_, None) => None,
-        (None, Some(m)) => return Err(ClassifyError::NoDatabase(m.name())),
-        (Some(db), Some(needed)) => {
-            let found = db.model();
+    // The model that drives the lookups: lens-motion or physical-lens from `main`, else
+    // thin-lens. Still pixels use the thin-lens database whenever the set has one.
+    let thin = dbs.thin_lens.as_ref();
+    let main = dbs.main.as_ref();
+    let model = match effects.cheapest_model() {
+        None => None,
+        Some(needed) => {
+            let found = main.map(|m| m.model()).or(thin.map(|t| t.model()));
+            let Some(found) = found else {
+                return Err(ClassifyError::NoDatabase(needed.name()));
+            };
             let ok = match needed {
-                PsfModel::ThinLens => found != PsfModel::PhysicalLens || !effects.motion,
+                PsfModel::ThinLens => true,
                 PsfModel::LensMotion => found == PsfModel::LensMotion,
                 PsfModel::PhysicalLens => found == PsfModel::PhysicalLens,
             };
@@ -249,6 +257,7 @@ pub fn classify(
             Some(found)
         }
     };
+    let combined = dbs.combined.as_ref();
     let lens = camera.thin_lens();
     let shutter = camera.shutter_frames as f32;
     let pixels_per_mm = camera.pixels_per_mm() as f32;
@@ -337,7 +346,7 @@ pub fn classify(
         }
     };
 
-    let pad = db.map_or(0, |d| d.max_extent_px()) + options.pad_margin;
+    let pad = combined.map_or(0, |d| d.max_extent_px()) + options.pad_margin;
     let padded_width = w as u32 + 2 * pad;
     let padded_height = h as u32 + 2 * pad;
 
@@ -354,8 +363,9 @@ pub fn classify(
         let m = frag.motion;
         let motion_len = (m[0] * m[0] + m[1] * m[1]).sqrt();
         let (mut rot_cos, mut rot_sin) = (1.0f32, 0.0f32);
-        let (path, psf_index, clamped) = match (model, db) {
-            (Some(PsfModel::PhysicalLens), Some(db)) => {
+        let offset = dbs.main_offset;
+        let (path, psf_index, clamped) = match (model, main, combined) {
+            (Some(PsfModel::PhysicalLens), Some(db), Some(all)) => {
                 let dx = x as f32 + 0.5 - centre[0];
                 let dy = y as f32 + 0.5 - centre[1];
                 let r = (dx * dx + dy * dy).sqrt();
@@ -364,23 +374,26 @@ pub fn classify(
                     rot_sin = dy / r;
                 }
                 let (idx, cl) = db.lookup([frag.depth, r / pixels_per_mm]);
-                (path_of(db, idx), idx, cl)
+                (path_of(all, idx + offset), idx + offset, cl)
             }
-            (Some(_), Some(db))
+            (Some(_), _, Some(all))
                 if coc >= options.copy_threshold_px || motion_len >= options.copy_threshold_px =>
             {
-                let s = match db.model() {
-                    PsfModel::LensMotion => {
-                        if motion_len > 0.0 {
+                let still = motion_len < options.copy_threshold_px;
+                let (idx, cl) = match (thin, main) {
+                    (Some(t), _) if still => t.lookup([coc, 0.0]),
+                    (_, Some(db_m)) => {
+                        if db_m.model() == PsfModel::LensMotion && motion_len > 0.0 {
                             rot_cos = m[0] / motion_len;
                             rot_sin = m[1] / motion_len;
                         }
-                        [coc, motion_len]
+                        let (i, cl) = db_m.lookup([coc, motion_len]);
+                        (i + offset, cl)
                     }
-                    _ => [coc, 0.0],
+                    (Some(t), None) => t.lookup([coc, 0.0]),
+                    (None, None) => (0, false),
                 };
-                let (idx, cl) = db.lookup(s);
-                (path_of(db, idx), idx, cl)
+                (path_of(all, idx), idx, cl)
             }
             _ => (SplatPath::Copy, 0, false),
         };
@@ -460,7 +473,7 @@ pub fn classify(
         padded_width,
         padded_height,
         record_count: records.len() as u32,
-        db_channels: db.map_or(1, |d| d.channels() as u32),
+        db_channels: combined.map_or(1, |d| d.channels() as u32),
     };
     Ok(Classified {
         frame,
@@ -572,7 +585,7 @@ mod tests {
             None,
         )
         .expect("g");
-        let c = classify(&g, &camera(3, 2, false, 0.0), None, &ClassifyOptions::default())
+        let c = classify(&g, &camera(3, 2, false, 0.0), &DbSet::none(), &ClassifyOptions::default())
             .expect("classify");
         assert_eq!(c.counts.copied, 6);
         assert_eq!(c.records.len(), 6);
@@ -584,14 +597,14 @@ mod tests {
     fn defocus_needs_a_thin_lens_database_and_rejects_motion() {
         let g = GBuffer::from_planes(2, 1, vec![[1.0; 4]; 2], Some(vec![0.5, 3.0]), None)
             .expect("g");
-        let err = classify(&g, &camera(2, 1, true, 0.0), None, &ClassifyOptions::default())
+        let err = classify(&g, &camera(2, 1, true, 0.0), &DbSet::none(), &ClassifyOptions::default())
             .expect_err("no db");
         assert!(err.to_string().contains("thin-lens"));
         assert_eq!(
             Effects::of(&camera(2, 1, true, 0.0), &g).cheapest_model(),
             Some(PsfModel::ThinLens)
         );
-        let err = classify(&g, &camera(3, 1, true, 0.0), None, &ClassifyOptions::default())
+        let err = classify(&g, &camera(3, 1, true, 0.0), &DbSet::none(), &ClassifyOptions::default())
             .expect_err("size");
         assert!(err.to_string().contains("3x1"));
     }
@@ -618,7 +631,8 @@ mod tests {
             edge_split: false,
             ..ClassifyOptions::default()
         };
-        let c = classify(&g, &camera(n as u32, 1, true, 0.0), Some(&db), &opts).expect("c");
+        let dbs = DbSet::single(db).expect("set");
+        let c = classify(&g, &camera(n as u32, 1, true, 0.0), &dbs, &opts).expect("c");
         let mut sums = vec![0.0f32; n];
         for r in &c.records {
             sums[(r.center_x as u32 - c.frame.pad) as usize] += r.weight;
