@@ -55,7 +55,8 @@ struct PassParams {
     planes: u32,
     scale: f32,
     border: u32,
-    // Pass-specific flags (composite: bit 0 = renormalise coverage).
+    // Pass-specific flags (composite: bit 0 = renormalise coverage, bit 1 = first chunk of
+    // layers, bit 2 = last chunk).
     flags: u32,
 }
 
@@ -78,7 +79,7 @@ fn unpack_i16_hi(w: u32) -> i32 {
     return bitcast<i32>(w) >> 16u;
 }
 
-// Where the splat stage writes (twin of runtime::gpu::layout::SplatTargets, 48 bytes).
+// Where the splat stage writes (twin of runtime::gpu::layout::SplatTargets, 64 bytes).
 struct SplatTargets {
     // Laplacian planes (layer * 4 + channel): analysis level 0 of the pyramid, whose pixel
     // (border, border) is the padded layer's pixel (0, 0).
@@ -93,4 +94,10 @@ struct SplatTargets {
     psf_count: u32,
     // Spreadlet values (and dense pixels) per position: 1 or 3.
     channels: u32,
+    // The layers this pass draws, [layer_base, layer_base + layer_count) (frames too large for
+    // one binding go in chunks of layers); plane (layer - layer_base) * 4 + channel.
+    layer_base: u32,
+    layer_count: u32,
+    _pad0: u32,
+    _pad1: u32,
 }

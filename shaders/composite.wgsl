@@ -3,10 +3,18 @@
 // layer whose coverage exceeds one is normalised by it, and (flag bit 0) the result's coverage is
 // raised to the summed coverage, capped at one (Lee et al. 2008). Negative values clamp to 0.
 // params.src: the layer images (padded layers); params.planes: layers; params.border: pad.
+// Frames too large for one binding come in chunks of layers, back to front: the running colour
+// and coverage stay in `output` and `coverage` between chunks (flags: bit 1 = first chunk, bit
+// 2 = last chunk, where the renormalisation and the clamp happen).
 
 @group(0) @binding(0) var<uniform> params: PassParams;
 @group(0) @binding(1) var<storage, read> layer_images: array<f32>;
 @group(0) @binding(2) var<storage, read_write> output: array<vec4<f32>>;
+@group(0) @binding(3) var<storage, read_write> coverage: array<f32>;
+
+const RENORMALIZE: u32 = 1u;
+const FIRST_CHUNK: u32 = 2u;
+const LAST_CHUNK: u32 = 4u;
 
 @compute @workgroup_size(16, 16, 1)
 fn composite(@builtin(global_invocation_id) id: vec3<u32>) {
@@ -17,8 +25,13 @@ fn composite(@builtin(global_invocation_id) id: vec3<u32>) {
     let s = params.src;
     let x = id.x + params.border;
     let y = id.y + params.border;
+    let o = id.y * w + id.x;
     var acc = vec4<f32>(0.0);
     var total = 0.0;
+    if (params.flags & FIRST_CHUNK) == 0u {
+        acc = output[o];
+        total = coverage[o];
+    }
     for (var l = 0u; l < params.planes; l++) {
         var c = vec4<f32>(
             layer_images[plane_index(s, l * 4u, x, y)],
@@ -32,12 +45,17 @@ fn composite(@builtin(global_invocation_id) id: vec3<u32>) {
         total += c.w;
         acc = c + (1.0 - c.w) * acc;
     }
-    if (params.flags & 1u) != 0u {
+    if (params.flags & LAST_CHUNK) == 0u {
+        output[o] = acc;
+        coverage[o] = total;
+        return;
+    }
+    if (params.flags & RENORMALIZE) != 0u {
         let target_alpha = min(total, 1.0);
         if acc.w > 1e-6 && target_alpha > acc.w {
             acc = acc * (target_alpha / acc.w);
             acc.w = target_alpha;
         }
     }
-    output[id.y * w + id.x] = max(acc, vec4<f32>(0.0));
+    output[o] = max(acc, vec4<f32>(0.0));
 }

@@ -130,10 +130,13 @@ fn splat_records(
     if i >= frame.record_count {
         return;
     }
-    let r = records[i];
-    if r.layer >= frame.layers {
+    var r = records[i];
+    if r.layer >= frame.layers || r.layer < targets.layer_base
+        || r.layer - targets.layer_base >= targets.layer_count {
         return;
     }
+    // From here on, the layer within this chunk.
+    r.layer -= targets.layer_base;
     if r.path == PATH_COPY {
         if lane == 0u {
             add_rgba(false, r.layer, r.center_x, r.center_y, r.color);

@@ -126,7 +126,10 @@ mod tests {
                 }
             }
             // Symmetric shapes (up to the pentagon's tilt): each quadrant near a quarter.
-            assert!(quadrants.iter().all(|&q| (800..1250).contains(&q)), "{quadrants:?}");
+            assert!(
+                quadrants.iter().all(|&q| (800..1250).contains(&q)),
+                "{quadrants:?}"
+            );
         }
         assert!((ApertureShape::from_blades(4, 0.0).area() - 2.0).abs() < 1e-12);
     }

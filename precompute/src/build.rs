@@ -125,7 +125,10 @@ impl BuildPlan {
     }
 
     /// Traces PSF `index` (deterministic for the seed).
-    pub fn trace(&self, index: u32) -> Result<(PsfImage, crate::trace::TraceStats), PrecomputeError> {
+    pub fn trace(
+        &self,
+        index: u32,
+    ) -> Result<(PsfImage, crate::trace::TraceStats), PrecomputeError> {
         let params = self.param_box(index)?;
         let mut rng = psf_rng(self.config.seed, index, 0);
         trace_psf(self.tracer.as_ref(), &params, self.rays, &mut rng, index)
@@ -135,11 +138,6 @@ impl BuildPlan {
     pub fn sparsify_options(&self) -> SparsifyOptions {
         SparsifyOptions {
             budget: f64::from(self.config.spreadlet_budget),
-            dart_spacing_px: std::env::var("PRECOMPUTE_DART_SPACING")
-                .ok()
-                .and_then(|v| v.parse().ok())
-                .unwrap_or(crate::sparsify::darts::DART_SPACING_PX),
-            // (PRECOMPUTE_DART_SPACING: an experiment knob, not part of the interface.)
             procedure: self.config.procedure,
             ..SparsifyOptions::default()
         }

@@ -35,8 +35,8 @@ impl Profile {
 
     /// The profile's numbers for `model`.
     pub fn spec(self, model: PsfModel) -> ProfileSpec {
-        use PsfModel::*;
         use Profile::*;
+        use PsfModel::*;
         let (psf_count, ranges): (u32, Vec<[f64; 2]>) = match (self, model) {
             (Test, ThinLens) => (6, vec![[0.0, 12.0]]),
             (Test, LensMotion) => (10, vec![[0.0, 12.0], [0.0, 24.0]]),
@@ -171,17 +171,28 @@ impl LensOptions {
     pub fn validate(&self) -> Result<(), PrecomputeError> {
         let bad = |m: String| Err(PrecomputeError::InvalidLens(m));
         if !(self.scene_unit_mm.is_finite() && self.scene_unit_mm > 0.0) {
-            return bad(format!("scene_unit_mm must be > 0, got {}", self.scene_unit_mm));
+            return bad(format!(
+                "scene_unit_mm must be > 0, got {}",
+                self.scene_unit_mm
+            ));
         }
         if !(self.sensor_width_mm.is_finite() && self.sensor_width_mm > 0.0) {
-            return bad(format!("sensor width must be > 0 mm, got {}", self.sensor_width_mm));
+            return bad(format!(
+                "sensor width must be > 0 mm, got {}",
+                self.sensor_width_mm
+            ));
         }
         let [near, far] = self.depth_range;
         if !(near.is_finite() && far.is_finite() && near > 0.0 && near < far) {
-            return bad(format!("depth range must satisfy 0 < near < far, got {near}..{far}"));
+            return bad(format!(
+                "depth range must satisfy 0 < near < far, got {near}..{far}"
+            ));
         }
         if !(self.focus_distance.is_finite() && self.focus_distance > 0.0) {
-            return bad(format!("focus distance must be > 0, got {}", self.focus_distance));
+            return bad(format!(
+                "focus distance must be > 0, got {}",
+                self.focus_distance
+            ));
         }
         if !(self.max_eccentricity_mm.is_finite() && self.max_eccentricity_mm > 0.0) {
             return bad(format!(
@@ -297,7 +308,10 @@ impl BuildConfig {
             return bad("rays per PSF must be > 0".into());
         }
         if self.blades == 1 || self.blades == 2 || self.blades > 64 {
-            return bad(format!("blades must be 0 (circle) or 3..=64, got {}", self.blades));
+            return bad(format!(
+                "blades must be 0 (circle) or 3..=64, got {}",
+                self.blades
+            ));
         }
         if !self.blade_rotation_rad.is_finite() {
             return bad("blade rotation must be finite".into());
@@ -308,7 +322,10 @@ impl BuildConfig {
             }
         }
         if !(self.dense_ratio.is_finite() && self.dense_ratio >= 0.0) {
-            return bad(format!("dense ratio must be >= 0, got {}", self.dense_ratio));
+            return bad(format!(
+                "dense ratio must be >= 0, got {}",
+                self.dense_ratio
+            ));
         }
         if let Some(r) = &self.ranges {
             if r.len() != self.model.dims() {

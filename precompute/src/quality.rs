@@ -54,7 +54,7 @@ pub fn similarity(recon: &[Vec<f32>], psf: &[Vec<f32>], width: usize, height: us
         .iter()
         .flat_map(|p| p.iter().copied())
         .fold(0.0f32, f32::max);
-    if !(max > 0.0) {
+    if max.is_nan() || max <= 0.0 {
         return 1.0;
     }
     let scale = 1.0 / max;

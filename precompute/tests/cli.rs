@@ -12,13 +12,25 @@ fn builds_a_test_database_and_a_report() {
     let out = dir.path().join("tl.sprdlt");
     let report = dir.path().join("tl.json");
     let status = precompute()
-        .args(["--model", "thin-lens", "--profile", "test", "--blades", "6", "--out"])
+        .args([
+            "--model",
+            "thin-lens",
+            "--profile",
+            "test",
+            "--blades",
+            "6",
+            "--out",
+        ])
         .arg(&out)
         .arg("--report")
         .arg(&report)
         .output()
         .unwrap();
-    assert!(status.status.success(), "{}", String::from_utf8_lossy(&status.stderr));
+    assert!(
+        status.status.success(),
+        "{}",
+        String::from_utf8_lossy(&status.stderr)
+    );
     let db = psf_db::PsfDatabase::read(&out).unwrap();
     assert_eq!(db.header().aperture.blades, 6);
     let json: serde_json::Value =
@@ -35,14 +47,47 @@ fn bad_input_is_a_clear_error_and_writes_nothing() {
     for args in [
         vec!["--model", "pinhole", "--profile", "test"],
         vec!["--model", "thin-lens", "--profile", "huge"],
-        vec!["--model", "thin-lens", "--profile", "test", "--spreadlet-budget", "-1"],
+        vec![
+            "--model",
+            "thin-lens",
+            "--profile",
+            "test",
+            "--spreadlet-budget",
+            "-1",
+        ],
         vec!["--model", "thin-lens", "--profile", "test", "--blades", "2"],
         vec!["--model", "thin-lens", "--profile", "test", "--rays", "0"],
-        vec!["--model", "thin-lens", "--profile", "test", "--stop-diameter", "3"],
-        vec!["--model", "physical-lens", "--profile", "test", "--focus-distance", "0.01"],
-        vec!["--model", "physical-lens", "--profile", "test", "--lens-radius-back", "40"],
+        vec![
+            "--model",
+            "thin-lens",
+            "--profile",
+            "test",
+            "--stop-diameter",
+            "3",
+        ],
+        vec![
+            "--model",
+            "physical-lens",
+            "--profile",
+            "test",
+            "--focus-distance",
+            "0.01",
+        ],
+        vec![
+            "--model",
+            "physical-lens",
+            "--profile",
+            "test",
+            "--lens-radius-back",
+            "40",
+        ],
     ] {
-        let o = precompute().args(&args).arg("--out").arg(&out).output().unwrap();
+        let o = precompute()
+            .args(&args)
+            .arg("--out")
+            .arg(&out)
+            .output()
+            .unwrap();
         assert!(!o.status.success(), "{args:?} succeeded");
         let err = String::from_utf8_lossy(&o.stderr);
         assert!(!err.contains("panicked"), "{args:?}: {err}");

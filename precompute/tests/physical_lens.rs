@@ -5,7 +5,7 @@
 use precompute::prefilter::ParamBox;
 use precompute::sampler::psf_rng;
 use precompute::trace::{trace_psf, RayCount};
-use precompute::{BuildConfig, BuildPlan, PsfImage, Profile};
+use precompute::{BuildConfig, BuildPlan, Profile, PsfImage};
 use psf_db::PsfModel;
 
 fn trace(plan: &BuildPlan, depth: f64, ecc: f64) -> (PsfImage, f64) {
@@ -72,7 +72,10 @@ fn chromatic_aberration_red_and_blue_differ() {
     let (cr, cb) = (off.centroid(0), off.centroid(2));
     println!("at 16 mm: centroid R {cr:?}, B {cb:?} px");
     assert!((cr[0] - cb[0]).abs() > 0.5, "R {cr:?} B {cb:?}");
-    assert!((cr[1] - cb[1]).abs() < 0.2, "no tangential shift expected: R {cr:?} B {cb:?}");
+    assert!(
+        (cr[1] - cb[1]).abs() < 0.2,
+        "no tangential shift expected: R {cr:?} B {cb:?}"
+    );
 }
 
 #[test]
@@ -114,10 +117,16 @@ fn cat_eye_vignetting_off_axis() {
         width(&free, 0),
         width(&free, 1)
     );
-    assert!((sc[0] / sc[1] - 1.0).abs() < 0.03, "on axis the blur is round");
+    assert!(
+        (sc[0] / sc[1] - 1.0).abs() < 0.03,
+        "on axis the blur is round"
+    );
     assert!(blocked_edge > blocked_centre + 0.1);
     assert!(blocked_edge > blocked_free + 0.1);
-    assert!(width(&edge, 0) < 0.9 * width(&free, 0), "the rim did not clip radially");
+    assert!(
+        width(&edge, 0) < 0.9 * width(&free, 0),
+        "the rim did not clip radially"
+    );
     assert!(se[0] < 0.9 * sf[0], "{se:?} vs {sf:?}");
     assert!((width(&edge, 1) / width(&free, 1) - 1.0).abs() < 0.25);
 }

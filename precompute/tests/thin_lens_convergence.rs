@@ -86,10 +86,14 @@ fn bladed_aperture_is_a_polygon() {
     let (img, _) = trace_psf(&tracer, &params, RayCount::Fixed(1_000_000), &mut rng, 0).unwrap();
     let area = img.support() as f64;
     let expected = shape.area() * r * r;
-    assert!((area - expected).abs() < 0.08 * expected, "{area} vs {expected}");
+    assert!(
+        (area - expected).abs() < 0.08 * expected,
+        "{area} vs {expected}"
+    );
     // Vertex at angle 0 (+x) reaches r; the edge normal at 30 degrees stops at the apothem.
     let at = |dx: i64, dy: i64| {
-        img.planes[0][(img.centre[1] as i64 + dy) as usize * img.width + (img.centre[0] as i64 + dx) as usize]
+        img.planes[0][(img.centre[1] as i64 + dy) as usize * img.width
+            + (img.centre[0] as i64 + dx) as usize]
     };
     assert!(at(11, 0) > 0.0);
     let apothem = r * (std::f64::consts::PI / 6.0).cos();

@@ -101,7 +101,10 @@ pub enum BenchError {
 pub fn synthetic_frame(db: &PsfDatabase, size: u32, layers: u32) -> Classified {
     let layers = layers.max(1);
     let dims = db.space().dims();
-    let range = |i: usize| dims.get(i).map_or((0.0, 0.0), |d| (d.min as f32, d.max as f32));
+    let range = |i: usize| {
+        dims.get(i)
+            .map_or((0.0, 0.0), |d| (d.min as f32, d.max as f32))
+    };
     let (s0_min, s0_max) = range(0);
     let (s1_min, s1_max) = range(1);
     let pad = db.max_extent_px() + 2;
@@ -127,7 +130,11 @@ pub fn synthetic_frame(db: &PsfDatabase, size: u32, layers: u32) -> Classified {
             };
             let angle = 6.0 * (u - 0.5) * (v - 0.5) + (3.0 * u).sin();
             let layer = ((depth * layers as f32) as u32).min(layers - 1);
-            let checker = if (x / 16 + y / 16) % 2 == 0 { 1.0 } else { 0.25 };
+            let checker = if (x / 16 + y / 16) % 2 == 0 {
+                1.0
+            } else {
+                0.25
+            };
             per_layer[layer as usize].push(SplatRecord {
                 center_x: (x as u32 + pad) as i32,
                 center_y: (y as u32 + pad) as i32,
@@ -218,7 +225,14 @@ fn time_cpu(db: &PsfDatabase, frame: &Classified, config: &BenchConfig) -> Vec<[
         .collect()
 }
 
-fn row(backend: &str, device: String, size: u32, records: usize, runs: &[[f64; 4]], timing: &str) -> BenchRow {
+fn row(
+    backend: &str,
+    device: String,
+    size: u32,
+    records: usize,
+    runs: &[[f64; 4]],
+    timing: &str,
+) -> BenchRow {
     let col = |k: usize| median(runs.iter().map(|r| r[k]).collect());
     BenchRow {
         backend: backend.into(),
@@ -239,7 +253,9 @@ fn row(backend: &str, device: String, size: u32, records: usize, runs: &[[f64; 4
 /// counted.
 pub fn run_bench(db: &PsfDatabase, config: &BenchConfig) -> Result<BenchReport, BenchError> {
     if config.sizes.is_empty() || config.runs == 0 || !(config.cpu || config.gpu) {
-        return Err(BenchError::Config("need at least one size, one run and one backend".into()));
+        return Err(BenchError::Config(
+            "need at least one size, one run and one backend".into(),
+        ));
     }
     if config.sizes.iter().any(|&s| s == 0 || s > 16384) {
         return Err(BenchError::Config("sizes must be in 1..=16384 px".into()));
@@ -257,7 +273,11 @@ pub fn run_bench(db: &PsfDatabase, config: &BenchConfig) -> Result<BenchReport, 
     #[cfg(feature = "gpu")]
     let mut gpu = if config.gpu {
         match crate::gpu::GpuContext::new()? {
-            Some(ctx) => Some(crate::gpu::GpuSynthesizer::new(&ctx, db, Default::default())?),
+            Some(ctx) => Some(crate::gpu::GpuSynthesizer::new(
+                &ctx,
+                db,
+                Default::default(),
+            )?),
             None => {
                 report.notes.push("no GPU adapter: GPU rows skipped".into());
                 None
@@ -268,7 +288,9 @@ pub fn run_bench(db: &PsfDatabase, config: &BenchConfig) -> Result<BenchReport, 
     };
     #[cfg(not(feature = "gpu"))]
     if config.gpu {
-        report.notes.push("built without the `gpu` feature: GPU rows skipped".into());
+        report
+            .notes
+            .push("built without the `gpu` feature: GPU rows skipped".into());
     }
     for &size in &config.sizes {
         let frame = synthetic_frame(db, size, config.layers);
@@ -276,7 +298,9 @@ pub fn run_bench(db: &PsfDatabase, config: &BenchConfig) -> Result<BenchReport, 
         if config.cpu {
             let runs = time_cpu(db, &frame, config);
             let device = format!("CPU, {} threads", rayon::current_num_threads());
-            report.rows.push(row("cpu", device, size, records, &runs, "wall"));
+            report
+                .rows
+                .push(row("cpu", device, size, records, &runs, "wall"));
         }
         #[cfg(feature = "gpu")]
         if let Some(gpu) = gpu.as_mut() {
@@ -290,7 +314,9 @@ pub fn run_bench(db: &PsfDatabase, config: &BenchConfig) -> Result<BenchReport, 
                 runs.push([t.splat_ms, t.integrate_ms, t.composite_ms, t.total_ms]);
             }
             let timing = if timestamps { "timestamps" } else { "wall" };
-            report.rows.push(row("gpu", gpu.adapter_name(), size, records, &runs, timing));
+            report
+                .rows
+                .push(row("gpu", gpu.adapter_name(), size, records, &runs, timing));
         }
     }
     Ok(report)
@@ -305,7 +331,10 @@ impl BenchReport {
             s,
             "| backend | device | size | records | splat ms | integrate ms | composite ms | total ms | timing | runs |"
         );
-        let _ = writeln!(s, "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |");
+        let _ = writeln!(
+            s,
+            "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
+        );
         for r in &self.rows {
             let _ = writeln!(
                 s,

@@ -26,7 +26,9 @@ fn examples_dir() -> PathBuf {
 
 fn test_db(model: PsfModel) -> PsfDatabase {
     let cfg = precompute::BuildConfig::new(model, precompute::Profile::Test);
-    precompute::build_database(&cfg, false).expect("test database").0
+    precompute::build_database(&cfg, false)
+        .expect("test database")
+        .0
 }
 
 /// The centre `CROP x CROP` of `g`, with the camera's sensor narrowed to keep pixels per mm.
@@ -34,9 +36,22 @@ fn crop(g: &GBuffer, cam: &Camera) -> (GBuffer, Camera) {
     let (x0, y0) = ((g.width - CROP) / 2, (g.height - CROP) / 2);
     let pick = |i: usize| (y0 + i / CROP) * g.width + x0 + i % CROP;
     let color = (0..CROP * CROP).map(|i| g.color[pick(i)]).collect();
-    let depth = g.depth.as_ref().map(|d| (0..CROP * CROP).map(|i| d[pick(i)]).collect());
-    let motion = g.motion.as_ref().map(|m| (0..CROP * CROP).map(|i| m[pick(i)]).collect());
-    let out = GBuffer { width: CROP, height: CROP, color, depth, motion, ..g.clone() };
+    let depth = g
+        .depth
+        .as_ref()
+        .map(|d| (0..CROP * CROP).map(|i| d[pick(i)]).collect());
+    let motion = g
+        .motion
+        .as_ref()
+        .map(|m| (0..CROP * CROP).map(|i| m[pick(i)]).collect());
+    let out = GBuffer {
+        width: CROP,
+        height: CROP,
+        color,
+        depth,
+        motion,
+        ..g.clone()
+    };
     let mut c = cam.clone();
     c.sensor_width_mm *= CROP as f64 / cam.width as f64;
     c.width = CROP as u32;
@@ -61,8 +76,11 @@ fn shared_examples_gpu_matches_cpu() {
     let thin = test_db(PsfModel::ThinLens);
     let motion = test_db(PsfModel::LensMotion);
     for name in ["comets", "fence"] {
-        let g = GBuffer::read_exr(&dir.join(name).join("input.exr"), &ChannelOptions::default())
-            .expect("input.exr");
+        let g = GBuffer::read_exr(
+            &dir.join(name).join("input.exr"),
+            &ChannelOptions::default(),
+        )
+        .expect("input.exr");
         let cam = Camera::from_json_file(&dir.join(name).join("camera.json")).expect("camera");
         let (g, cam) = crop(&g, &cam);
         let dbs = if cam.has_shutter() && g.motion.is_some() {
@@ -76,9 +94,14 @@ fn shared_examples_gpu_matches_cpu() {
         };
         let options = SynthOptions::default();
         let (cpu, cpu_stats) = synthesize(&g, &cam, &dbs, &options).expect("CPU synthesis");
-        let mut gpu = GpuSynthesizer::for_database(ctx, dbs.combined.as_ref(), GpuSynthOptions::from_synth(&options))
-            .expect("GPU synthesizer");
-        let (img, stats, times) = synthesize_gpu(&mut gpu, &g, &cam, &dbs, &options).expect("GPU synthesis");
+        let mut gpu = GpuSynthesizer::for_database(
+            ctx,
+            dbs.combined.as_ref(),
+            GpuSynthOptions::from_synth(&options),
+        )
+        .expect("GPU synthesizer");
+        let (img, stats, times) =
+            synthesize_gpu(&mut gpu, &g, &cam, &dbs, &options).expect("GPU synthesis");
         assert_eq!(stats.counts, cpu_stats.counts);
         let a: Vec<f32> = img.pixels.iter().flatten().copied().collect();
         let b: Vec<f32> = cpu.pixels.iter().flatten().copied().collect();
@@ -90,8 +113,14 @@ fn shared_examples_gpu_matches_cpu() {
             stats.counts.sparse, stats.counts.dense, stats.counts.copied,
             cpu_stats.times.total_ms, times.total_ms, times.splat_ms, times.integrate_ms, times.composite_ms
         );
-        assert!(stats.counts.sparse + stats.counts.dense > 0, "{name}: nothing was splatted");
+        assert!(
+            stats.counts.sparse + stats.counts.dense > 0,
+            "{name}: nothing was splatted"
+        );
         assert!(ssim >= 0.999, "{name}: SSIM {ssim}");
-        assert!(d <= MAX_REL_DIFF * m.max(1.0), "{name}: max difference {d} (max value {m})");
+        assert!(
+            d <= MAX_REL_DIFF * m.max(1.0),
+            "{name}: max difference {d} (max value {m})"
+        );
     }
 }

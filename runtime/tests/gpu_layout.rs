@@ -73,6 +73,7 @@ fn wgsl_structs_match_rust() {
     check!(m, SplatTargets, "SplatTargets", [
         laplacian => "laplacian", direct => "direct", border => "border",
         rotation => "rotation", psf_count => "psf_count", channels => "channels",
+        layer_base => "layer_base", layer_count => "layer_count", _pad0 => "_pad0", _pad1 => "_pad1",
     ]);
 }
 

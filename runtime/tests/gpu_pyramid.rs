@@ -20,18 +20,31 @@ fn check_size(pyr: &mut GpuPyramid, w: usize, h: usize, n: usize) {
         let cpu = ws.integrate(lap);
         assert_eq!((gpu[p].width, gpu[p].height), (w, h));
         let (d, m) = max_diff(&gpu[p].data, &cpu.data);
-        assert!(d <= REL_TOL * m.max(1.0), "{w}x{h} plane {p}: output differs by {d} (max {m})");
+        assert!(
+            d <= REL_TOL * m.max(1.0),
+            "{w}x{h} plane {p}: output differs by {d} (max {m})"
+        );
         assert_eq!(levels.analysis.len(), ws.levels());
         for (i, cpu_level) in ws.analysis_levels().iter().enumerate() {
             let g = &levels.analysis[i][p];
-            assert_eq!((g.width, g.height), (cpu_level.width, cpu_level.height), "a_{i} size");
+            assert_eq!(
+                (g.width, g.height),
+                (cpu_level.width, cpu_level.height),
+                "a_{i} size"
+            );
             let (d, m) = max_diff(&g.data, &cpu_level.data);
-            assert!(d <= REL_TOL * m.max(1e-3), "{w}x{h} a_{i} plane {p}: {d} (max {m})");
+            assert!(
+                d <= REL_TOL * m.max(1e-3),
+                "{w}x{h} a_{i} plane {p}: {d} (max {m})"
+            );
         }
         for (i, cpu_level) in ws.synthesis_levels().iter().enumerate() {
             let g = &levels.synthesis[i][p];
             let (d, m) = max_diff(&g.data, &cpu_level.data);
-            assert!(d <= REL_TOL * m.max(1e-3), "{w}x{h} f_{i} plane {p}: {d} (max {m})");
+            assert!(
+                d <= REL_TOL * m.max(1e-3),
+                "{w}x{h} f_{i} plane {p}: {d} (max {m})"
+            );
         }
     }
 }
@@ -53,7 +66,9 @@ fn pyramid_integrates_an_impulse_like_the_cpu() {
     let mut pyr = GpuPyramid::new(ctx).expect("pipelines");
     let mut lap = Plane::new(48, 40);
     lap.set(20, 17, 1.0);
-    let gpu = pyr.integrate(std::slice::from_ref(&lap)).expect("GPU pyramid");
+    let gpu = pyr
+        .integrate(std::slice::from_ref(&lap))
+        .expect("GPU pyramid");
     let cpu = poisson::integrate_pyramid(&lap);
     let (d, m) = max_diff(&gpu[0].data, &cpu.data);
     assert!(m > 0.0 && d <= REL_TOL * m, "impulse: {d} (max {m})");
@@ -65,7 +80,10 @@ fn pyramid_integrates_an_impulse_like_the_cpu() {
 fn pyramid_timing_probe() {
     let Some(ctx) = context() else { return };
     let mut pyr = GpuPyramid::new(ctx).expect("pipelines");
-    let n: usize = std::env::var("PROBE_SIZE").ok().and_then(|s| s.parse().ok()).unwrap_or(310);
+    let n: usize = std::env::var("PROBE_SIZE")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(310);
     let laps: Vec<Plane> = (0..32).map(|i| noise_plane(n, n, i)).collect();
     pyr.integrate(&laps).expect("warm-up");
     for _ in 0..3 {

@@ -15,8 +15,8 @@ use rand_chacha::ChaCha8Rng;
 use runtime::gpu::{AtomicMode, GpuSynthOptions, GpuSynthesizer};
 use runtime::pipeline::types::{FrameParams, SplatPath, SplatRecord};
 use runtime::pipeline::{
-    composite, integrate, splat, Classified, CompositeOptions, Integrator, LayerInfo,
-    PathCounts, RotationSampling, SplatOptions,
+    composite, integrate, splat, Classified, CompositeOptions, Integrator, LayerInfo, PathCounts,
+    RotationSampling, SplatOptions,
 };
 use runtime::rgba::RgbaImage;
 
@@ -47,7 +47,13 @@ fn hand_database(model: PsfModel, seed: u64) -> PsfDatabase {
             let (w, h) = (rng.random_range(1..6u16), rng.random_range(1..5u16));
             let origin = [-(w as i16) / 2, -(h as i16) / 2];
             let data: Vec<f32> = (0..w as usize * h as usize * ch)
-                .map(|_| if rng.random_bool(0.2) { 0.0 } else { rng.random_range(0.0..0.2) })
+                .map(|_| {
+                    if rng.random_bool(0.2) {
+                        0.0
+                    } else {
+                        rng.random_range(0.0..0.2)
+                    }
+                })
                 .collect();
             b.push_dense(origin, w, h, &data).expect("dense");
         } else {
@@ -56,7 +62,11 @@ fn hand_database(model: PsfModel, seed: u64) -> PsfDatabase {
             let (rx, ry) = (rng.random_range(1.0..6.0f32), rng.random_range(1.0..6.0f32));
             let blob = Plane::from_fn(17, 17, |x, y| {
                 let (dx, dy) = ((x as f32 - 8.0) / rx, (y as f32 - 8.0) / ry);
-                if dx * dx + dy * dy <= 1.0 { 1.0 } else { 0.0 }
+                if dx * dx + dy * dy <= 1.0 {
+                    1.0
+                } else {
+                    0.0
+                }
             });
             let lap = poisson::laplacian(&blob);
             let mut pos = Vec::new();
@@ -82,13 +92,19 @@ fn hand_database(model: PsfModel, seed: u64) -> PsfDatabase {
 fn test_profile_database(model: PsfModel) -> &'static PsfDatabase {
     static DBS: OnceLock<Vec<PsfDatabase>> = OnceLock::new();
     let dbs = DBS.get_or_init(|| {
-        [PsfModel::ThinLens, PsfModel::LensMotion, PsfModel::PhysicalLens]
-            .into_iter()
-            .map(|m| {
-                let cfg = precompute::BuildConfig::new(m, precompute::Profile::Test);
-                precompute::build_database(&cfg, false).expect("test database").0
-            })
-            .collect()
+        [
+            PsfModel::ThinLens,
+            PsfModel::LensMotion,
+            PsfModel::PhysicalLens,
+        ]
+        .into_iter()
+        .map(|m| {
+            let cfg = precompute::BuildConfig::new(m, precompute::Profile::Test);
+            precompute::build_database(&cfg, false)
+                .expect("test database")
+                .0
+        })
+        .collect()
     });
     match model {
         PsfModel::ThinLens => &dbs[0],
@@ -99,7 +115,13 @@ fn test_profile_database(model: PsfModel) -> &'static PsfDatabase {
 
 /// A `Classified` as `pipeline::classify` makes it: records sorted by layer, then row, then
 /// column, with per-layer counts.
-fn classified(width: u32, height: u32, pad: u32, layers: u32, mut records: Vec<SplatRecord>) -> Classified {
+fn classified(
+    width: u32,
+    height: u32,
+    pad: u32,
+    layers: u32,
+    mut records: Vec<SplatRecord>,
+) -> Classified {
     records.sort_by_key(|r| (r.layer, r.center_y, r.center_x));
     let mut infos = vec![LayerInfo::default(); layers as usize];
     let mut counts = PathCounts::default();
@@ -132,7 +154,15 @@ fn classified(width: u32, height: u32, pad: u32, layers: u32, mut records: Vec<S
     }
 }
 
-fn record(x: i32, y: i32, psf: u32, layer: u32, angle: f32, path: SplatPath, color: [f32; 4]) -> SplatRecord {
+fn record(
+    x: i32,
+    y: i32,
+    psf: u32,
+    layer: u32,
+    angle: f32,
+    path: SplatPath,
+    color: [f32; 4],
+) -> SplatRecord {
     SplatRecord {
         center_x: x,
         center_y: y,
@@ -147,7 +177,13 @@ fn record(x: i32, y: i32, psf: u32, layer: u32, angle: f32, path: SplatPath, col
 }
 
 /// `n` random records over the padded frame (so that some PSFs are cut by its border).
-fn random_records(db: &PsfDatabase, c: (u32, u32, u32, u32), n: usize, rotate: bool, seed: u64) -> Vec<SplatRecord> {
+fn random_records(
+    db: &PsfDatabase,
+    c: (u32, u32, u32, u32),
+    n: usize,
+    rotate: bool,
+    seed: u64,
+) -> Vec<SplatRecord> {
     let (w, h, pad, layers) = c;
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     (0..n)
@@ -159,8 +195,17 @@ fn random_records(db: &PsfDatabase, c: (u32, u32, u32, u32), n: usize, rotate: b
                 _ => SplatPath::Sparse,
             };
             let a: f32 = rng.random_range(0.0..1.0);
-            let color = [rng.random_range(0.0..1.0) * a, rng.random_range(0.0..1.0) * a, rng.random_range(0.0..1.0) * a, a];
-            let angle = if rotate && rng.random_bool(0.7) { rng.random_range(-3.2..3.2f32) } else { 0.0 };
+            let color = [
+                rng.random_range(0.0..1.0) * a,
+                rng.random_range(0.0..1.0) * a,
+                rng.random_range(0.0..1.0) * a,
+                a,
+            ];
+            let angle = if rotate && rng.random_bool(0.7) {
+                rng.random_range(-3.2..3.2f32)
+            } else {
+                0.0
+            };
             record(
                 rng.random_range(0..(w + 2 * pad) as i32),
                 rng.random_range(0..(h + 2 * pad) as i32),
@@ -185,11 +230,18 @@ fn or_zeros(p: &Plane, w: usize, h: usize) -> Plane {
 fn compare_planes(what: &str, gpu: &[Plane], cpu: &[Plane], w: usize, h: usize, tol: f32) {
     assert_eq!(gpu.len(), cpu.len(), "{what}: plane count");
     let cpu: Vec<Plane> = cpu.iter().map(|p| or_zeros(p, w, h)).collect();
-    let scale = cpu.iter().flat_map(|p| &p.data).map(|v| v.abs()).fold(1.0f32, f32::max);
+    let scale = cpu
+        .iter()
+        .flat_map(|p| &p.data)
+        .map(|v| v.abs())
+        .fold(1.0f32, f32::max);
     for (i, (g, c)) in gpu.iter().zip(&cpu).enumerate() {
         assert_eq!((g.width, g.height), (w, h), "{what} plane {i} size");
         let (d, _) = max_diff(&g.data, &c.data);
-        assert!(d <= tol * scale, "{what} plane {i}: differs by {d} (scale {scale})");
+        assert!(
+            d <= tol * scale,
+            "{what} plane {i}: differs by {d} (scale {scale})"
+        );
     }
 }
 
@@ -214,18 +266,50 @@ fn check_case(
     let f = c.frame;
     let (pw, ph) = (f.padded_width as usize, f.padded_height as usize);
 
-    let stack = splat(c, db, &SplatOptions { rotation: options.rotation });
+    let stack = splat(
+        c,
+        db,
+        &SplatOptions {
+            rotation: options.rotation,
+        },
+    );
     let planes = gpu.splat_planes(&f, &c.records).expect("GPU splat");
-    compare_planes(&format!("{name}: laplacian"), &planes.laplacian, &stack.laplacian, pw, ph, SPLAT_REL_TOL);
-    compare_planes(&format!("{name}: direct"), &planes.direct, &stack.direct, pw, ph, SPLAT_REL_TOL);
+    compare_planes(
+        &format!("{name}: laplacian"),
+        &planes.laplacian,
+        &stack.laplacian,
+        pw,
+        ph,
+        SPLAT_REL_TOL,
+    );
+    compare_planes(
+        &format!("{name}: direct"),
+        &planes.direct,
+        &stack.direct,
+        pw,
+        ph,
+        SPLAT_REL_TOL,
+    );
 
     let layers = integrate(&stack, integrator);
-    let gpu_layers = gpu.layer_images(&f, &c.records, integrator).expect("GPU integrate");
-    compare_planes(&format!("{name}: layers"), &gpu_layers, &layers.planes, pw, ph, 2e-5);
+    let gpu_layers = gpu
+        .layer_images(&f, &c.records, integrator)
+        .expect("GPU integrate");
+    compare_planes(
+        &format!("{name}: layers"),
+        &gpu_layers,
+        &layers.planes,
+        pw,
+        ph,
+        2e-5,
+    );
 
     let cpu_img = composite(&layers, &options.composite);
     let (gpu_img, times) = gpu.run(&f, &c.records, integrator).expect("GPU run");
-    assert_eq!((gpu_img.width, gpu_img.height), (cpu_img.width, cpu_img.height));
+    assert_eq!(
+        (gpu_img.width, gpu_img.height),
+        (cpu_img.width, cpu_img.height)
+    );
     let (a, b) = (flat(&gpu_img), flat(&cpu_img));
     let (d, m) = max_diff(&a, &b);
     let ssim = metrics::ssim_rgb(&a, &b, cpu_img.width, cpu_img.height).expect("ssim");
@@ -233,16 +317,33 @@ fn check_case(
         "{name}: SSIM {ssim:.6}, max diff {d:.2e} (max value {m:.3}), GPU {:.2} ms (timestamps: {})",
         times.total_ms, times.gpu_timestamps
     );
-    assert!(m > 0.0, "{name}: the CPU image is black: the case tests nothing");
+    assert!(
+        m > 0.0,
+        "{name}: the CPU image is black: the case tests nothing"
+    );
     assert!(ssim >= MIN_SSIM, "{name}: SSIM {ssim} < {MIN_SSIM}");
-    assert!(d <= MAX_ABS_DIFF, "{name}: max difference {d} > {MAX_ABS_DIFF}");
+    assert!(
+        d <= MAX_ABS_DIFF,
+        "{name}: max difference {d} > {MAX_ABS_DIFF}"
+    );
     let counters = gpu.counters();
-    assert_eq!((counters.pipeline_builds, counters.database_uploads, counters.frame_allocations), (1, 1, 1));
+    assert_eq!(
+        (
+            counters.pipeline_builds,
+            counters.database_uploads,
+            counters.frame_allocations
+        ),
+        (1, 1, 1)
+    );
     (ssim, d)
 }
 
 fn options(atomics: AtomicMode, rotation: RotationSampling) -> GpuSynthOptions {
-    GpuSynthOptions { atomics, rotation, ..GpuSynthOptions::default() }
+    GpuSynthOptions {
+        atomics,
+        rotation,
+        ..GpuSynthOptions::default()
+    }
 }
 
 #[test]
@@ -250,15 +351,29 @@ fn single_pixels_every_hand_model_both_atomic_paths() {
     if context().is_none() {
         return;
     }
-    for model in [PsfModel::ThinLens, PsfModel::LensMotion, PsfModel::PhysicalLens] {
+    for model in [
+        PsfModel::ThinLens,
+        PsfModel::LensMotion,
+        PsfModel::PhysicalLens,
+    ] {
         let db = hand_database(model, 3);
         for psf in 0..db.psf_count() as u32 {
-            let path = if db.dense(psf as usize).is_some() { SplatPath::Dense } else { SplatPath::Sparse };
+            let path = if db.dense(psf as usize).is_some() {
+                SplatPath::Dense
+            } else {
+                SplatPath::Sparse
+            };
             let recs = vec![record(20, 18, psf, 0, 0.0, path, [0.9, 0.5, 0.2, 1.0])];
             let c = classified(24, 20, 8, 1, recs);
             for atomics in [AtomicMode::Auto, AtomicMode::CompareExchange] {
                 let name = format!("{model:?} psf {psf} {atomics:?}");
-                check_case(&name, Some(&db), &c, Integrator::Pyramid, options(atomics, RotationSampling::Bilinear));
+                check_case(
+                    &name,
+                    Some(&db),
+                    &c,
+                    Integrator::Pyramid,
+                    options(atomics, RotationSampling::Bilinear),
+                );
             }
         }
     }
@@ -269,28 +384,79 @@ fn borders_rotations_and_overlaps_hand_databases() {
     if context().is_none() {
         return;
     }
-    for (k, model) in [PsfModel::ThinLens, PsfModel::LensMotion, PsfModel::PhysicalLens].into_iter().enumerate() {
+    for (k, model) in [
+        PsfModel::ThinLens,
+        PsfModel::LensMotion,
+        PsfModel::PhysicalLens,
+    ]
+    .into_iter()
+    .enumerate()
+    {
         let db = hand_database(model, 11 + k as u64);
         let geometry = (48, 40, 9, 3);
-        let mut recs = random_records(&db, geometry, 3000, model != PsfModel::ThinLens, 5 + k as u64);
+        let mut recs = random_records(
+            &db,
+            geometry,
+            3000,
+            model != PsfModel::ThinLens,
+            5 + k as u64,
+        );
         // Corners of the padded frame and of the image.
         for &(x, y) in &[(0, 0), (65, 0), (0, 57), (65, 57), (9, 9), (56, 48)] {
-            recs.push(record(x, y, 0, 1, 0.0, SplatPath::Sparse, [1.0, 1.0, 1.0, 1.0]));
+            recs.push(record(
+                x,
+                y,
+                0,
+                1,
+                0.0,
+                SplatPath::Sparse,
+                [1.0, 1.0, 1.0, 1.0],
+            ));
         }
         let c = classified(geometry.0, geometry.1, geometry.2, geometry.3, recs);
         for rotation in [RotationSampling::Bilinear, RotationSampling::Nearest] {
             for atomics in [AtomicMode::Auto, AtomicMode::CompareExchange] {
                 let name = format!("{model:?} overlaps {rotation:?} {atomics:?}");
-                check_case(&name, Some(&db), &c, Integrator::Pyramid, options(atomics, rotation));
+                check_case(
+                    &name,
+                    Some(&db),
+                    &c,
+                    Integrator::Pyramid,
+                    options(atomics, rotation),
+                );
             }
+        }
+        for max_layers_per_chunk in [1, 2] {
+            let name = format!("{model:?} overlaps, chunks of {max_layers_per_chunk} layers");
+            let o = GpuSynthOptions {
+                max_layers_per_chunk,
+                ..GpuSynthOptions::default()
+            };
+            check_case(&name, Some(&db), &c, Integrator::Pyramid, o);
+            check_case(
+                &format!("{name}, exact"),
+                Some(&db),
+                &c,
+                Integrator::Exact,
+                o,
+            );
         }
         for lanes in [1, 64] {
             let name = format!("{model:?} overlaps, {lanes} lanes per record");
-            let o = GpuSynthOptions { lanes_per_record: lanes, ..GpuSynthOptions::default() };
+            let o = GpuSynthOptions {
+                lanes_per_record: lanes,
+                ..GpuSynthOptions::default()
+            };
             check_case(&name, Some(&db), &c, Integrator::Pyramid, o);
         }
         let name = format!("{model:?} overlaps exact");
-        check_case(&name, Some(&db), &c, Integrator::Exact, options(AtomicMode::Auto, RotationSampling::Bilinear));
+        check_case(
+            &name,
+            Some(&db),
+            &c,
+            Integrator::Exact,
+            options(AtomicMode::Auto, RotationSampling::Bilinear),
+        );
     }
 }
 
@@ -304,11 +470,25 @@ fn copies_only_without_database() {
     for y in 0..32 {
         for x in 0..40 {
             let a = rng.random_range(0.2..1.0f32);
-            recs.push(record(x + 4, y + 4, 0, 0, 0.0, SplatPath::Copy, [0.3 * a, 0.6 * a, 0.9 * a, a]));
+            recs.push(record(
+                x + 4,
+                y + 4,
+                0,
+                0,
+                0.0,
+                SplatPath::Copy,
+                [0.3 * a, 0.6 * a, 0.9 * a, a],
+            ));
         }
     }
     let c = classified(40, 32, 4, 1, recs);
-    check_case("copies", None, &c, Integrator::Pyramid, GpuSynthOptions::default());
+    check_case(
+        "copies",
+        None,
+        &c,
+        Integrator::Pyramid,
+        GpuSynthOptions::default(),
+    );
 }
 
 #[test]
@@ -316,22 +496,42 @@ fn test_profile_databases_every_model() {
     if context().is_none() {
         return;
     }
-    for model in [PsfModel::ThinLens, PsfModel::LensMotion, PsfModel::PhysicalLens] {
+    for model in [
+        PsfModel::ThinLens,
+        PsfModel::LensMotion,
+        PsfModel::PhysicalLens,
+    ] {
         let db = test_profile_database(model);
         let pad = db.max_extent_px() + 2;
         let geometry = (64, 48, pad, 4);
         // One record of every PSF, spread over the frame, then random overlapping ones.
         let mut recs: Vec<SplatRecord> = (0..db.psf_count() as u32)
             .map(|psf| {
-                let path = if db.dense(psf as usize).is_some() { SplatPath::Dense } else { SplatPath::Sparse };
+                let path = if db.dense(psf as usize).is_some() {
+                    SplatPath::Dense
+                } else {
+                    SplatPath::Sparse
+                };
                 let x = pad as i32 + (psf as i32 * 7) % 64;
                 let y = pad as i32 + (psf as i32 * 5) % 48;
                 record(x, y, psf, psf % 4, 0.0, path, [0.8, 0.6, 0.4, 1.0])
             })
             .collect();
-        recs.extend(random_records(db, geometry, 1500, model == PsfModel::LensMotion, 21));
+        recs.extend(random_records(
+            db,
+            geometry,
+            1500,
+            model == PsfModel::LensMotion,
+            21,
+        ));
         let c = classified(geometry.0, geometry.1, geometry.2, geometry.3, recs);
-        check_case(&format!("{model:?} test profile"), Some(db), &c, Integrator::Pyramid, GpuSynthOptions::default());
+        check_case(
+            &format!("{model:?} test profile"),
+            Some(db),
+            &c,
+            Integrator::Pyramid,
+            GpuSynthOptions::default(),
+        );
     }
 }
 
@@ -342,25 +542,63 @@ fn frames_of_one_size_reuse_buffers_and_a_new_size_reallocates() {
     let mut gpu = GpuSynthesizer::new(ctx, &db, GpuSynthOptions::default()).expect("synth");
     let geometry = (32, 24, 8, 2);
     for seed in 0..3 {
-        let c = classified(32, 24, 8, 2, random_records(&db, geometry, 200 + 100 * seed as usize, true, seed));
-        let (img, _) = gpu.run(&c.frame, &c.records, Integrator::Pyramid).expect("run");
-        let cpu = composite(&integrate(&splat(&c, Some(&db), &SplatOptions::default()), Integrator::Pyramid), &CompositeOptions::default());
+        let c = classified(
+            32,
+            24,
+            8,
+            2,
+            random_records(&db, geometry, 200 + 100 * seed as usize, true, seed),
+        );
+        let (img, _) = gpu
+            .run(&c.frame, &c.records, Integrator::Pyramid)
+            .expect("run");
+        let cpu = composite(
+            &integrate(
+                &splat(&c, Some(&db), &SplatOptions::default()),
+                Integrator::Pyramid,
+            ),
+            &CompositeOptions::default(),
+        );
         let (d, _) = max_diff(&flat(&img), &flat(&cpu));
         assert!(d <= MAX_ABS_DIFF, "frame {seed}: {d}");
     }
     let n = gpu.counters();
-    assert_eq!((n.pipeline_builds, n.database_uploads, n.frame_allocations, n.frames), (1, 1, 1, 3));
-    let c = classified(40, 24, 8, 2, random_records(&db, (40, 24, 8, 2), 50, true, 7));
-    gpu.run(&c.frame, &c.records, Integrator::Pyramid).expect("run");
+    assert_eq!(
+        (
+            n.pipeline_builds,
+            n.database_uploads,
+            n.frame_allocations,
+            n.frames
+        ),
+        (1, 1, 1, 3)
+    );
+    let c = classified(
+        40,
+        24,
+        8,
+        2,
+        random_records(&db, (40, 24, 8, 2), 50, true, 7),
+    );
+    gpu.run(&c.frame, &c.records, Integrator::Pyramid)
+        .expect("run");
     let n = gpu.counters();
-    assert_eq!((n.pipeline_builds, n.database_uploads, n.frame_allocations), (1, 1, 2));
+    assert_eq!(
+        (n.pipeline_builds, n.database_uploads, n.frame_allocations),
+        (1, 1, 2)
+    );
 }
 
 #[test]
 fn bad_frames_are_errors_not_panics() {
     let Some(ctx) = context() else { return };
     let mut gpu = GpuSynthesizer::without_database(ctx, GpuSynthOptions::default()).expect("synth");
-    let c = classified(8, 8, 2, 1, vec![record(3, 3, 0, 0, 0.0, SplatPath::Copy, [1.0; 4])]);
+    let c = classified(
+        8,
+        8,
+        2,
+        1,
+        vec![record(3, 3, 0, 0, 0.0, SplatPath::Copy, [1.0; 4])],
+    );
     let mut f = c.frame;
     f.padded_width += 1;
     assert!(gpu.run(&f, &c.records, Integrator::Pyramid).is_err());
@@ -370,7 +608,10 @@ fn bad_frames_are_errors_not_panics() {
     let mut f = c.frame;
     f.width = 0;
     assert!(gpu.run(&f, &c.records, Integrator::Pyramid).is_err());
-    let odd = GpuSynthOptions { lanes_per_record: 3, ..GpuSynthOptions::default() };
+    let odd = GpuSynthOptions {
+        lanes_per_record: 3,
+        ..GpuSynthOptions::default()
+    };
     assert!(GpuSynthesizer::without_database(ctx, odd).is_err());
     // Records pointing outside the database or the layers draw nothing (as on the CPU).
     let mut recs = c.records.clone();
@@ -379,6 +620,8 @@ fn bad_frames_are_errors_not_panics() {
     let mut f = c.frame;
     f.record_count = 3;
     let (img, _) = gpu.run(&f, &recs, Integrator::Pyramid).expect("run");
-    let (good, _) = gpu.run(&c.frame, &c.records, Integrator::Pyramid).expect("run");
+    let (good, _) = gpu
+        .run(&c.frame, &c.records, Integrator::Pyramid)
+        .expect("run");
     assert_eq!(img, good);
 }

@@ -100,7 +100,11 @@ impl Singlet {
         let front_vertex = self.stop_gap_mm;
         let back_vertex = self.stop_gap_mm + self.thickness_mm;
         let p1 = self.hit_sphere(at_stop, dir, front_vertex, self.radius_front_mm)?;
-        let d1 = refract(dir, self.normal(p1, front_vertex, self.radius_front_mm), 1.0 / n)?;
+        let d1 = refract(
+            dir,
+            self.normal(p1, front_vertex, self.radius_front_mm),
+            1.0 / n,
+        )?;
         let p2 = self.hit_sphere(p1, d1, back_vertex, self.radius_back_mm)?;
         let d2 = refract(d1, self.normal(p2, back_vertex, self.radius_back_mm), n)?;
         Some(ExitRay { point: p2, dir: d2 })
@@ -158,12 +162,16 @@ impl Singlet {
 
     /// Moves the sensor to where an axial object `object_distance_mm` in front of the stop
     /// comes to a paraxial focus at `lambda_um`.
-    pub fn focus(&mut self, object_distance_mm: f64, lambda_um: f64) -> Result<(), PrecomputeError> {
+    pub fn focus(
+        &mut self,
+        object_distance_mm: f64,
+        lambda_um: f64,
+    ) -> Result<(), PrecomputeError> {
         let h = 1e-3 * self.stop_radius_mm;
         let exit = self
             .paraxial_exit(-object_distance_mm, h, lambda_um)
             .ok_or_else(|| PrecomputeError::InvalidLens("the axial ray is blocked".into()))?;
-        if !(exit.dir.x < 0.0) {
+        if exit.dir.x.is_nan() || exit.dir.x >= 0.0 {
             return Err(PrecomputeError::InvalidLens(format!(
                 "the focus distance {object_distance_mm} mm does not form a real image \
                  (it lies inside the focal length)"
@@ -262,7 +270,11 @@ mod tests {
         assert!(l.sensor_z_mm > far);
         // Newton: the extension is ~ f^2 / (object distance from the front focal point).
         let ext = l.sensor_z_mm - far;
-        assert!((ext - f * f / 1000.0).abs() < 0.1 * ext, "{ext} vs {}", f * f / 1000.0);
+        assert!(
+            (ext - f * f / 1000.0).abs() < 0.1 * ext,
+            "{ext} vs {}",
+            f * f / 1000.0
+        );
         assert!(l.focus(20.0, 0.58756).is_err());
     }
 }

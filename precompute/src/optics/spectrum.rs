@@ -32,7 +32,8 @@ impl Spectrum {
         let steps = 6000;
         let mut mean = [0.0; 3];
         for i in 0..steps {
-            let l = LAMBDA_MIN_NM + (i as f64 + 0.5) / steps as f64 * (LAMBDA_MAX_NM - LAMBDA_MIN_NM);
+            let l =
+                LAMBDA_MIN_NM + (i as f64 + 0.5) / steps as f64 * (LAMBDA_MAX_NM - LAMBDA_MIN_NM);
             for (c, m) in mean.iter_mut().enumerate() {
                 *m += raw(c, l) / steps as f64;
             }

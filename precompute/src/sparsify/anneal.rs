@@ -39,6 +39,9 @@ impl Default for AnnealOptions {
     }
 }
 
+/// Sites touched in a step: id, position and values before it.
+type Touched = Vec<(u32, Option<[i32; 2]>, Vec<f64>)>;
+
 #[derive(Clone)]
 struct State {
     pos: Vec<Option<[i32; 2]>>,
@@ -136,12 +139,9 @@ fn anneal_sites(
         }
         let mut s = cur.clone();
         // Touched sites with their position and values before this step.
-        let mut touched: Vec<(u32, Option<[i32; 2]>, Vec<f64>)> = Vec::new();
+        let mut touched: Touched = Vec::new();
         let mut is_touched = vec![false; n];
-        let touch = |id: u32,
-                     s: &State,
-                     touched: &mut Vec<(u32, Option<[i32; 2]>, Vec<f64>)>,
-                     is_touched: &mut Vec<bool>| {
+        let touch = |id: u32, s: &State, touched: &mut Touched, is_touched: &mut Vec<bool>| {
             if !is_touched[id as usize] {
                 is_touched[id as usize] = true;
                 let v = s.val[id as usize * ch..(id as usize + 1) * ch].to_vec();

@@ -14,7 +14,7 @@ use super::target::Target;
 use super::voronoi::SiteIndex;
 
 /// Default dart radius at the reference importance, pixels, for budget 1.
-pub const DART_SPACING_PX: f64 = 1.5;
+pub const DART_SPACING_PX: f64 = 2.0;
 
 /// A spreadlet site: continuous pixel coordinates and its cell group.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -28,7 +28,7 @@ pub struct Site {
 /// The dart radius of each active pixel, pixels.
 pub fn dart_radii(t: &Target, budget: f64, spacing_px: f64) -> Vec<f64> {
     let total: f64 = t.importance.iter().sum();
-    if t.importance.is_empty() || !(total > 0.0) {
+    if t.importance.is_empty() || total.is_nan() || total <= 0.0 {
         return vec![1.0; t.importance.len()];
     }
     let mut sorted = t.importance.clone();

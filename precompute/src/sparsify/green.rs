@@ -363,6 +363,9 @@ mod tests {
         let lhs: f64 = a.iter().zip(&probe).map(|(x, y)| x * y).sum();
         let at = op.adjoint(&probe);
         let rhs: f64 = at.iter().zip(&values).map(|(x, y)| x * y).sum();
-        assert!((lhs - rhs).abs() < 1e-8 * lhs.abs().max(1.0), "{lhs} vs {rhs}");
+        assert!(
+            (lhs - rhs).abs() < 1e-8 * lhs.abs().max(1.0),
+            "{lhs} vs {rhs}"
+        );
     }
 }

@@ -64,7 +64,9 @@ impl std::str::FromStr for Procedure {
         match s {
             "paper" => Ok(Procedure::Paper),
             "improved" => Ok(Procedure::Improved),
-            _ => Err(format!("unknown procedure '{s}' (expected paper or improved)")),
+            _ => Err(format!(
+                "unknown procedure '{s}' (expected paper or improved)"
+            )),
         }
     }
 }
@@ -127,7 +129,13 @@ pub struct AblationL1 {
 /// Runs the procedure on `t`.
 pub fn sparsify(t: &Target, opts: &SparsifyOptions, rng: &mut impl Rng) -> Sparsified {
     let torus = Torus::new(t.width, t.height);
-    let mut sites = throw_darts(t, opts.budget, opts.dart_spacing_px, opts.dart_failures, rng);
+    let mut sites = throw_darts(
+        t,
+        opts.budget,
+        opts.dart_spacing_px,
+        opts.dart_failures,
+        rng,
+    );
     lloyd(t, &mut sites, opts.lloyd_iterations);
     let c = collapse(t, round_sites(&sites, t.width, t.height));
     let (s, l1) = anneal(t, &torus, c, &opts.anneal, rng);
@@ -148,7 +156,13 @@ pub fn sparsify(t: &Target, opts: &SparsifyOptions, rng: &mut impl Rng) -> Spars
 /// darts + annealing and the full procedure, all from the same darts.
 pub fn ablation(t: &Target, opts: &SparsifyOptions, rng: &mut impl Rng) -> AblationL1 {
     let torus = Torus::new(t.width, t.height);
-    let darts = throw_darts(t, opts.budget, opts.dart_spacing_px, opts.dart_failures, rng);
+    let darts = throw_darts(
+        t,
+        opts.budget,
+        opts.dart_spacing_px,
+        opts.dart_failures,
+        rng,
+    );
     let d = collapse(t, round_sites(&darts, t.width, t.height));
     let l1_darts = reconstruct(&torus, &d.spreadlets).l1(&t.psf);
     let mut relaxed = darts.clone();
@@ -241,7 +255,10 @@ mod tests {
             assert!(s.spreadlets.len() < t.active.len());
             l1.push(s.l1);
         }
-        println!("sharp disk r = 10 px, budget 4: L1 paper {:.4}, improved {:.4}", l1[0], l1[1]);
+        println!(
+            "sharp disk r = 10 px, budget 4: L1 paper {:.4}, improved {:.4}",
+            l1[0], l1[1]
+        );
         assert!(l1[1] < 0.2, "{l1:?}");
     }
 }

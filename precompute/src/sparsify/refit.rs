@@ -29,12 +29,12 @@ pub fn refit(t: &Target, torus: &Torus, s: &Spreadlets, iterations: u32) -> Spre
         let mut gamma: f64 = g.iter().map(|x| x * x).sum();
         let gamma0 = gamma;
         for _ in 0..iterations {
-            if !(gamma > 1e-24 * gamma0.max(1e-300)) {
+            if gamma.is_nan() || gamma <= 1e-24 * gamma0.max(1e-300) {
                 break;
             }
             let q = op.apply(&p);
             let qq: f64 = q.iter().map(|x| x * x).sum();
-            if !(qq > 0.0) {
+            if qq.is_nan() || qq <= 0.0 {
                 break;
             }
             let alpha = gamma / qq;

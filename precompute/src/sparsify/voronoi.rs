@@ -45,7 +45,10 @@ impl SiteIndex {
                 id: i as u32,
             })
             .collect();
-        if verts.iter().all(|v| v.pos.x.is_finite() && v.pos.y.is_finite()) {
+        if verts
+            .iter()
+            .all(|v| v.pos.x.is_finite() && v.pos.y.is_finite())
+        {
             if let Ok(tri) = DelaunayTriangulation::bulk_load_stable(verts) {
                 return SiteIndex {
                     tri,
@@ -78,7 +81,10 @@ impl SiteIndex {
         if let Some(v) = self.tri.locate_vertex(Point2::new(p[0], p[1])) {
             return Some(v.data().id);
         }
-        self.rejected.iter().find(|(q, _)| *q == p).map(|&(_, id)| id)
+        self.rejected
+            .iter()
+            .find(|(q, _)| *q == p)
+            .map(|&(_, id)| id)
     }
 
     /// Inserts site `id` at `p`. Returns the id of the site already at `p` instead (and
@@ -180,7 +186,9 @@ mod tests {
             vec![[0.0, 0.0], [5.0, 0.0]],
             (0..9).map(|i| [i as f64, 2.0 * i as f64]).collect(), // collinear
             vec![[1.0, 1.0], [1.0, 1.0], [4.0, 2.0]],             // coincident
-            (0..40).map(|i| [((i * 17) % 23) as f64, ((i * 7) % 13) as f64]).collect(),
+            (0..40)
+                .map(|i| [((i * 17) % 23) as f64, ((i * 7) % 13) as f64])
+                .collect(),
         ];
         for sites in sets {
             let idx = SiteIndex::from_positions(&sites);
@@ -192,7 +200,9 @@ mod tests {
                         Some((id, d)) => {
                             assert!((d - brute(&sites, p)).abs() < 1e-9);
                             let q = sites[id as usize];
-                            assert!(((q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2) - d).abs() < 1e-9);
+                            assert!(
+                                ((q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2) - d).abs() < 1e-9
+                            );
                         }
                     }
                 }

@@ -131,7 +131,7 @@ pub fn trace_psf(
     }
     for (c, plane) in acc.iter().enumerate() {
         let sum: f64 = plane.iter().sum();
-        if !(sum > 0.0) {
+        if sum.is_nan() || sum <= 0.0 {
             return Err(PrecomputeError::EmptyPsf { index });
         }
         for (o, &v) in image.planes[c].iter_mut().zip(plane) {

@@ -54,21 +54,19 @@ impl GpuContext {
     /// As [`GpuContext::new`], with the requirement given explicitly instead of read from the
     /// environment.
     pub fn with_requirement(require: bool) -> Result<Option<Self>, GpuError> {
-        let instance =
-            wgpu::Instance::new(wgpu::InstanceDescriptor {
-                backends: wgpu::Backends::from_env().unwrap_or(wgpu::Backends::PRIMARY),
-                ..wgpu::InstanceDescriptor::new_without_display_handle_from_env()
-            });
-        let adapter = match pollster::block_on(instance.request_adapter(
-            &wgpu::RequestAdapterOptions {
+        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor {
+            backends: wgpu::Backends::from_env().unwrap_or(wgpu::Backends::PRIMARY),
+            ..wgpu::InstanceDescriptor::new_without_display_handle_from_env()
+        });
+        let adapter =
+            match pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
                 power_preference: wgpu::PowerPreference::HighPerformance,
                 ..Default::default()
-            },
-        )) {
-            Ok(a) => a,
-            Err(e) if require => return Err(GpuError::NoAdapter(e.to_string())),
-            Err(_) => return Ok(None),
-        };
+            })) {
+                Ok(a) => a,
+                Err(e) if require => return Err(GpuError::NoAdapter(e.to_string())),
+                Err(_) => return Ok(None),
+            };
         let info = adapter.get_info();
         let available = adapter.features();
         let wanted = wgpu::Features::SHADER_FLOAT32_ATOMIC | wgpu::Features::TIMESTAMP_QUERY;

@@ -56,17 +56,25 @@ pub fn synthesize_gpu(
         };
         stats.layers_used = 1;
         stats.times.total_ms = total.elapsed().as_secs_f64() * 1e3;
-        let image = RgbaImage { width: gbuffer.width, height: gbuffer.height, pixels: gbuffer.color.clone() };
+        let image = RgbaImage {
+            width: gbuffer.width,
+            height: gbuffer.height,
+            pixels: gbuffer.color.clone(),
+        };
         return Ok((image, stats, StageTimes::default()));
     }
     let t = Instant::now();
-    let classified =
-        classify(gbuffer, camera, dbs, &options.classify).map_err(|e| GpuError::Input(e.to_string()))?;
+    let classified = classify(gbuffer, camera, dbs, &options.classify)
+        .map_err(|e| GpuError::Input(e.to_string()))?;
     stats.times.classify_ms = t.elapsed().as_secs_f64() * 1e3;
     stats.models = dbs.models();
     stats.counts = classified.counts;
     stats.pad_px = classified.frame.pad;
-    stats.layers_used = classified.layers.iter().filter(|l| l.record_count > 0).count() as u32;
+    stats.layers_used = classified
+        .layers
+        .iter()
+        .filter(|l| l.record_count > 0)
+        .count() as u32;
     let (image, gpu_times) = gpu.run(&classified.frame, &classified.records, options.integrator)?;
     stats.times.splat_ms = gpu_times.splat_ms;
     stats.times.integrate_ms = gpu_times.integrate_ms;

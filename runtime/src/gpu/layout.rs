@@ -52,7 +52,8 @@ pub struct PassParams {
     pub scale: f32,
     /// Border (padding) cropped by the composite pass, px.
     pub border: u32,
-    /// Pass-specific flags (composite: bit 0 = renormalise coverage).
+    /// Pass-specific flags (composite: bit 0 = renormalise coverage, bit 1 = first chunk of
+    /// layers, bit 2 = last chunk).
     pub flags: u32,
 }
 
@@ -73,4 +74,12 @@ pub struct SplatTargets {
     pub psf_count: u32,
     /// Values per spreadlet position and per dense pixel (1 or 3).
     pub channels: u32,
+    /// First layer this pass draws (frames too large for one binding go in chunks of layers).
+    pub layer_base: u32,
+    /// Number of layers this pass draws; plane `(layer - layer_base) * 4 + channel`.
+    pub layer_count: u32,
+    /// Padding to 16 bytes.
+    pub _pad0: u32,
+    /// Padding to 16 bytes.
+    pub _pad1: u32,
 }

@@ -20,4 +20,6 @@ pub use error::GpuError;
 pub use frontend::synthesize_gpu;
 pub use pyramid::{GpuPyramid, PyramidLevels};
 pub use shaders::shader_sources_for_validation;
-pub use synth::{AtomicMode, GpuSynthOptions, GpuSynthesizer, SplatPlanes, StageTimes, SynthCounters};
+pub use synth::{
+    AtomicMode, GpuSynthOptions, GpuSynthesizer, SplatPlanes, StageTimes, SynthCounters,
+};

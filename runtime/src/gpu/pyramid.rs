@@ -5,7 +5,10 @@ use poisson::pyramid::{level_sizes, G, H1, H2, PAD, PYRAMID_SCALE};
 use poisson::Plane;
 
 use super::layout::{PassParams, PlaneSet};
-use super::util::{bind_group, compute_pipelines, read_f32, storage_entry, storage_zeroed, uniform_entry, uniform_init};
+use super::util::{
+    bind_group, compute_pipelines, read_f32, storage_entry, storage_zeroed, uniform_entry,
+    uniform_init,
+};
 use super::{shaders, GpuContext, GpuError};
 
 /// Workgroup edge of the per-pixel passes (`@workgroup_size(16, 16, 1)`).
@@ -38,7 +41,12 @@ impl PyramidPipelines {
         let mut constants: Vec<(&str, f64)> = Vec::new();
         constants.extend(names.iter().zip(H1).map(|(n, v)| (*n, v as f64)));
         constants.extend(names2.iter().zip(H2).map(|(n, v)| (*n, v as f64)));
-        constants.extend(["g_0", "g_1", "g_2"].iter().zip(G).map(|(n, v)| (*n, v as f64)));
+        constants.extend(
+            ["g_0", "g_1", "g_2"]
+                .iter()
+                .zip(G)
+                .map(|(n, v)| (*n, v as f64)),
+        );
         constants.push(("pad", PAD as f64));
         let mut p = compute_pipelines(
             ctx,
@@ -49,7 +57,12 @@ impl PyramidPipelines {
             &constants,
         )?
         .into_iter();
-        let mut next = || p.next().ok_or_else(|| GpuError::Wgpu { stage: "pyramid", message: "missing pipeline".into() });
+        let mut next = || {
+            p.next().ok_or_else(|| GpuError::Wgpu {
+                stage: "pyramid",
+                message: "missing pipeline".into(),
+            })
+        };
         Ok(Self {
             analysis: next()?,
             top: next()?,
@@ -121,7 +134,11 @@ impl PyramidFrame {
         }
         let total = offset;
         if total > u32::MAX as usize {
-            return Err(GpuError::TooLarge { what: "pyramid levels", bytes: 4 * total as u64, limit: 4 * u32::MAX as u64 });
+            return Err(GpuError::TooLarge {
+                what: "pyramid levels",
+                bytes: 4 * total as u64,
+                limit: 4 * u32::MAX as u64,
+            });
         }
         let synthesis_sets = analysis_sets.clone();
         let analysis = storage_zeroed(ctx, "pyramid analysis levels", 4 * total as u64)?;
@@ -131,7 +148,12 @@ impl PyramidFrame {
         let planes_u = planes as u32;
         let mut push = |kind: PassKind, params: PassParams| {
             let buf = uniform_init(ctx, "pyramid pass", bytemuck::bytes_of(&params));
-            let group = bind_group(ctx, "pyramid pass", &pipelines.layout, &[&buf, &analysis, &synthesis, layer_images]);
+            let group = bind_group(
+                ctx,
+                "pyramid pass",
+                &pipelines.layout,
+                &[&buf, &analysis, &synthesis, layer_images],
+            );
             let d = params.dst;
             passes.push(Pass {
                 kind,
@@ -140,26 +162,78 @@ impl PyramidFrame {
                 size: [d.width.div_ceil(TILE), d.height.div_ceil(TILE), planes_u],
             });
         };
-        let base = PassParams { planes: planes_u, scale, ..Default::default() };
+        let base = PassParams {
+            planes: planes_u,
+            scale,
+            ..Default::default()
+        };
         for i in 1..levels {
-            push(PassKind::Analysis, PassParams { src: analysis_sets[i - 1], dst: analysis_sets[i], ..base });
+            push(
+                PassKind::Analysis,
+                PassParams {
+                    src: analysis_sets[i - 1],
+                    dst: analysis_sets[i],
+                    ..base
+                },
+            );
         }
-        push(PassKind::Top, PassParams { src: analysis_sets[levels - 1], dst: synthesis_sets[levels - 1], ..base });
+        push(
+            PassKind::Top,
+            PassParams {
+                src: analysis_sets[levels - 1],
+                dst: synthesis_sets[levels - 1],
+                ..base
+            },
+        );
         for i in (0..levels - 1).rev() {
             push(
                 PassKind::Synthesis,
-                PassParams { src: synthesis_sets[i + 1], dst: synthesis_sets[i], aux: analysis_sets[i], ..base },
+                PassParams {
+                    src: synthesis_sets[i + 1],
+                    dst: synthesis_sets[i],
+                    aux: analysis_sets[i],
+                    ..base
+                },
             );
         }
-        push(PassKind::Output, PassParams { src: synthesis_sets[0], dst: layer_set, ..base });
-        push(PassKind::ExactOutput, PassParams { src: synthesis_sets[0], dst: layer_set, scale: 1.0, ..base });
-        Ok(Self { width, height, planes, analysis_sets, synthesis_sets, analysis, synthesis, passes })
+        push(
+            PassKind::Output,
+            PassParams {
+                src: synthesis_sets[0],
+                dst: layer_set,
+                ..base
+            },
+        );
+        push(
+            PassKind::ExactOutput,
+            PassParams {
+                src: synthesis_sets[0],
+                dst: layer_set,
+                scale: 1.0,
+                ..base
+            },
+        );
+        Ok(Self {
+            width,
+            height,
+            planes,
+            analysis_sets,
+            synthesis_sets,
+            analysis,
+            synthesis,
+            passes,
+        })
     }
 
     /// Records every pass. The Laplacian must be in analysis level 0 (inside its `PAD` border).
     /// With `exact`, skips the pyramid and runs only an output pass with scale 1 (exact
     /// integration: the primal planes were uploaded into synthesis level 0).
-    pub(crate) fn encode(&self, pipelines: &PyramidPipelines, pass: &mut wgpu::ComputePass<'_>, exact: bool) {
+    pub(crate) fn encode(
+        &self,
+        pipelines: &PyramidPipelines,
+        pass: &mut wgpu::ComputePass<'_>,
+        exact: bool,
+    ) {
         for p in &self.passes {
             let pipeline = match (p.kind, exact) {
                 (PassKind::ExactOutput, true) | (PassKind::Output, false) => &pipelines.output,
@@ -176,7 +250,13 @@ impl PyramidFrame {
 
     /// Uploads `planes` (each `width x height`, unpadded) into `set`'s level of `buffer`,
     /// zeroing the `PAD` border.
-    pub(crate) fn upload_padded(&self, ctx: &GpuContext, buffer: &wgpu::Buffer, set: PlaneSet, planes: &[&Plane]) {
+    pub(crate) fn upload_padded(
+        &self,
+        ctx: &GpuContext,
+        buffer: &wgpu::Buffer,
+        set: PlaneSet,
+        planes: &[&Plane],
+    ) {
         let (w0, h0) = (set.width as usize, set.height as usize);
         let mut data = vec![0f32; w0 * h0 * planes.len()];
         for (p, plane) in planes.iter().enumerate() {
@@ -186,17 +266,33 @@ impl PyramidFrame {
                 data[dst..dst + n].copy_from_slice(&plane.row(y)[..n]);
             }
         }
-        ctx.queue.write_buffer(buffer, 4 * set.offset as u64, bytemuck::cast_slice(&data));
+        ctx.queue
+            .write_buffer(buffer, 4 * set.offset as u64, bytemuck::cast_slice(&data));
     }
 
     /// Reads back every plane of one level (`set` in `buffer`).
-    pub(crate) fn read_level(&self, ctx: &GpuContext, buffer: &wgpu::Buffer, set: PlaneSet) -> Result<Vec<Plane>, GpuError> {
+    pub(crate) fn read_level(
+        &self,
+        ctx: &GpuContext,
+        buffer: &wgpu::Buffer,
+        set: PlaneSet,
+    ) -> Result<Vec<Plane>, GpuError> {
         let n = set.plane_len();
-        let data = read_f32(ctx, "pyramid level", buffer, 4 * set.offset as u64, 4 * (n * self.planes) as u64)?;
+        let data = read_f32(
+            ctx,
+            "pyramid level",
+            buffer,
+            4 * set.offset as u64,
+            4 * (n * self.planes) as u64,
+        )?;
         Ok(data
             .chunks_exact(n.max(1))
             .take(self.planes)
-            .map(|c| Plane { width: set.width as usize, height: set.height as usize, data: c.to_vec() })
+            .map(|c| Plane {
+                width: set.width as usize,
+                height: set.height as usize,
+                data: c.to_vec(),
+            })
             .collect())
     }
 }
@@ -229,7 +325,11 @@ struct StandaloneFrame {
 impl GpuPyramid {
     /// Compiles the pyramid pipelines.
     pub fn new(ctx: &GpuContext) -> Result<Self, GpuError> {
-        Ok(Self { ctx: ctx.clone(), pipelines: PyramidPipelines::new(ctx)?, frame: None })
+        Ok(Self {
+            ctx: ctx.clone(),
+            pipelines: PyramidPipelines::new(ctx)?,
+            frame: None,
+        })
     }
 
     /// Integrates each Laplacian plane (all the same size) like `poisson::integrate_pyramid`.
@@ -241,14 +341,25 @@ impl GpuPyramid {
         if w == 0 || h == 0 {
             return Err(GpuError::Input("empty plane".into()));
         }
-        if laplacians.iter().any(|p| (p.width, p.height) != (w, h) || p.data.len() != w * h) {
+        if laplacians
+            .iter()
+            .any(|p| (p.width, p.height) != (w, h) || p.data.len() != w * h)
+        {
             return Err(GpuError::Input("planes of different sizes".into()));
         }
         let reuse = matches!(&self.frame, Some(f) if (f.frame.width, f.frame.height, f.frame.planes) == (w, h, n));
         if !reuse {
             let set = PlaneSet::packed(w, h, 0);
             let images = storage_zeroed(&self.ctx, "pyramid output", 4 * (w * h * n) as u64)?;
-            let frame = PyramidFrame::new(&self.ctx, &self.pipelines, w, h, n, (&images, set), PYRAMID_SCALE)?;
+            let frame = PyramidFrame::new(
+                &self.ctx,
+                &self.pipelines,
+                w,
+                h,
+                n,
+                (&images, set),
+                PYRAMID_SCALE,
+            )?;
             self.frame = Some(StandaloneFrame { frame, images, set });
         }
         let Some(StandaloneFrame { frame, images, set }) = &self.frame else {
@@ -259,21 +370,37 @@ impl GpuPyramid {
         let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
         encoder.clear_buffer(images, 0, None);
         {
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("pyramid"), timestamp_writes: None });
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("pyramid"),
+                timestamp_writes: None,
+            });
             frame.encode(&self.pipelines, &mut pass, false);
         }
         self.ctx.queue.submit([encoder.finish()]);
-        let data = read_f32(&self.ctx, "pyramid output", images, 0, 4 * (w * h * n) as u64)?;
+        let data = read_f32(
+            &self.ctx,
+            "pyramid output",
+            images,
+            0,
+            4 * (w * h * n) as u64,
+        )?;
         Ok(data
             .chunks_exact(set.plane_len())
-            .map(|c| Plane { width: w, height: h, data: c.to_vec() })
+            .map(|c| Plane {
+                width: w,
+                height: h,
+                data: c.to_vec(),
+            })
             .collect())
     }
 
     /// Every level of the last [`GpuPyramid::integrate`] call.
     pub fn levels(&self) -> Result<PyramidLevels, GpuError> {
         let Some(StandaloneFrame { frame, .. }) = &self.frame else {
-            return Ok(PyramidLevels { analysis: Vec::new(), synthesis: Vec::new() });
+            return Ok(PyramidLevels {
+                analysis: Vec::new(),
+                synthesis: Vec::new(),
+            });
         };
         let analysis = frame
             .analysis_sets
@@ -285,6 +412,9 @@ impl GpuPyramid {
             .iter()
             .map(|&s| frame.read_level(&self.ctx, &frame.synthesis, s))
             .collect::<Result<_, _>>()?;
-        Ok(PyramidLevels { analysis, synthesis })
+        Ok(PyramidLevels {
+            analysis,
+            synthesis,
+        })
     }
 }

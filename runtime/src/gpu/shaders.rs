@@ -15,7 +15,11 @@ pub(crate) fn pyramid() -> String {
 
 /// The splat stage (sparse, dense and copied records), with float atomics or compare-exchange.
 pub(crate) fn splat(float_atomics: bool) -> String {
-    let atomics = if float_atomics { ATOMIC_F32 } else { ATOMIC_CAS };
+    let atomics = if float_atomics {
+        ATOMIC_F32
+    } else {
+        ATOMIC_CAS
+    };
     format!("{COMMON}\n{atomics}\n{SPLAT}\n{DENSE}")
 }
 

@@ -7,7 +7,7 @@
 
 use std::time::Instant;
 
-use poisson::pyramid::{PAD, PYRAMID_SCALE};
+use poisson::pyramid::{level_sizes, PAD, PYRAMID_SCALE};
 use poisson::{ExactIntegrator, Plane};
 use psf_db::{DenseEntry, PsfDatabase, SPARSE_SLOT};
 use rayon::prelude::*;
@@ -47,6 +47,9 @@ pub struct GpuSynthOptions {
     /// Invocations that share one record's spreadlets (a power of two, 1 to 64; default 8:
     /// many records of small PSFs keep the device busy, 64 suits few large PSFs).
     pub lanes_per_record: u32,
+    /// At most this many layers are drawn together (default: all that fit the device's
+    /// largest storage binding; lower only to test the chunked path).
+    pub max_layers_per_chunk: u32,
 }
 
 impl Default for GpuSynthOptions {
@@ -56,6 +59,7 @@ impl Default for GpuSynthOptions {
             composite: CompositeOptions::default(),
             atomics: AtomicMode::default(),
             lanes_per_record: 8,
+            max_layers_per_chunk: u32::MAX,
         }
     }
 }
@@ -136,7 +140,11 @@ impl DbBuffers {
         let limit = ctx.limits().max_storage_buffer_binding_size;
         let check = |what: &'static str, bytes: usize| {
             if bytes as u64 > limit {
-                Err(GpuError::TooLarge { what, bytes: bytes as u64, limit })
+                Err(GpuError::TooLarge {
+                    what,
+                    bytes: bytes as u64,
+                    limit,
+                })
             } else {
                 Ok(())
             }
@@ -174,29 +182,46 @@ impl DbBuffers {
 struct FrameBuffers {
     key: (u32, u32, u32, u32),
     frame_uniform: wgpu::Buffer,
-    targets_uniform: wgpu::Buffer,
     records: wgpu::Buffer,
     record_capacity: usize,
     layer_set: PlaneSet,
     layer_images: wgpu::Buffer,
     pyramid: PyramidFrame,
-    splat_group: wgpu::BindGroup,
-    composite_group: wgpu::BindGroup,
-    _composite_params: wgpu::Buffer,
+    /// Layers drawn per chunk (all of them unless the buffers would exceed a binding).
+    chunk_layers: u32,
+    chunks: Vec<Chunk>,
     output: wgpu::Buffer,
+    /// Running coverage between chunks (bound in the composite groups).
+    _coverage: wgpu::Buffer,
     output_staging: wgpu::Buffer,
     output_bytes: u64,
     queries: Option<Queries>,
+}
+
+/// A run of layers drawn, integrated and composited together in the frame buffers.
+struct Chunk {
+    layer_count: u32,
+    splat_group: wgpu::BindGroup,
+    composite_group: wgpu::BindGroup,
+    // Kept alive with the bind groups.
+    _targets: wgpu::Buffer,
+    _composite_params: wgpu::Buffer,
 }
 
 struct Queries {
     set: wgpu::QuerySet,
     resolve: wgpu::Buffer,
     staging: wgpu::Buffer,
+    count: u32,
 }
 
-/// Timestamp slots: begin/end of splat, integrate, composite.
-const QUERY_COUNT: u32 = 6;
+/// Timestamp slots per chunk: begin/end of splat, integrate, composite.
+const QUERIES_PER_CHUNK: u32 = 6;
+
+/// Composite flags (`shaders/composite.wgsl`).
+const RENORMALIZE: u32 = 1;
+const FIRST_CHUNK: u32 = 2;
+const LAST_CHUNK: u32 = 4;
 
 /// The synthesis pipeline on the GPU: compiled pipelines and the uploaded database, reused for
 /// every frame.
@@ -224,7 +249,11 @@ enum Until {
 
 impl GpuSynthesizer {
     /// Compiles the pipelines and uploads `db` (once).
-    pub fn new(ctx: &GpuContext, db: &PsfDatabase, options: GpuSynthOptions) -> Result<Self, GpuError> {
+    pub fn new(
+        ctx: &GpuContext,
+        db: &PsfDatabase,
+        options: GpuSynthOptions,
+    ) -> Result<Self, GpuError> {
         Self::build(ctx, Some(db), options)
     }
 
@@ -234,27 +263,35 @@ impl GpuSynthesizer {
         Self::build(ctx, None, options)
     }
 
-    fn build(ctx: &GpuContext, db: Option<&PsfDatabase>, options: GpuSynthOptions) -> Result<Self, GpuError> {
+    fn build(
+        ctx: &GpuContext,
+        db: Option<&PsfDatabase>,
+        options: GpuSynthOptions,
+    ) -> Result<Self, GpuError> {
         let lanes = options.lanes_per_record;
         if !(1..=64).contains(&lanes) || !lanes.is_power_of_two() {
-            return Err(GpuError::Input(format!("lanes per record must be a power of two in 1..=64, not {lanes}")));
+            return Err(GpuError::Input(format!(
+                "lanes per record must be a power of two in 1..=64, not {lanes}"
+            )));
         }
         let float_atomics = ctx.has_float_atomics() && options.atomics == AtomicMode::Auto;
-        let splat_layout = ctx.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("splat"),
-            entries: &[
-                uniform_entry(0),
-                uniform_entry(1),
-                storage_entry(2, true),
-                storage_entry(3, true),
-                storage_entry(4, true),
-                storage_entry(5, true),
-                storage_entry(6, true),
-                storage_entry(7, true),
-                storage_entry(8, false),
-                storage_entry(9, false),
-            ],
-        });
+        let splat_layout = ctx
+            .device
+            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some("splat"),
+                entries: &[
+                    uniform_entry(0),
+                    uniform_entry(1),
+                    storage_entry(2, true),
+                    storage_entry(3, true),
+                    storage_entry(4, true),
+                    storage_entry(5, true),
+                    storage_entry(6, true),
+                    storage_entry(7, true),
+                    storage_entry(8, false),
+                    storage_entry(9, false),
+                ],
+            });
         let splat = compute_pipelines(
             ctx,
             "splat",
@@ -264,11 +301,20 @@ impl GpuSynthesizer {
             &[("LANES", lanes as f64)],
         )?
         .pop()
-        .ok_or_else(|| GpuError::Wgpu { stage: "splat", message: "no pipeline".into() })?;
-        let composite_layout = ctx.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("composite"),
-            entries: &[uniform_entry(0), storage_entry(1, true), storage_entry(2, false)],
-        });
+        .ok_or_else(|| GpuError::Wgpu {
+            stage: "splat",
+            message: "no pipeline".into(),
+        })?;
+        let composite_layout =
+            ctx.device
+                .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                    label: Some("composite"),
+                    entries: &[
+                        uniform_entry(0),
+                        storage_entry(1, true),
+                        storage_entry(2, false),
+                    ],
+                });
         let composite = compute_pipelines(
             ctx,
             "composite",
@@ -278,7 +324,10 @@ impl GpuSynthesizer {
             &[],
         )?
         .pop()
-        .ok_or_else(|| GpuError::Wgpu { stage: "composite", message: "no pipeline".into() })?;
+        .ok_or_else(|| GpuError::Wgpu {
+            stage: "composite",
+            message: "no pipeline".into(),
+        })?;
         let pyramid = PyramidPipelines::new(ctx)?;
         let db = DbBuffers::upload(ctx, db)?;
         ctx.take_error("database upload")?;
@@ -293,7 +342,11 @@ impl GpuSynthesizer {
             composite_layout,
             composite,
             frame: None,
-            counters: SynthCounters { pipeline_builds: 1, database_uploads: 1, ..Default::default() },
+            counters: SynthCounters {
+                pipeline_builds: 1,
+                database_uploads: 1,
+                ..Default::default()
+            },
         })
     }
 
@@ -341,7 +394,9 @@ impl GpuSynthesizer {
         integrator: Integrator,
     ) -> Result<(RgbaImage, StageTimes), GpuError> {
         let t0 = Instant::now();
-        let mut times = self.execute(frame, records, integrator, Until::Composite)?;
+        let mut times = self.execute(frame, records, integrator, Until::Composite, |_, _, _| {
+            Ok(())
+        })?;
         let t = Instant::now();
         let fb = self.frame_buffers()?;
         let data = map_read(&self.ctx, "output", &fb.output_staging, fb.output_bytes)?;
@@ -356,18 +411,51 @@ impl GpuSynthesizer {
         }
         times.readback_ms = ms(t);
         times.total_ms = ms(t0);
-        Ok((RgbaImage { width: w, height: h, pixels }, times))
+        Ok((
+            RgbaImage {
+                width: w,
+                height: h,
+                pixels,
+            },
+            times,
+        ))
     }
 
     /// Stage-level entry point: splat only, and read back the Laplacian and direct planes.
-    pub fn splat_planes(&mut self, frame: &FrameParams, records: &[SplatRecord]) -> Result<SplatPlanes, GpuError> {
-        self.execute(frame, records, Integrator::Pyramid, Until::Splat)?;
-        let fb = self.frame_buffers()?;
+    pub fn splat_planes(
+        &mut self,
+        frame: &FrameParams,
+        records: &[SplatRecord],
+    ) -> Result<SplatPlanes, GpuError> {
         let (pw, ph) = (frame.padded_width as usize, frame.padded_height as usize);
-        let padded = fb.pyramid.read_level(&self.ctx, &fb.pyramid.analysis, fb.pyramid.analysis_sets[0])?;
-        let laplacian = padded.iter().map(|p| p.crop(PAD as isize, PAD as isize, pw, ph)).collect();
-        let direct = fb.pyramid.read_level(&self.ctx, &fb.layer_images, fb.layer_set)?;
-        Ok(SplatPlanes { laplacian, direct })
+        let mut out = SplatPlanes {
+            laplacian: Vec::new(),
+            direct: Vec::new(),
+        };
+        self.execute(
+            frame,
+            records,
+            Integrator::Pyramid,
+            Until::Splat,
+            |ctx, fb, chunk| {
+                let n = chunk.layer_count as usize * 4;
+                let pyr = &fb.pyramid;
+                let padded = pyr.read_level(ctx, &pyr.analysis, pyr.analysis_sets[0])?;
+                out.laplacian.extend(
+                    padded
+                        .iter()
+                        .take(n)
+                        .map(|p| p.crop(PAD as isize, PAD as isize, pw, ph)),
+                );
+                out.direct.extend(
+                    pyr.read_level(ctx, &fb.layer_images, fb.layer_set)?
+                        .into_iter()
+                        .take(n),
+                );
+                Ok(())
+            },
+        )?;
+        Ok(out)
     }
 
     /// Stage-level entry point: splat and integrate, and read back the layer images (primal
@@ -378,22 +466,56 @@ impl GpuSynthesizer {
         records: &[SplatRecord],
         integrator: Integrator,
     ) -> Result<Vec<Plane>, GpuError> {
-        self.execute(frame, records, integrator, Until::Integrate)?;
-        let fb = self.frame_buffers()?;
-        fb.pyramid.read_level(&self.ctx, &fb.layer_images, fb.layer_set)
+        let mut out = Vec::new();
+        self.execute(
+            frame,
+            records,
+            integrator,
+            Until::Integrate,
+            |ctx, fb, chunk| {
+                let n = chunk.layer_count as usize * 4;
+                out.extend(
+                    fb.pyramid
+                        .read_level(ctx, &fb.layer_images, fb.layer_set)?
+                        .into_iter()
+                        .take(n),
+                );
+                Ok(())
+            },
+        )?;
+        Ok(out)
+    }
+
+    /// Layers drawn together in the last frame (fewer than the frame's when its buffers would
+    /// exceed the device's binding size: the frame then runs in chunks of layers).
+    pub fn layers_per_chunk(&self) -> Option<u32> {
+        self.frame.as_ref().map(|f| f.chunk_layers)
     }
 
     fn frame_buffers(&self) -> Result<&FrameBuffers, GpuError> {
-        self.frame.as_ref().ok_or_else(|| GpuError::Input("no frame has run".into()))
+        self.frame
+            .as_ref()
+            .ok_or_else(|| GpuError::Input("no frame has run".into()))
     }
 
     fn validate(frame: &FrameParams, records: &[SplatRecord]) -> Result<(), GpuError> {
         let bad = |m: String| Err(GpuError::Input(m));
         if frame.width == 0 || frame.height == 0 || frame.layers == 0 {
-            return bad(format!("empty frame {}x{} with {} layers", frame.width, frame.height, frame.layers));
+            return bad(format!(
+                "empty frame {}x{} with {} layers",
+                frame.width, frame.height, frame.layers
+            ));
         }
-        if Some(frame.padded_width) != frame.pad.checked_mul(2).and_then(|p| p.checked_add(frame.width))
-            || Some(frame.padded_height) != frame.pad.checked_mul(2).and_then(|p| p.checked_add(frame.height))
+        if Some(frame.padded_width)
+            != frame
+                .pad
+                .checked_mul(2)
+                .and_then(|p| p.checked_add(frame.width))
+            || Some(frame.padded_height)
+                != frame
+                    .pad
+                    .checked_mul(2)
+                    .and_then(|p| p.checked_add(frame.height))
         {
             return bad(format!(
                 "padded size {}x{} is not {}x{} plus 2 x {} px",
@@ -401,7 +523,11 @@ impl GpuSynthesizer {
             ));
         }
         if frame.record_count as usize != records.len() {
-            return bad(format!("frame says {} records, {} given", frame.record_count, records.len()));
+            return bad(format!(
+                "frame says {} records, {} given",
+                frame.record_count,
+                records.len()
+            ));
         }
         Ok(())
     }
@@ -410,105 +536,205 @@ impl GpuSynthesizer {
     /// buffer when it is too small.
     fn prepare(&mut self, frame: &FrameParams, records: usize) -> Result<(), GpuError> {
         let key = (frame.width, frame.height, frame.pad, frame.layers);
-        let ctx = &self.ctx;
         if self.frame.as_ref().is_none_or(|f| f.key != key) {
             self.frame = None;
-            let (pw, ph) = (frame.padded_width as usize, frame.padded_height as usize);
-            let planes = frame.layers as usize * 4;
-            let plane_bytes = 4 * (pw * ph) as u64;
-            let layer_set = PlaneSet::packed(pw, ph, 0);
-            let layer_images = storage_zeroed(ctx, "layer images", plane_bytes * planes as u64)?;
-            let pyramid = PyramidFrame::new(ctx, &self.pyramid, pw, ph, planes, (&layer_images, layer_set), PYRAMID_SCALE)?;
-            let (w, h) = (frame.width as usize, frame.height as usize);
-            let output_bytes = 16 * (w * h) as u64;
-            let output = storage_zeroed(ctx, "output image", output_bytes)?;
-            let output_staging = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("output staging"),
-                size: output.size(),
-                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
+            let fb = self.frame_buffers_for(frame, key)?;
+            self.counters.frame_allocations += 1;
+            self.frame = Some(fb);
+        }
+        let needs_records = self
+            .frame
+            .as_ref()
+            .is_some_and(|f| f.record_capacity < records);
+        if needs_records {
+            let capacity = records.next_power_of_two();
+            let buf = storage_zeroed(
+                &self.ctx,
+                "records",
+                (capacity * size_of::<SplatRecord>()) as u64,
+            )?;
+            let fb = self
+                .frame
+                .as_ref()
+                .ok_or_else(|| GpuError::Input("no frame".into()))?;
+            let groups: Vec<wgpu::BindGroup> = fb
+                .chunks
+                .iter()
+                .map(|c| {
+                    self.splat_group(
+                        &fb.frame_uniform,
+                        &c._targets,
+                        &buf,
+                        &fb.pyramid.analysis,
+                        &fb.layer_images,
+                    )
+                })
+                .collect();
+            self.counters.record_allocations += 1;
+            if let Some(fb) = self.frame.as_mut() {
+                fb.records = buf;
+                fb.record_capacity = capacity;
+                for (c, g) in fb.chunks.iter_mut().zip(groups) {
+                    c.splat_group = g;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn frame_buffers_for(
+        &self,
+        frame: &FrameParams,
+        key: (u32, u32, u32, u32),
+    ) -> Result<FrameBuffers, GpuError> {
+        let ctx = &self.ctx;
+        let (pw, ph) = (frame.padded_width as usize, frame.padded_height as usize);
+        // Layers per chunk: the most whose planes fit one binding (the pyramid levels are the
+        // largest buffer), capped by the option.
+        let limit = ctx
+            .limits()
+            .max_storage_buffer_binding_size
+            .min(ctx.limits().max_buffer_size);
+        let level_px: u64 = level_sizes(pw, ph)
+            .iter()
+            .map(|&(w, h)| (w * h) as u64)
+            .sum();
+        let per_layer = 16 * level_px.max((pw * ph) as u64);
+        let fit = u32::try_from(limit / per_layer).unwrap_or(u32::MAX);
+        let chunk_layers = frame
+            .layers
+            .min(fit)
+            .min(self.options.max_layers_per_chunk.max(1));
+        if chunk_layers == 0 {
+            return Err(GpuError::TooLarge {
+                what: "one layer's planes",
+                bytes: per_layer,
+                limit,
             });
-            let composite_params = uniform_init(
-                ctx,
-                "composite",
-                bytemuck::bytes_of(&PassParams {
-                    src: layer_set,
-                    dst: PlaneSet::packed(w, h, 0),
-                    planes: frame.layers,
-                    border: frame.pad,
-                    flags: u32::from(self.options.composite.renormalize_coverage),
+        }
+        let planes = chunk_layers as usize * 4;
+        let layer_set = PlaneSet::packed(pw, ph, 0);
+        let layer_images = storage_zeroed(ctx, "layer images", 4 * (pw * ph * planes) as u64)?;
+        let pyramid = PyramidFrame::new(
+            ctx,
+            &self.pyramid,
+            pw,
+            ph,
+            planes,
+            (&layer_images, layer_set),
+            PYRAMID_SCALE,
+        )?;
+        let (w, h) = (frame.width as usize, frame.height as usize);
+        let output_bytes = 16 * (w * h) as u64;
+        let output = storage_zeroed(ctx, "output image", output_bytes)?;
+        let coverage = storage_zeroed(ctx, "output coverage", 4 * (w * h) as u64)?;
+        let output_staging = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("output staging"),
+            size: output.size(),
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let frame_uniform = uniform_init(ctx, "frame", bytemuck::bytes_of(frame));
+        let records = storage_zeroed(ctx, "records", 16)?;
+        let n_chunks = frame.layers.div_ceil(chunk_layers);
+        let renormalize = if self.options.composite.renormalize_coverage {
+            RENORMALIZE
+        } else {
+            0
+        };
+        let chunks = (0..n_chunks)
+            .map(|k| {
+                let layer_base = k * chunk_layers;
+                let layer_count = chunk_layers.min(frame.layers - layer_base);
+                let targets = SplatTargets {
+                    laplacian: pyramid.analysis_sets[0],
+                    direct: layer_set,
+                    border: PAD as u32,
+                    rotation: match self.options.rotation {
+                        RotationSampling::Bilinear => 0,
+                        RotationSampling::Nearest => 1,
+                    },
+                    psf_count: self.db.psf_count,
+                    channels: self.db.channels,
+                    layer_base,
+                    layer_count,
                     ..Default::default()
-                }),
-            );
-            let composite_group =
-                bind_group(ctx, "composite", &self.composite_layout, &[&composite_params, &layer_images, &output]);
-            let frame_uniform = uniform_init(ctx, "frame", bytemuck::bytes_of(frame));
-            let targets = SplatTargets {
-                laplacian: pyramid.analysis_sets[0],
-                direct: layer_set,
-                border: PAD as u32,
-                rotation: match self.options.rotation {
-                    RotationSampling::Bilinear => 0,
-                    RotationSampling::Nearest => 1,
-                },
-                psf_count: self.db.psf_count,
-                channels: self.db.channels,
-            };
-            let targets_uniform = uniform_init(ctx, "splat targets", bytemuck::bytes_of(&targets));
-            let records_buf = storage_zeroed(ctx, "records", 16)?;
-            let splat_group = self.splat_group(&frame_uniform, &targets_uniform, &records_buf, &pyramid.analysis, &layer_images);
-            let queries = ctx.has_timestamps().then(|| Queries {
+                };
+                let targets = uniform_init(ctx, "splat targets", bytemuck::bytes_of(&targets));
+                let splat_group = self.splat_group(
+                    &frame_uniform,
+                    &targets,
+                    &records,
+                    &pyramid.analysis,
+                    &layer_images,
+                );
+                let first = if k == 0 { FIRST_CHUNK } else { 0 };
+                let last = if k + 1 == n_chunks { LAST_CHUNK } else { 0 };
+                let params = uniform_init(
+                    ctx,
+                    "composite",
+                    bytemuck::bytes_of(&PassParams {
+                        src: layer_set,
+                        dst: PlaneSet::packed(w, h, 0),
+                        planes: layer_count,
+                        border: frame.pad,
+                        flags: renormalize | first | last,
+                        ..Default::default()
+                    }),
+                );
+                let composite_group = bind_group(
+                    ctx,
+                    "composite",
+                    &self.composite_layout,
+                    &[&params, &layer_images, &output, &coverage],
+                );
+                Chunk {
+                    layer_count,
+                    splat_group,
+                    composite_group,
+                    _targets: targets,
+                    _composite_params: params,
+                }
+            })
+            .collect();
+        let count = QUERIES_PER_CHUNK * n_chunks;
+        let queries =
+            (ctx.has_timestamps() && count <= wgpu::QUERY_SET_MAX_QUERIES).then(|| Queries {
                 set: ctx.device.create_query_set(&wgpu::QuerySetDescriptor {
                     label: Some("stage timestamps"),
                     ty: wgpu::QueryType::Timestamp,
-                    count: QUERY_COUNT,
+                    count,
                 }),
                 resolve: ctx.device.create_buffer(&wgpu::BufferDescriptor {
                     label: Some("timestamps"),
-                    size: 8 * QUERY_COUNT as u64,
+                    size: 8 * count as u64,
                     usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
                     mapped_at_creation: false,
                 }),
                 staging: ctx.device.create_buffer(&wgpu::BufferDescriptor {
                     label: Some("timestamps staging"),
-                    size: 8 * QUERY_COUNT as u64,
+                    size: 8 * count as u64,
                     usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
                     mapped_at_creation: false,
                 }),
+                count,
             });
-            self.counters.frame_allocations += 1;
-            self.frame = Some(FrameBuffers {
-                key,
-                frame_uniform,
-                targets_uniform,
-                records: records_buf,
-                record_capacity: 0,
-                layer_set,
-                layer_images,
-                pyramid,
-                splat_group,
-                composite_group,
-                _composite_params: composite_params,
-                output,
-                output_staging,
-                output_bytes,
-                queries,
-            });
-        }
-        let needs_records = self.frame.as_ref().is_some_and(|f| f.record_capacity < records);
-        if needs_records {
-            let capacity = records.next_power_of_two();
-            let buf = storage_zeroed(ctx, "records", (capacity * size_of::<SplatRecord>()) as u64)?;
-            let fb = self.frame.as_ref().ok_or_else(|| GpuError::Input("no frame".into()))?;
-            let group = self.splat_group(&fb.frame_uniform, &fb.targets_uniform, &buf, &fb.pyramid.analysis, &fb.layer_images);
-            self.counters.record_allocations += 1;
-            if let Some(fb) = self.frame.as_mut() {
-                fb.records = buf;
-                fb.record_capacity = capacity;
-                fb.splat_group = group;
-            }
-        }
-        Ok(())
+        Ok(FrameBuffers {
+            key,
+            frame_uniform,
+            records,
+            record_capacity: 0,
+            layer_set,
+            layer_images,
+            pyramid,
+            chunk_layers,
+            chunks,
+            output,
+            _coverage: coverage,
+            output_staging,
+            output_bytes,
+            queries,
+        })
     }
 
     fn splat_group(
@@ -539,121 +765,172 @@ impl GpuSynthesizer {
         )
     }
 
-    /// Runs the stages up to `until`; with `Until::Composite` the image is copied into the
-    /// output staging buffer (and the timestamps resolved), all submitted.
+    /// Runs the stages up to `until`, chunk of layers by chunk; after each chunk's last stage
+    /// (when `until` is not `Composite`) the work is finished and `readback` called. With
+    /// `Until::Composite` the image is copied into the output staging buffer (and the
+    /// timestamps resolved), all submitted.
     fn execute(
         &mut self,
         frame: &FrameParams,
         records: &[SplatRecord],
         integrator: Integrator,
         until: Until,
+        mut readback: impl FnMut(&GpuContext, &FrameBuffers, &Chunk) -> Result<(), GpuError>,
     ) -> Result<StageTimes, GpuError> {
         Self::validate(frame, records)?;
         let t_upload = Instant::now();
         self.prepare(frame, records.len())?;
         let ctx = &self.ctx;
-        let fb = self.frame.as_ref().ok_or_else(|| GpuError::Input("no frame".into()))?;
-        ctx.queue.write_buffer(&fb.frame_uniform, 0, bytemuck::bytes_of(frame));
+        let fb = self
+            .frame
+            .as_ref()
+            .ok_or_else(|| GpuError::Input("no frame".into()))?;
+        ctx.queue
+            .write_buffer(&fb.frame_uniform, 0, bytemuck::bytes_of(frame));
         if !records.is_empty() {
-            ctx.queue.write_buffer(&fb.records, 0, bytemuck::cast_slice(records));
+            ctx.queue
+                .write_buffer(&fb.records, 0, bytemuck::cast_slice(records));
         }
-        let mut times = StageTimes { upload_ms: ms(t_upload), ..Default::default() };
-        // GPU timestamps only when every stage runs in one submission.
-        let queries = fb.queries.as_ref().filter(|_| integrator == Integrator::Pyramid);
-        times.gpu_timestamps = queries.is_some() && until == Until::Composite;
-        let ts = |i: u32| {
-            queries.map(|q| wgpu::ComputePassTimestampWrites {
-                query_set: &q.set,
-                beginning_of_pass_write_index: Some(2 * i),
-                end_of_pass_write_index: Some(2 * i + 1),
-            })
+        let mut times = StageTimes {
+            upload_ms: ms(t_upload),
+            ..Default::default()
         };
+        // GPU timestamps only when every stage runs in one submission.
+        let queries = fb
+            .queries
+            .as_ref()
+            .filter(|_| integrator == Integrator::Pyramid && until == Until::Composite);
+        times.gpu_timestamps = queries.is_some();
         let wall = !times.gpu_timestamps;
-
-        // Splat.
-        let t = Instant::now();
-        let mut enc = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("frame") });
+        let new_encoder = || {
+            ctx.device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                    label: Some("frame"),
+                })
+        };
+        let finish =
+            |enc: wgpu::CommandEncoder, stage: &'static str, t: Instant| -> Result<f64, GpuError> {
+                ctx.queue.submit([enc.finish()]);
+                ctx.wait(stage)?;
+                Ok(ms(t))
+            };
         let lap = fb.pyramid.analysis_sets[0];
-        enc.clear_buffer(&fb.pyramid.analysis, 4 * lap.offset as u64, Some(4 * (lap.stride as u64) * (frame.layers as u64 * 4)));
-        enc.clear_buffer(&fb.layer_images, 0, None);
-        {
-            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("splat"), timestamp_writes: ts(0) });
-            let n = (records.len() as u32).div_ceil(64 / self.options.lanes_per_record);
-            if n > 0 {
-                let max = ctx.limits().max_compute_workgroups_per_dimension.max(1);
-                let x = n.min(max);
-                pass.set_pipeline(&self.splat);
-                pass.set_bind_group(0, &fb.splat_group, &[]);
-                pass.dispatch_workgroups(x, n.div_ceil(x), 1);
+        let (pw, ph) = (frame.padded_width as usize, frame.padded_height as usize);
+        let n = (records.len() as u32).div_ceil(64 / self.options.lanes_per_record);
+        let max = ctx.limits().max_compute_workgroups_per_dimension.max(1);
+        let mut enc = new_encoder();
+        for (k, chunk) in fb.chunks.iter().enumerate() {
+            let ts = |stage: u32| {
+                queries.map(|q| wgpu::ComputePassTimestampWrites {
+                    query_set: &q.set,
+                    beginning_of_pass_write_index: Some(QUERIES_PER_CHUNK * k as u32 + 2 * stage),
+                    end_of_pass_write_index: Some(QUERIES_PER_CHUNK * k as u32 + 2 * stage + 1),
+                })
+            };
+
+            // Splat.
+            let t = Instant::now();
+            enc.clear_buffer(
+                &fb.pyramid.analysis,
+                4 * lap.offset as u64,
+                Some(4 * lap.stride as u64 * fb.pyramid.planes as u64),
+            );
+            enc.clear_buffer(&fb.layer_images, 0, None);
+            {
+                let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some("splat"),
+                    timestamp_writes: ts(0),
+                });
+                if n > 0 {
+                    let x = n.min(max);
+                    pass.set_pipeline(&self.splat);
+                    pass.set_bind_group(0, &chunk.splat_group, &[]);
+                    pass.dispatch_workgroups(x, n.div_ceil(x), 1);
+                }
+            }
+            if wall {
+                times.splat_ms += finish(std::mem::replace(&mut enc, new_encoder()), "splat", t)?;
+            }
+            if until == Until::Splat {
+                readback(ctx, fb, chunk)?;
+                continue;
+            }
+
+            // Integrate.
+            let t = Instant::now();
+            if integrator == Integrator::Exact {
+                // Exact integration is an FFT on the CPU (as `poisson::ExactIntegrator`): read
+                // the Laplacian back, integrate, upload into synthesis level 0, run the output
+                // pass with scale 1. (`wall` holds here: the splat above has finished.)
+                let padded = fb.pyramid.read_level(ctx, &fb.pyramid.analysis, lap)?;
+                let exact = ExactIntegrator::new(pw, ph);
+                let primal: Vec<Plane> = padded
+                    .par_iter()
+                    .map(|p| {
+                        let lap = p.crop(PAD as isize, PAD as isize, pw, ph);
+                        if lap.data.iter().all(|&v| v == 0.0) {
+                            Plane::new(pw, ph)
+                        } else {
+                            exact.integrate(&lap)
+                        }
+                    })
+                    .collect();
+                let refs: Vec<&Plane> = primal.iter().collect();
+                fb.pyramid.upload_padded(
+                    ctx,
+                    &fb.pyramid.synthesis,
+                    fb.pyramid.synthesis_sets[0],
+                    &refs,
+                );
+                let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some("integrate"),
+                    timestamp_writes: None,
+                });
+                fb.pyramid.encode(&self.pyramid, &mut pass, true);
+            } else {
+                let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some("integrate"),
+                    timestamp_writes: ts(1),
+                });
+                fb.pyramid.encode(&self.pyramid, &mut pass, false);
+            }
+            if wall {
+                times.integrate_ms +=
+                    finish(std::mem::replace(&mut enc, new_encoder()), "integrate", t)?;
+            }
+            if until == Until::Integrate {
+                readback(ctx, fb, chunk)?;
+                continue;
+            }
+
+            // Composite (back to front: chunk by chunk, layers in order within each).
+            let t = Instant::now();
+            {
+                let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some("composite"),
+                    timestamp_writes: ts(2),
+                });
+                pass.set_pipeline(&self.composite);
+                pass.set_bind_group(0, &chunk.composite_group, &[]);
+                pass.dispatch_workgroups(
+                    frame.width.div_ceil(TILE),
+                    frame.height.div_ceil(TILE),
+                    1,
+                );
+            }
+            if wall {
+                times.composite_ms +=
+                    finish(std::mem::replace(&mut enc, new_encoder()), "composite", t)?;
             }
         }
-        if wall || until == Until::Splat {
-            ctx.queue.submit([enc.finish()]);
-            ctx.wait("splat")?;
-            times.splat_ms = ms(t);
-            enc = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("frame") });
-        }
-        if until == Until::Splat {
-            self.counters.frames += 1;
-            return Ok(times);
-        }
-
-        // Integrate.
-        let t = Instant::now();
-        if integrator == Integrator::Exact {
-            // Exact integration is an FFT on the CPU (as `poisson::ExactIntegrator`): read the
-            // Laplacian back, integrate, upload into synthesis level 0, run the output pass.
-            let (pw, ph) = (frame.padded_width as usize, frame.padded_height as usize);
-            let padded = fb.pyramid.read_level(ctx, &fb.pyramid.analysis, lap)?;
-            let exact = ExactIntegrator::new(pw, ph);
-            let primal: Vec<Plane> = padded
-                .par_iter()
-                .map(|p| {
-                    let lap = p.crop(PAD as isize, PAD as isize, pw, ph);
-                    if lap.data.iter().all(|&v| v == 0.0) {
-                        Plane::new(pw, ph)
-                    } else {
-                        exact.integrate(&lap)
-                    }
-                })
-                .collect();
-            let refs: Vec<&Plane> = primal.iter().collect();
-            fb.pyramid.upload_padded(ctx, &fb.pyramid.synthesis, fb.pyramid.synthesis_sets[0], &refs);
-            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("integrate"), timestamp_writes: None });
-            fb.pyramid.encode(&self.pyramid, &mut pass, true);
-        } else {
-            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("integrate"), timestamp_writes: ts(1) });
-            fb.pyramid.encode(&self.pyramid, &mut pass, false);
-        }
-        if wall || until == Until::Integrate {
-            ctx.queue.submit([enc.finish()]);
-            ctx.wait("integrate")?;
-            times.integrate_ms = ms(t);
-            enc = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("frame") });
-        }
-        if until == Until::Integrate {
-            self.counters.frames += 1;
-            return Ok(times);
-        }
-
-        // Composite.
-        let t = Instant::now();
-        {
-            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("composite"), timestamp_writes: ts(2) });
-            pass.set_pipeline(&self.composite);
-            pass.set_bind_group(0, &fb.composite_group, &[]);
-            pass.dispatch_workgroups(frame.width.div_ceil(TILE), frame.height.div_ceil(TILE), 1);
-        }
-        enc.copy_buffer_to_buffer(&fb.output, 0, &fb.output_staging, 0, fb.output_bytes);
-        if let Some(q) = queries {
-            enc.resolve_query_set(&q.set, 0..QUERY_COUNT, &q.resolve, 0);
-            enc.copy_buffer_to_buffer(&q.resolve, 0, &q.staging, 0, 8 * QUERY_COUNT as u64);
+        if until == Until::Composite {
+            enc.copy_buffer_to_buffer(&fb.output, 0, &fb.output_staging, 0, fb.output_bytes);
+            if let Some(q) = queries {
+                enc.resolve_query_set(&q.set, 0..q.count, &q.resolve, 0);
+                enc.copy_buffer_to_buffer(&q.resolve, 0, &q.staging, 0, 8 * q.count as u64);
+            }
         }
         ctx.queue.submit([enc.finish()]);
-        if wall {
-            ctx.wait("composite")?;
-            times.composite_ms = ms(t);
-        }
         self.counters.frames += 1;
         Ok(times)
     }
@@ -662,10 +939,15 @@ impl GpuSynthesizer {
         let Some(q) = self.frame.as_ref().and_then(|f| f.queries.as_ref()) else {
             return Ok(());
         };
-        let raw = map_read_bytes(&self.ctx, "timestamps", &q.staging, 8 * QUERY_COUNT as u64)?;
+        let raw = map_read_bytes(&self.ctx, "timestamps", &q.staging, 8 * q.count as u64)?;
         let ticks: Vec<u64> = bytemuck::pod_collect_to_vec(&raw);
         let period_ns = self.ctx.queue.get_timestamp_period() as f64;
-        let span = |i: usize| ticks[2 * i + 1].saturating_sub(ticks[2 * i]) as f64 * period_ns * 1e-6;
+        let span = |stage: usize| -> f64 {
+            ticks
+                .chunks_exact(QUERIES_PER_CHUNK as usize)
+                .map(|c| c[2 * stage + 1].saturating_sub(c[2 * stage]) as f64 * period_ns * 1e-6)
+                .sum()
+        };
         times.splat_ms = span(0);
         times.integrate_ms = span(1);
         times.composite_ms = span(2);
@@ -674,7 +956,9 @@ impl GpuSynthesizer {
 }
 
 fn fingerprint(db: Option<&PsfDatabase>) -> (usize, usize, usize) {
-    db.map_or((0, 0, 0), |d| (d.psf_count(), d.spreadlet_count(), d.dense_data().len()))
+    db.map_or((0, 0, 0), |d| {
+        (d.psf_count(), d.spreadlet_count(), d.dense_data().len())
+    })
 }
 
 fn ms(t: Instant) -> f64 {

@@ -15,7 +15,9 @@ pub(crate) fn storage_init(ctx: &GpuContext, label: &str, data: &[u8]) -> wgpu::
         .create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some(label),
             contents: &bytes,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
+            usage: wgpu::BufferUsages::STORAGE
+                | wgpu::BufferUsages::COPY_DST
+                | wgpu::BufferUsages::COPY_SRC,
         })
 }
 
@@ -26,14 +28,19 @@ pub(crate) fn storage_zeroed(
     bytes: u64,
 ) -> Result<wgpu::Buffer, GpuError> {
     let bytes = bytes.max(16).next_multiple_of(4);
-    let limit = ctx.limits().max_storage_buffer_binding_size.min(ctx.limits().max_buffer_size);
+    let limit = ctx
+        .limits()
+        .max_storage_buffer_binding_size
+        .min(ctx.limits().max_buffer_size);
     if bytes > limit {
         return Err(GpuError::TooLarge { what, bytes, limit });
     }
     Ok(ctx.device.create_buffer(&wgpu::BufferDescriptor {
         label: Some(what),
         size: bytes,
-        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
+        usage: wgpu::BufferUsages::STORAGE
+            | wgpu::BufferUsages::COPY_DST
+            | wgpu::BufferUsages::COPY_SRC,
         mapped_at_creation: false,
     }))
 }
@@ -182,7 +189,9 @@ pub(crate) fn map_read(
     staging: &wgpu::Buffer,
     bytes: u64,
 ) -> Result<Vec<f32>, GpuError> {
-    Ok(bytemuck::pod_collect_to_vec::<u8, f32>(&map_read_bytes(ctx, what, staging, bytes)?))
+    Ok(bytemuck::pod_collect_to_vec::<u8, f32>(&map_read_bytes(
+        ctx, what, staging, bytes,
+    )?))
 }
 
 /// Maps the first `bytes` of a MAP_READ buffer (after the copy into it was submitted), copies

@@ -36,7 +36,11 @@ pub fn noise_plane(width: usize, height: usize, seed: u64) -> Plane {
 /// Largest absolute difference and largest absolute value of `b`.
 pub fn max_diff(a: &[f32], b: &[f32]) -> (f32, f32) {
     assert_eq!(a.len(), b.len());
-    let d = a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f32::max);
+    let d = a
+        .iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f32::max);
     let m = b.iter().map(|v| v.abs()).fold(0.0, f32::max);
     (d, m)
 }
