@@ -163,7 +163,8 @@ impl BuildPlan {
         let support = image.support();
         let cfg = &self.config;
         let dense = sparse.len() as f64 > f64::from(cfg.dense_ratio) * support as f64
-            || (sim < f64::from(cfg.dense_below_similarity)
+            || ((sim < f64::from(cfg.dense_below_similarity)
+                || err > f64::from(cfg.dense_above_l1))
                 && support <= cfg.dense_max_support as usize);
         let range = params.range();
         let report = PsfReport {
@@ -215,9 +216,26 @@ pub fn build_database(
     cfg: &BuildConfig,
     progress: bool,
 ) -> Result<(PsfDatabase, BuildReport), PrecomputeError> {
+    build_database_part(cfg, None, progress)
+}
+
+/// Builds part `k` of `n` of the database `cfg` describes (`shard = Some((k, n))`), or the
+/// whole database (`None`). A part holds the contiguous PSF range of [`psf_db::ShardRange`],
+/// each PSF traced with the seed it has in a whole build, so [`psf_db::merge_shards`] of all
+/// parts gives the bytes of the whole build.
+pub fn build_database_part(
+    cfg: &BuildConfig,
+    shard: Option<(u32, u32)>,
+    progress: bool,
+) -> Result<(PsfDatabase, BuildReport), PrecomputeError> {
     let start = Instant::now();
     let plan = BuildPlan::new(cfg)?;
-    let n = plan.space.psf_count();
+    let range = match shard {
+        Some((k, n)) => Some(psf_db::ShardRange::of(k, n, plan.space.psf_count())?),
+        None => None,
+    };
+    let indices = range.map_or(0..plan.space.psf_count(), |r| r.indices());
+    let n = indices.len() as u32;
     let bar = if progress {
         let b = ProgressBar::new(u64::from(n));
         if let Ok(style) = ProgressStyle::with_template(
@@ -230,7 +248,7 @@ pub fn build_database(
     } else {
         ProgressBar::hidden()
     };
-    let results: Vec<Result<ProcessedPsf, PrecomputeError>> = (0..n)
+    let results: Vec<Result<ProcessedPsf, PrecomputeError>> = indices
         .into_par_iter()
         .map(|i| {
             let r = plan.process(i);
@@ -253,6 +271,7 @@ pub fn build_database(
         rotation_rad: cfg.blade_rotation_rad,
     };
     header.lens = plan.lens.clone();
+    header.shard = range;
     header.build = BuildInfo {
         profile: cfg.profile.name().into(),
         build_seconds: None,

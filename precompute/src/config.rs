@@ -250,7 +250,7 @@ pub struct BuildConfig {
     pub blade_rotation_rad: f32,
     /// Lens for physical-lens (`None` = [`LensOptions::default`]).
     pub lens: Option<LensOptions>,
-    /// Sparsification procedure (default: [`Procedure::Improved`]).
+    /// Sparsification procedure (default: [`Procedure::Paper`]).
     pub procedure: Procedure,
     /// Also measure the ablation (darts / +Lloyd / +annealing / full) per PSF; slower.
     pub ablation: bool,
@@ -263,14 +263,18 @@ pub struct BuildConfig {
     /// A PSF of at most [`Self::dense_max_support`] pixels is also stored dense when its
     /// spreadlets' similarity falls below this (small PSFs are cheap to draw directly).
     pub dense_below_similarity: f32,
-    /// Largest dense support (pixels) the similarity rule applies to.
+    /// A PSF of at most [`Self::dense_max_support`] pixels is also stored dense when its
+    /// spreadlets' L1 error (fraction of its light misplaced) exceeds this.
+    pub dense_above_l1: f32,
+    /// Largest dense support (pixels) the similarity and L1 rules apply to.
     pub dense_max_support: u32,
 }
 
 impl BuildConfig {
     /// Defaults for `model` and `profile`: seed 1, rays from the profile, budget 1,
-    /// pre-filtering on, circular aperture, default lens, improved procedure; stored dense
-    /// above 0.5 spreadlets per support pixel, or below similarity 0.9 when at most 4096 px.
+    /// pre-filtering on, circular aperture, default lens, the paper's procedure; stored dense
+    /// above 0.5 spreadlets per support pixel, or, when at most 4096 px, below similarity 0.9
+    /// or above L1 0.15.
     pub fn new(model: PsfModel, profile: Profile) -> Self {
         BuildConfig {
             model,
@@ -288,6 +292,7 @@ impl BuildConfig {
             ranges: None,
             dense_ratio: 0.5,
             dense_below_similarity: 0.9,
+            dense_above_l1: 0.15,
             dense_max_support: 4096,
         }
     }

@@ -2,13 +2,19 @@
 //!
 //! ```text
 //! precompute --model lens-motion --profile quick --out lens-motion.sprdlt --report report.json
+//! precompute --model lens-motion --profile paper --shard 3/32 --out part-3.sprdlt
+//! precompute merge part-*.sprdlt --out lens-motion.sprdlt
 //! ```
+//!
+//! A sharded build (`--shard K/N`, K from 0; `auto/N` takes K from `SLURM_ARRAY_TASK_ID` or
+//! `JOB_COMPLETION_INDEX`) writes a partial file; `merge` joins the parts into the database,
+//! byte-identical to a single build (docs/BATCH.md).
 
 use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
 use clap::Parser;
-use precompute::{build_database, BuildConfig, LensOptions, Procedure, Profile};
+use precompute::{build::build_database_part, BuildConfig, LensOptions, Procedure, Profile};
 use psf_db::PsfModel;
 
 /// Light-trace, pre-filter and sparsify every PSF of a model into a spreadlet database.
@@ -45,9 +51,9 @@ struct Args {
     /// Rotation of the bladed aperture, radians.
     #[arg(long, default_value_t = 0.0)]
     blade_rotation: f32,
-    /// Sparsification: improved (sign-separated cells + least-squares values, default) or
-    /// paper.
-    #[arg(long, default_value = "improved")]
+    /// Sparsification: paper (default) or improved (sign-separated cells + least-squares
+    /// values).
+    #[arg(long, default_value = "paper")]
     procedure: String,
     /// Also measure the ablation (darts / +Lloyd / +annealing / full); slower.
     #[arg(long)]
@@ -94,10 +100,72 @@ struct Args {
     /// physical-lens: largest eccentricity sampled, mm.
     #[arg(long)]
     max_eccentricity: Option<f64>,
+    /// Build only part K of N (0-based) into a partial file for `precompute merge`; `auto/N`
+    /// takes K from SLURM_ARRAY_TASK_ID or JOB_COMPLETION_INDEX.
+    #[arg(long)]
+    shard: Option<String>,
+}
+
+/// Join the partial files of a sharded build into the database.
+#[derive(Debug, Parser)]
+#[command(name = "precompute merge")]
+struct MergeArgs {
+    /// The partial files (any order).
+    #[arg(required = true)]
+    parts: Vec<PathBuf>,
+    /// Output database, written atomically.
+    #[arg(long)]
+    out: PathBuf,
+}
+
+/// The engine variables a batch job's index comes from, in the order they are tried.
+const SHARD_INDEX_VARS: [&str; 2] = ["SLURM_ARRAY_TASK_ID", "JOB_COMPLETION_INDEX"];
+
+fn parse_shard(spec: &str) -> Result<(u32, u32)> {
+    let spec = match spec.strip_prefix("auto/") {
+        Some(count) => {
+            let Some((var, k)) = SHARD_INDEX_VARS
+                .iter()
+                .find_map(|v| std::env::var(v).ok().map(|k| (*v, k)))
+            else {
+                bail!(
+                    "--shard auto/{count}: neither {} is set",
+                    SHARD_INDEX_VARS.join(" nor ")
+                );
+            };
+            eprintln!("shard index {k} from {var}");
+            format!("{k}/{count}")
+        }
+        None => spec.to_string(),
+    };
+    Ok(psf_db::ShardRange::parse_spec(&spec)?)
+}
+
+fn merge(args: MergeArgs) -> Result<()> {
+    let parts = args
+        .parts
+        .iter()
+        .map(|p| psf_db::PsfDatabase::read(p).with_context(|| format!("reading {}", p.display())))
+        .collect::<Result<Vec<_>>>()?;
+    let db = psf_db::merge_shards(&parts)?;
+    db.write_atomic(&args.out)
+        .with_context(|| format!("writing {}", args.out.display()))?;
+    eprintln!(
+        "merged {} parts: {} {} PSFs -> {}",
+        parts.len(),
+        db.psf_count(),
+        db.model(),
+        args.out.display()
+    );
+    Ok(())
 }
 
 fn main() -> Result<()> {
+    if std::env::args_os().nth(1).is_some_and(|a| a == "merge") {
+        return merge(MergeArgs::parse_from(std::env::args_os().skip(1)));
+    }
     let args = Args::parse();
+    let shard = args.shard.as_deref().map(parse_shard).transpose()?;
     let model: PsfModel = args.model.parse()?;
     let profile: Profile = args.profile.parse()?;
     let procedure: Procedure = args
@@ -146,7 +214,7 @@ fn main() -> Result<()> {
     }
     cfg.validate()?;
 
-    let (db, report) = build_database(&cfg, true)
+    let (db, report) = build_database_part(&cfg, shard, true)
         .with_context(|| format!("building the {model} database ({profile} profile)"))?;
     db.write_atomic(&args.out)
         .with_context(|| format!("writing {}", args.out.display()))?;

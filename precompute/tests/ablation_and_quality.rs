@@ -26,7 +26,7 @@ fn ablation_order_darts_lloyd_annealing_full() {
 #[test]
 fn lens_motion_quick_spreadlets_reproduce_their_psfs() {
     // A subset of the quick profile's lens-motion PSFs, away from the axes (the PSFs on the
-    // axes are small and stored dense by the fast track).
+    // axes are small and stored dense by the fast track), with the default (paper's) procedure.
     let cfg = BuildConfig::new(PsfModel::LensMotion, Profile::Quick);
     let plan = BuildPlan::new(&cfg).unwrap();
     let mut sims = Vec::new();
@@ -53,8 +53,9 @@ fn lens_motion_quick_spreadlets_reproduce_their_psfs() {
         "subset of {}: mean similarity {sim:.4}, mean sparsity {spars:.4}",
         sims.len()
     );
-    // Measured 2026-11-22: see docs/BENCHMARKS.md. The paper's anchor (0.97 at 9.3 %) is not
-    // reached under the project's sRGB SSIM; this bounds what is.
-    assert!(sim > 0.85, "{sim}");
-    assert!(spars < 0.35, "{spars}");
+    // The paper's anchor for lens-motion: mean similarity 0.97 at mean sparsity 9.3 %.
+    // (Measured on this subset: 0.983 at 9.6 %; over all 25 PSFs the quick database stores
+    // as spreadlets: 0.935 at 9.4 %.)
+    assert!(sim >= 0.97, "{sim}");
+    assert!(spars <= 0.105, "{spars}");
 }

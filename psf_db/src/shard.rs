@@ -80,11 +80,13 @@ impl ShardRange {
     }
 }
 
-/// The header with the per-part fields cleared, for comparing parts.
+/// The header with the per-part fields cleared, for comparing parts. The PSF resolution is
+/// the largest PSF image of the part, so the whole database's is the largest over the parts.
 fn settings_of(header: &DbHeader) -> DbHeader {
     let mut h = header.clone();
     h.shard = None;
     h.stats.clear();
+    h.psf_resolution = 0;
     h
 }
 
@@ -97,7 +99,7 @@ fn first_difference(a: &DbHeader, b: &DbHeader) -> String {
             })*
         };
     }
-    differ!(model, seed, rays_per_psf, spreadlet_budget, prefilter, psf_resolution, channels);
+    differ!(model, seed, rays_per_psf, spreadlet_budget, prefilter, channels);
     if a.space != b.space {
         return "the parameter space (ranges, betas or grid) differs".into();
     }
@@ -168,6 +170,12 @@ pub fn merge_shards(parts: &[PsfDatabase]) -> Result<PsfDatabase, DbError> {
     }
 
     let mut header = reference;
+    header.psf_resolution = by_index
+        .iter()
+        .flatten()
+        .map(|p| p.header().psf_resolution)
+        .max()
+        .unwrap_or(1);
     let with_stats = by_index
         .iter()
         .flatten()

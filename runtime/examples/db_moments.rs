@@ -4,15 +4,26 @@
 //! `cargo run --release -p runtime --example db_moments -- FILE.sprdlt`
 
 fn main() -> anyhow::Result<()> {
-    let path = std::env::args().nth(1).ok_or_else(|| anyhow::anyhow!("usage: db_moments FILE"))?;
+    let path = std::env::args()
+        .nth(1)
+        .ok_or_else(|| anyhow::anyhow!("usage: db_moments FILE"))?;
     let db = psf_db::PsfDatabase::read(&path)?;
     let ch = db.channels();
-    println!("{}: {} PSFs, model {}, max extent {} px", path, db.psf_count(), db.model().name(), db.max_extent_px());
+    println!(
+        "{}: {} PSFs, model {}, max extent {} px",
+        path,
+        db.psf_count(),
+        db.model().name(),
+        db.max_extent_px()
+    );
     for i in 0..db.psf_count() {
         let st = db.header().stats[i];
         if let Some(d) = db.dense(i) {
             let s: f64 = d.data.iter().map(|&v| f64::from(v)).sum::<f64>() / ch as f64;
-            println!("{i:4} {:?} dense {}x{} sum {s:.5}", st.coords, d.width, d.height);
+            println!(
+                "{i:4} {:?} dense {}x{} sum {s:.5}",
+                st.coords, d.width, d.height
+            );
             continue;
         }
         let (pos, val) = db.spreadlets(i);

@@ -23,7 +23,11 @@ fn main() -> anyhow::Result<()> {
         let c = g.color[i];
         lum.push(f64::from(0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2]));
     }
-    for (name, mut v) in [("signed CoC px", coc), ("motion px", mot), ("luminance", lum)] {
+    for (name, mut v) in [
+        ("signed CoC px", coc),
+        ("motion px", mot),
+        ("luminance", lum),
+    ] {
         v.sort_by(|a, b| a.total_cmp(b));
         let p = |q: f64| v[((v.len() - 1) as f64 * q) as usize];
         println!(

@@ -271,7 +271,10 @@ mod tests {
             (r#""f_stop":-2.0,"focus_distance":1.0"#, "f_stop"),
             (r#""f_stop":2.0,"focus_distance":0.01"#, "focal length"),
             (r#""f_stop":0.0,"focus_distance":1.0"#, "f_stop"),
-            (r#""f_stop":2.0,"focus_distance":1.0,"shutter_frames":-1"#, "shutter_frames"),
+            (
+                r#""f_stop":2.0,"focus_distance":1.0,"shutter_frames":-1"#,
+                "shutter_frames",
+            ),
         ];
         for (fields, needle) in cases {
             let text = format!(
@@ -283,7 +286,9 @@ mod tests {
         let zero = r#"{"width":0,"height":8,"focal_length_mm":50,"sensor_width_mm":36}"#;
         assert!(Camera::from_json_str(zero).is_err());
         let missing = r#"{"width":8,"height":8,"sensor_width_mm":36}"#;
-        let err = Camera::from_json_str(missing).expect_err("missing").to_string();
+        let err = Camera::from_json_str(missing)
+            .expect_err("missing")
+            .to_string();
         assert!(err.contains("focal_length_mm"), "{err}");
     }
 }

@@ -5,9 +5,17 @@
 //!   supported PSF sums to zero. A residual `m` integrates to a far field `m/(2 pi) log r` that
 //!   does not decay; summed over every pixel of a layer it becomes a visible offset across the
 //!   whole image. It is removed by subtracting it from the values in proportion to `|v|`.
+//! - **Dipole and quadrupole** (moments against x, y, xy, x^2 - y^2): they vanish, like the
+//!   monopole, for the Laplacian of a compactly supported image; residuals leave far fields
+//!   decaying as 1/r and 1/r^2 whose area integral does not converge. All five are zeroed
+//!   together with the energy below by the smallest change of the values (weighted by |v|).
 //! - **Energy** `sum v |x|^2 / 4` (the integrated PSF's sum: `L(|x|^2/4) = 1` for the 5-point
 //!   stencil): 1 for the light-conserving models (thin-lens, lens-motion); each PSF is scaled to
 //!   it, and dense PSFs to a sum of 1. The physical lens keeps its energy (vignetting is real).
+//!
+//! A sparse thin-lens or lens-motion PSF whose recorded error is large (L1 above
+//! [`MAX_SPARSE_L1`]) is replaced by its analytic dense PSF (disk convolved with the motion
+//! segment, at its cell's centre), drawn by the fast track.
 //!
 //! A sparse PSF with no spreadlets, or whose energy is below [`MIN_ENERGY`] (nothing usable to
 //! scale), is replaced by the Laplacian of a single pixel (the 5-point stencil itself), so the
@@ -17,6 +25,53 @@ use psf_db::{DatabaseBuilder, DbError, PsfDatabase, PsfModel};
 
 /// Sparse PSFs with less energy than this are replaced by a single pixel.
 pub const MIN_ENERGY: f64 = 0.25;
+
+/// Sparse thin-lens and lens-motion PSFs whose recorded L1 error (against their pre-filtered
+/// PSF, relative to its unit sum) exceeds this are replaced by a dense analytic PSF.
+pub const MAX_SPARSE_L1: f32 = 0.15;
+
+/// Subsamples per pixel edge when rendering an analytic PSF.
+const SUBSAMPLES: usize = 6;
+
+/// The analytic PSF of a circular thin lens of CoC radius `coc` (px) moving `len` px along +x
+/// over the shutter (box shutter), as a dense image: `(origin, width, height, data)` with the
+/// pixel values summing to 1. Each pixel is the mean over `SUBSAMPLES`^2 points of the
+/// disk-convolved-with-segment intensity.
+pub fn analytic_psf(coc: f64, len: f64) -> ([i16; 2], u16, u16, Vec<f32>) {
+    // Radii under half a pixel are drawn as half a pixel: the PSF then covers about a pixel.
+    let r = coc.max(0.5);
+    let half = 0.5 * len.max(0.0);
+    let rx = (r + half + 1.0).ceil() as i32;
+    let ry = (r + 1.0).ceil() as i32;
+    let (w, h) = ((2 * rx + 1) as usize, (2 * ry + 1) as usize);
+    let mut data = vec![0.0f64; w * h];
+    let k = SUBSAMPLES as f64;
+    for v in 0..h {
+        for u in 0..w {
+            let mut acc = 0.0;
+            for sy in 0..SUBSAMPLES {
+                for sx in 0..SUBSAMPLES {
+                    let x = (u as i32 - rx) as f64 - 0.5 + (sx as f64 + 0.5) / k;
+                    let y = (v as i32 - ry) as f64 - 0.5 + (sy as f64 + 0.5) / k;
+                    if y.abs() >= r {
+                        continue;
+                    }
+                    let chord = (r * r - y * y).sqrt();
+                    acc += if half < 1e-3 {
+                        f64::from(u8::from(x.abs() <= chord))
+                    } else {
+                        // Length of the segment [-half, half] within the disk around (x, y).
+                        ((x + chord).min(half) - (x - chord).max(-half)).max(0.0) / (2.0 * half)
+                    };
+                }
+            }
+            data[v * w + u] = acc;
+        }
+    }
+    let sum: f64 = data.iter().sum();
+    let data = data.iter().map(|&v| (v / sum) as f32).collect();
+    ([-rx as i16, -ry as i16], w as u16, h as u16, data)
+}
 
 /// What conditioning changed.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
@@ -33,6 +88,9 @@ pub struct ConditionReport {
     pub replaced_by_pixel: usize,
     /// Dense PSFs rescaled to sum 1.
     pub dense_rescaled: usize,
+    /// Sparse PSFs whose recorded L1 exceeded [`MAX_SPARSE_L1`], replaced by dense analytic
+    /// PSFs (thin-lens, lens-motion).
+    pub replaced_by_analytic: usize,
 }
 
 /// The Laplacian of a unit pixel at the centre under the 5-point stencil.
@@ -66,6 +124,20 @@ pub fn condition(db: &PsfDatabase) -> Result<(PsfDatabase, ConditionReport), DbE
             continue;
         }
         let (positions, values) = db.spreadlets(i);
+        let recorded_l1 = db.header().stats.get(i).map_or(0.0, |s| s.l1);
+        if normalise && recorded_l1 > MAX_SPARSE_L1 {
+            if let Some(c) = db.space().cell_center(i as u32) {
+                let len = if db.model() == PsfModel::LensMotion {
+                    c[1]
+                } else {
+                    0.0
+                };
+                let (origin, w, h, data) = analytic_psf(c[0], len);
+                builder.push_dense(origin, w, h, &data)?;
+                report.replaced_by_analytic += 1;
+                continue;
+            }
+        }
         let mut vals: Vec<f64> = values.iter().map(|&v| f64::from(v)).collect();
         let mut energy_sum = 0.0;
         for c in 0..ch {
@@ -76,23 +148,18 @@ pub fn condition(db: &PsfDatabase) -> Result<(PsfDatabase, ConditionReport), DbE
             }
             if abs > 0.0 {
                 report.max_relative_monopole = report.max_relative_monopole.max(m0.abs() / abs);
+            }
+            let e = moment(positions, &vals, ch, c, 5);
+            energy_sum += e;
+            if e < MIN_ENERGY {
+                continue;
+            }
+            let target = if normalise { 1.0 } else { e };
+            if !project_moments(positions, &mut vals, ch, c, target) {
+                // Too few spreadlets to fix every moment: at least remove the monopole.
                 for k in 0..positions.len() {
                     let v = &mut vals[k * ch + c];
                     *v -= m0 * v.abs() / abs;
-                }
-            }
-            let e: f64 = positions
-                .iter()
-                .enumerate()
-                .map(|(k, p)| {
-                    let (x, y) = (f64::from(p[0]), f64::from(p[1]));
-                    vals[k * ch + c] * (x * x + y * y) / 4.0
-                })
-                .sum();
-            energy_sum += e;
-            if normalise && e >= MIN_ENERGY {
-                for k in 0..positions.len() {
-                    vals[k * ch + c] /= e;
                 }
             }
         }
@@ -117,10 +184,120 @@ pub fn condition(db: &PsfDatabase) -> Result<(PsfDatabase, ConditionReport), DbE
     Ok((builder.finish()?, report))
 }
 
+/// The moment `sum v_k p(x_k)` of channel `c` for the polynomial `p` number `which`:
+/// 0: 1, 1: x, 2: y, 3: x y, 4: x^2 - y^2 (the harmonic ones, which vanish for the Laplacian
+/// of a compactly supported image), 5: (x^2 + y^2) / 4 (the energy: the image's sum).
+fn moment(positions: &[[i16; 2]], vals: &[f64], ch: usize, c: usize, which: usize) -> f64 {
+    positions
+        .iter()
+        .enumerate()
+        .map(|(k, p)| vals[k * ch + c] * poly(which, p))
+        .sum()
+}
+
+#[inline]
+fn poly(which: usize, p: &[i16; 2]) -> f64 {
+    let (x, y) = (f64::from(p[0]), f64::from(p[1]));
+    match which {
+        0 => 1.0,
+        1 => x,
+        2 => y,
+        3 => x * y,
+        4 => x * x - y * y,
+        _ => (x * x + y * y) / 4.0,
+    }
+}
+
+/// The smallest change of channel `c`'s values (weighted by `|v|`, so every spreadlet moves
+/// in proportion to its size) that zeroes the harmonic moments up to second order and sets
+/// the energy to `energy`: the integrated PSF then has no far field decaying slower than
+/// `1/r^3` and sums to `energy`. False when the system is singular (too few spreadlets).
+fn project_moments(
+    positions: &[[i16; 2]],
+    vals: &mut [f64],
+    ch: usize,
+    c: usize,
+    energy: f64,
+) -> bool {
+    const M: usize = 6;
+    let n = positions.len();
+    if n < M {
+        return false;
+    }
+    let vmax = (0..n).map(|k| vals[k * ch + c].abs()).fold(0.0, f64::max);
+    let weights: Vec<f64> = (0..n)
+        .map(|k| vals[k * ch + c].abs() + 1e-3 * vmax)
+        .collect();
+    // Residuals r = A v - b.
+    let mut r = [0.0f64; M];
+    for (i, ri) in r.iter_mut().enumerate() {
+        *ri = moment(positions, vals, ch, c, i);
+    }
+    r[5] -= energy;
+    // Normal matrix A W A^T.
+    let mut a = [[0.0f64; M + 1]; M];
+    for (k, p) in positions.iter().enumerate() {
+        let w = weights[k];
+        let ph: [f64; M] = std::array::from_fn(|i| poly(i, p));
+        for i in 0..M {
+            for j in 0..M {
+                a[i][j] += w * ph[i] * ph[j];
+            }
+        }
+    }
+    for i in 0..M {
+        a[i][M] = r[i];
+    }
+    // Gaussian elimination with partial pivoting.
+    for col in 0..M {
+        let piv = (col..M)
+            .max_by(|&i, &j| a[i][col].abs().total_cmp(&a[j][col].abs()))
+            .unwrap_or(col);
+        let scale = a.iter().map(|row| row[col].abs()).fold(0.0, f64::max);
+        if a[piv][col].abs() <= 1e-12 * scale.max(1e-300) {
+            return false;
+        }
+        a.swap(col, piv);
+        let pivot_row = a[col];
+        for (i, row) in a.iter_mut().enumerate() {
+            if i != col {
+                let f = row[col] / pivot_row[col];
+                for (x, p) in row[col..].iter_mut().zip(&pivot_row[col..]) {
+                    *x -= f * p;
+                }
+            }
+        }
+    }
+    let lambda: [f64; M] = std::array::from_fn(|i| a[i][M] / a[i][i]);
+    for (k, p) in positions.iter().enumerate() {
+        let w = weights[k];
+        let delta: f64 = (0..M).map(|i| lambda[i] * poly(i, p)).sum();
+        vals[k * ch + c] -= w * delta;
+    }
+    true
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use psf_db::{DbHeader, ParamSpace};
+
+    #[test]
+    fn analytic_psf_sums_to_one_and_has_the_right_support() {
+        let (origin, w, h, data) = analytic_psf(3.0, 10.0);
+        let sum: f64 = data.iter().map(|&v| f64::from(v)).sum();
+        assert!((sum - 1.0).abs() < 1e-5);
+        assert_eq!((origin[0], origin[1]), (-9, -4));
+        let at = |x: i32, y: i32| {
+            data[((y - origin[1] as i32) as usize) * w as usize + (x - origin[0] as i32) as usize]
+        };
+        assert!(at(7, 0) > 0.0 && at(0, 2) > 0.0);
+        assert_eq!(at(9, 0), 0.0);
+        assert_eq!(at(0, 4), 0.0);
+        assert!(h == 9);
+        // Symmetric in x.
+        assert!((at(5, 1) - at(-5, 1)).abs() < 1e-7);
+    }
 
     #[test]
     fn monopole_is_removed_and_energy_normalised() {

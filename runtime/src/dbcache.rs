@@ -55,11 +55,21 @@ pub fn cache_dir() -> PathBuf {
 
 /// The build settings for `model` at `profile` with an aperture of `blades` blades (0 =
 /// circular).
+///
+/// The runtime samples the one-dimensional thin-lens space more finely than the profile's
+/// default for `quick` (64 PSFs instead of 24: a still surface otherwise takes a CoC up to ~15%
+/// off); it costs seconds to build.
 pub fn build_config(model: PsfModel, profile: Profile, blades: u32) -> BuildConfig {
     let mut cfg = BuildConfig::new(model, profile);
     cfg.blades = blades;
+    if model == PsfModel::ThinLens && profile == Profile::Quick {
+        cfg.psf_count = Some(THIN_LENS_QUICK_PSFS);
+    }
     cfg
 }
+
+/// PSFs of the thin-lens database the runtime builds with the quick profile.
+pub const THIN_LENS_QUICK_PSFS: u32 = 64;
 
 /// The file name a configuration is cached under: model, profile, and a hash (FNV-1a 64) of
 /// every build setting and the database format version.
@@ -70,7 +80,11 @@ pub fn cache_file_name(cfg: &BuildConfig) -> String {
         h ^= u64::from(b);
         h = h.wrapping_mul(0x0100_0000_01b3);
     }
-    format!("{}-{}-{h:016x}.sprdlt", cfg.model.name(), cfg.profile.name())
+    format!(
+        "{}-{}-{h:016x}.sprdlt",
+        cfg.model.name(),
+        cfg.profile.name()
+    )
 }
 
 /// Where a cached database came from.

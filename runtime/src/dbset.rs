@@ -99,16 +99,17 @@ fn concatenate(a: &PsfDatabase, b: &PsfDatabase) -> Result<PsfDatabase, DbError>
         .chain(&b.header().stats)
         .copied()
         .collect();
-    header.stats.resize(capacity as usize, header.stats.last().copied().unwrap_or(
-        psf_db::PsfStats {
+    header.stats.resize(
+        capacity as usize,
+        header.stats.last().copied().unwrap_or(psf_db::PsfStats {
             coords: [0.0; 2],
             spreadlets: 0,
             dense_support: 0,
             l1: 0.0,
             ssim: 0.0,
             extent_px: 0.0,
-        },
-    ));
+        }),
+    );
     let mut builder = DatabaseBuilder::new(header);
     for db in [a, b] {
         for i in 0..db.psf_count() {

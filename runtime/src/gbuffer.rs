@@ -327,7 +327,10 @@ impl GBuffer {
             if motion.len() != n {
                 return Err(layout_err("motion", motion.len()));
             }
-            if let Some(i) = motion.iter().position(|m| !(m[0].is_finite() && m[1].is_finite())) {
+            if let Some(i) = motion
+                .iter()
+                .position(|m| !(m[0].is_finite() && m[1].is_finite()))
+            {
                 let m = motion[i];
                 return Err(GBufferError::BadValue {
                     path: name.to_string(),
@@ -366,8 +369,8 @@ mod tests {
     #[test]
     fn nan_colour_is_dropped_and_nan_depth_is_an_error() {
         let color = vec![[1.0, f32::NAN, 0.0, 1.0], [0.5, 0.5, 0.5, 1.0]];
-        let g = GBuffer::from_planes(2, 1, color.clone(), Some(vec![1.0, 2.0]), None)
-            .expect("valid");
+        let g =
+            GBuffer::from_planes(2, 1, color.clone(), Some(vec![1.0, 2.0]), None).expect("valid");
         assert_eq!(g.dropped_pixels, 1);
         assert_eq!(g.color[0], [0.0; 4]);
         let err = GBuffer::from_planes(2, 1, color.clone(), Some(vec![1.0, f32::NAN]), None)

@@ -6,13 +6,17 @@
 //! mirrors. Inputs come from [`gbuffer::GBuffer::read_exr`] and [`camera::Camera`]; databases
 //! from [`dbcache`].
 
+#[cfg(feature = "gpu")]
+pub mod bench;
 pub mod camera;
 pub mod condition;
 pub mod dbcache;
 pub mod dbset;
+pub mod demo;
 pub mod gbuffer;
-pub mod pipeline;
-pub mod rgba;
-pub mod synth;
 #[cfg(feature = "gpu")]
 pub mod gpu;
+pub mod pipeline;
+pub mod reconstruct;
+pub mod rgba;
+pub mod synth;

@@ -1,6 +1,7 @@
 //! `spreadlet`: depth of field and motion blur by splatting sparse Laplacian PSFs.
 //!
-//! Subcommands: `synth` (from a pinhole G-buffer) and `compare` (SSIM and PSNR of two EXRs).
+//! Subcommands: `synth` (from a pinhole G-buffer), `reconstruct` (from stochastic frames),
+//! `demo` (everything on built-in data) and `compare` (SSIM and PSNR of two EXRs).
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -35,6 +36,67 @@ enum Command {
     Synth(SynthArgs),
     /// SSIM and PSNR (sRGB, as DEVELOPERS.md defines them) of two OpenEXR images.
     Compare(CompareArgs),
+    /// Reconstruct depth of field and motion blur from noisy stochastic frames (each sample
+    /// labelled with its lens position and time; layout in docs/STOCHASTIC.md).
+    Reconstruct(ReconstructArgs),
+    /// The whole job on built-in data: render a scene, synthesise, reconstruct, score.
+    Demo(DemoArgs),
+}
+
+#[derive(Args, Debug)]
+struct ReconstructArgs {
+    /// Stochastic frames (OpenEXR, docs/STOCHASTIC.md).
+    #[arg(long)]
+    input: PathBuf,
+    /// Camera description (`camera.json`); flags with the same names override its fields.
+    #[arg(long)]
+    camera: Option<PathBuf>,
+    #[command(flatten)]
+    camera_flags: CameraFlags,
+    /// Output OpenEXR (linear RGBA, f32), written atomically.
+    #[arg(long)]
+    out: PathBuf,
+    /// Profile of databases built on demand.
+    #[arg(long, default_value = "quick")]
+    db_profile: String,
+    /// Number of global depth layers (binned in constant parallax).
+    #[arg(long, default_value_t = 8)]
+    layers: u32,
+    /// Poisson integrator (exact by default: the pyramid's small relative error becomes
+    /// visible around HDR highlights).
+    #[arg(long, value_enum, default_value_t = Integrator::Exact)]
+    integrate: Integrator,
+    /// Write an sRGB PNG preview.
+    #[arg(long)]
+    preview: Option<PathBuf>,
+    /// Write statistics (effects, counts per path, stage times) as JSON.
+    #[arg(long)]
+    stats: Option<PathBuf>,
+    /// Print no progress.
+    #[arg(long, short)]
+    quiet: bool,
+}
+
+#[derive(Args, Debug)]
+struct DemoArgs {
+    /// Output folder.
+    #[arg(long, default_value = "out/demo")]
+    out: PathBuf,
+    /// Built-in scene (bokeh, crossing, occluder, rotating, physical).
+    #[arg(long, default_value = "crossing")]
+    scene: String,
+    /// Square image size override, pixels.
+    #[arg(long)]
+    size: Option<u32>,
+    /// Samples per pixel of the reference.
+    #[arg(long, default_value_t = 1024)]
+    reference_spp: usize,
+    /// Profile of databases built on demand.
+    #[arg(long, default_value = "quick")]
+    db_profile: String,
+    /// Print no progress.
+    #[arg(long, short)]
+    quiet: bool,
 }
 
 /// Which device runs the pipeline.
@@ -113,8 +175,9 @@ struct SynthArgs {
     /// Do not scale the composite up to the layers' joint coverage.
     #[arg(long)]
     no_coverage_renormalization: bool,
-    /// Poisson integrator.
-    #[arg(long, value_enum, default_value_t = Integrator::Pyramid)]
+    /// Poisson integrator (exact by default: the pyramid's small relative error becomes
+    /// visible around HDR highlights).
+    #[arg(long, value_enum, default_value_t = Integrator::Exact)]
     integrate: Integrator,
     /// Placement of rotated (motion-aligned) spreadlets.
     #[arg(long, value_enum, default_value_t = RotationSampling::Bilinear)]
@@ -168,6 +231,8 @@ fn main() {
     let result = match cli.command {
         Command::Synth(args) => run_synth(args),
         Command::Compare(args) => run_compare(args),
+        Command::Reconstruct(args) => run_reconstruct(args),
+        Command::Demo(args) => run_demo(args),
     };
     if let Err(e) = result {
         eprintln!("error: {e:#}");
@@ -230,7 +295,10 @@ fn run_synth(args: SynthArgs) -> Result<()> {
     let gbuffer = GBuffer::read_exr(&args.input, &channel_options)?;
     let read_ms = t.elapsed().as_secs_f64() * 1e3;
     if !(args.soft_layers.is_finite() && args.soft_layers >= 0.0) {
-        bail!("--soft-layers must be zero or positive, got {}", args.soft_layers);
+        bail!(
+            "--soft-layers must be zero or positive, got {}",
+            args.soft_layers
+        );
     }
     if args.layers == 0 || args.layers > 64 {
         bail!("--layers must be between 1 and 64, got {}", args.layers);
@@ -316,7 +384,11 @@ fn run_synth(args: SynthArgs) -> Result<()> {
              on the {backend}",
             stats.width,
             stats.height,
-            if effects.defocus { "defocus" } else { "no defocus" },
+            if effects.defocus {
+                "defocus"
+            } else {
+                "no defocus"
+            },
             if effects.motion { " + motion" } else { "" },
             stats.counts.sparse,
             stats.counts.dense,
@@ -400,5 +472,78 @@ fn run_compare(args: CompareArgs) -> Result<()> {
     } else {
         println!("SSIM {ssim:.4}  PSNR {psnr:.2} dB");
     }
+    Ok(())
+}
+
+fn run_reconstruct(args: ReconstructArgs) -> Result<()> {
+    let camera = load_camera(args.camera.as_deref(), &args.camera_flags)?;
+    if args.layers == 0 || args.layers > 64 {
+        bail!("--layers must be between 1 and 64, got {}", args.layers);
+    }
+    let frames = scene::StochasticFrames::read_exr(&args.input)
+        .with_context(|| format!("reading stochastic frames {}", args.input.display()))?;
+    let effects = runtime::reconstruct::effects_of(&camera, &frames);
+    let profile: precompute::Profile = args.db_profile.parse()?;
+    let dbs = runtime::demo::cached_dbs(effects, profile, camera.aperture_blades, !args.quiet)?;
+    let options = SynthOptions {
+        classify: ClassifyOptions {
+            layers: args.layers,
+            min_coc_px: runtime::reconstruct::min_footprint_px(frames.spp),
+            ..ClassifyOptions::default()
+        },
+        integrator: args.integrate,
+        ..SynthOptions::default()
+    };
+    let (image, stats) = runtime::reconstruct::reconstruct(&frames, &camera, &dbs, &options)?;
+    image.write_exr(&args.out)?;
+    if let Some(p) = &args.preview {
+        image.write_preview_png(p)?;
+    }
+    if !args.quiet {
+        eprintln!(
+            "{}x{} from {} spp: {} sparse, {} dense, {} copied, {} dropped; {:.0} ms",
+            stats.width,
+            stats.height,
+            frames.spp,
+            stats.counts.sparse,
+            stats.counts.dense,
+            stats.counts.copied,
+            stats.counts.dropped,
+            stats.times.total_ms
+        );
+    }
+    if let Some(p) = &args.stats {
+        let text = serde_json::to_string_pretty(&serde_json::json!({
+            "input": args.input, "output": args.out, "spp": frames.spp, "reconstruction": stats,
+        }))?;
+        runtime::rgba::write_atomically(p, |f| {
+            use std::io::Write;
+            f.write_all(text.as_bytes())
+                .map_err(|source| runtime::rgba::WriteError::Io {
+                    path: p.display().to_string(),
+                    source,
+                })
+        })?;
+    }
+    Ok(())
+}
+
+fn run_demo(args: DemoArgs) -> Result<()> {
+    let options = runtime::demo::DemoOptions {
+        out: args.out.clone(),
+        scene: args.scene,
+        size: args.size,
+        reference_spp: args.reference_spp,
+        profile: args.db_profile.parse()?,
+        progress: !args.quiet,
+        ..Default::default()
+    };
+    let steps = runtime::demo::run(&options)?;
+    println!("{}", runtime::demo::table(&steps));
+    println!(
+        "wrote {}: side_by_side.png (pinhole | synthesis | reconstruct_1spp | average_1spp | \
+         average_16spp | reference), summary.json and the EXRs",
+        args.out.display()
+    );
     Ok(())
 }

@@ -9,8 +9,8 @@ use crate::camera::Camera;
 use crate::dbset::DbSet;
 use crate::gbuffer::GBuffer;
 use crate::pipeline::{
-    classify, composite, integrate, splat, ClassifyOptions, CompositeOptions, Effects,
-    Integrator, PathCounts, SplatOptions,
+    classify, composite, integrate, splat, ClassifyOptions, CompositeOptions, Effects, Integrator,
+    PathCounts, SplatOptions,
 };
 use crate::rgba::RgbaImage;
 

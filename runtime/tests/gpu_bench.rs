@@ -2,13 +2,7 @@
 //! PSF size, rotations, copies, several layers) the GPU image matches the CPU's.
 #![cfg(feature = "gpu")]
 
-// Until `runtime/src/lib.rs` declares `pub mod bench;`, the module is compiled into this test
-// (its `crate::pipeline` / `crate::gpu` paths resolve through these imports).
-#[allow(unused_imports)]
-use runtime::{gpu, pipeline};
-#[path = "../src/bench.rs"]
-#[allow(dead_code)]
-mod bench;
+use runtime::bench;
 
 mod gpu_support;
 

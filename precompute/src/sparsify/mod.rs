@@ -34,12 +34,14 @@ use lloyd::lloyd;
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Procedure {
-    /// The paper's: darts, Lloyd, collapse, annealing.
+    /// The paper's: darts, Lloyd, collapse, annealing (the default: on the quick lens-motion
+    /// database it reaches the same similarity with fewer spreadlets than `Improved`).
+    #[default]
     Paper,
     /// The paper's steps with separate Voronoi cells for positive and negative Laplacian
     /// pixels (a cell never straddles an edge, whose two signed sides would cancel), then a
-    /// least-squares re-fit of the values (kept when it lowers the L1).
-    #[default]
+    /// least-squares re-fit of the values (kept when it lowers the L1). Better on sharp,
+    /// small PSFs (a sharp disk: L1 0.16 against 0.25), but it spends more spreadlets.
     Improved,
 }
 

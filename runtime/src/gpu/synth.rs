@@ -313,6 +313,7 @@ impl GpuSynthesizer {
                         uniform_entry(0),
                         storage_entry(1, true),
                         storage_entry(2, false),
+                        storage_entry(3, false),
                     ],
                 });
         let composite = compute_pipelines(

@@ -19,7 +19,6 @@
 
 use psf_db::{PsfDatabase, PsfModel};
 
-
 use super::types::{FrameParams, SplatPath, SplatRecord};
 use crate::camera::Camera;
 use crate::dbset::DbSet;
@@ -83,6 +82,10 @@ pub struct ClassifyOptions {
     pub copy_threshold_px: f32,
     /// Extra padding beyond the database's largest PSF extent, pixels.
     pub pad_margin: u32,
+    /// Smallest CoC radius a fragment is splatted with, pixels: 0 for synthesis; for
+    /// reconstruction the footprint that spreads sparse samples over the pixels between them
+    /// (a reconstruction filter), which the PSF lookup then also pre-filters.
+    pub min_coc_px: f32,
 }
 
 impl Default for ClassifyOptions {
@@ -93,6 +96,7 @@ impl Default for ClassifyOptions {
             edge_split: true,
             copy_threshold_px: 0.5,
             pad_margin: 2,
+            min_coc_px: 0.0,
         }
     }
 }
@@ -181,13 +185,25 @@ impl Effects {
     }
 }
 
-/// One part of a pixel before layering: weight, parallax, CoC and motion.
-#[derive(Clone, Copy, Debug)]
-struct Fragment {
-    weight: f32,
-    parallax: f32,
-    depth: f32,
-    motion: [f32; 2],
+/// One part of a pixel (or one stochastic sample) before layering: where its PSF is centred,
+/// its colour, weight, parallax, depth and motion. Synthesis makes one or two per G-buffer
+/// pixel (edge split); reconstruction one per stochastic sample.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Fragment {
+    /// Pixel (unpadded, x right) on which the PSF is centred.
+    pub x: i32,
+    /// Pixel (unpadded, y down) on which the PSF is centred.
+    pub y: i32,
+    /// Premultiplied linear RGBA, before `weight`.
+    pub color: [f32; 4],
+    /// Share of `color` this fragment carries (edge split, samples of one pixel).
+    pub weight: f32,
+    /// Parallax, 1/depth (per scene unit); 0 for infinitely far.
+    pub parallax: f32,
+    /// Planar depth, scene units.
+    pub depth: f32,
+    /// Motion over the shutter, pixels (x right, y down).
+    pub motion: [f32; 2],
 }
 
 /// Checks that the camera and the G-buffer agree about the image size.
@@ -232,11 +248,82 @@ pub fn classify(
             present: present(),
         });
     }
+    let model = resolve_model(effects, dbs)?;
+    let lens = camera.thin_lens();
+    let shutter = camera.shutter_frames as f32;
+
+    // Parallax of every pixel and the range over pixels that carry something.
+    let depth_at = |i: usize| gbuffer.depth.as_ref().map_or(f32::INFINITY, |d| d[i]);
+    let parallax_of = |d: f32| if d.is_finite() { 1.0 / d } else { 0.0 };
+    let motion_at = |i: usize| -> [f32; 2] {
+        match (&gbuffer.motion, effects.motion) {
+            (Some(m), true) => [m[i][0] * shutter, m[i][1] * shutter],
+            _ => [0.0, 0.0],
+        }
+    };
+    let signed_coc = |d: f32| -> f32 { lens.map_or(0.0, |l| l.signed_coc_px(f64::from(d)) as f32) };
+
+    let mut counts = PathCounts {
+        dropped: gbuffer.dropped_pixels,
+        ..PathCounts::default()
+    };
+
+    // Fragments per pixel (up to two: edge split).
+    let mut fragments: Vec<Fragment> = Vec::with_capacity(w * h);
+    for y in 0..h {
+        for x in 0..w {
+            let i = y * w + x;
+            let c = gbuffer.color[i];
+            if c == [0.0; 4] {
+                continue;
+            }
+            let d = depth_at(i);
+            let own = Fragment {
+                x: x as i32,
+                y: y as i32,
+                color: c,
+                weight: 1.0,
+                parallax: parallax_of(d),
+                depth: d,
+                motion: motion_at(i),
+            };
+            let split = if options.edge_split && model.is_some() {
+                edge_split(gbuffer, x, y, &signed_coc, &depth_at)
+            } else {
+                None
+            };
+            match split {
+                Some((alpha, j)) => {
+                    counts.edge_split += 1;
+                    let dj = depth_at(j);
+                    fragments.push(Fragment {
+                        weight: alpha,
+                        parallax: parallax_of(dj),
+                        depth: dj,
+                        motion: motion_at(j),
+                        ..own
+                    });
+                    fragments.push(Fragment {
+                        weight: 1.0 - alpha,
+                        ..own
+                    });
+                }
+                None => fragments.push(own),
+            }
+        }
+    }
+
+    classify_fragments(&fragments, w, h, camera, dbs, model, options, counts)
+}
+
+/// The model that drives the lookups for `effects`: lens-motion or physical-lens from
+/// `dbs.main`, else thin-lens; `None` when nothing needs simulating.
+pub fn resolve_model(effects: Effects, dbs: &DbSet) -> Result<Option<PsfModel>, ClassifyError> {
     // The model that drives the lookups: lens-motion or physical-lens from `main`, else
     // thin-lens. Still pixels use the thin-lens database whenever the set has one.
     let thin = dbs.thin_lens.as_ref();
     let main = dbs.main.as_ref();
-    let model = match effects.cheapest_model() {
+    Ok(match effects.cheapest_model() {
         None => None,
         Some(needed) => {
             let found = main.map(|m| m.model()).or(thin.map(|t| t.model()));
@@ -256,10 +343,30 @@ pub fn classify(
             }
             Some(found)
         }
-    };
+    })
+}
+
+/// Layers fragments and turns them into splat records: the nearest PSF of each (O(1) through
+/// the nested grid), its rotation, its drawing path, and its layer(s). `model` comes from
+/// [`resolve_model`]; `counts` carries what the caller already counted (dropped, edge splits).
+#[allow(clippy::too_many_arguments)]
+pub fn classify_fragments(
+    fragments: &[Fragment],
+    w: usize,
+    h: usize,
+    camera: &Camera,
+    dbs: &DbSet,
+    model: Option<PsfModel>,
+    options: &ClassifyOptions,
+    mut counts: PathCounts,
+) -> Result<Classified, ClassifyError> {
+    if options.layers == 0 {
+        return Err(ClassifyError::NoLayers);
+    }
+    let thin = dbs.thin_lens.as_ref();
+    let main = dbs.main.as_ref();
     let combined = dbs.combined.as_ref();
     let lens = camera.thin_lens();
-    let shutter = camera.shutter_frames as f32;
     let pixels_per_mm = camera.pixels_per_mm() as f32;
     // Nothing to simulate: every pixel is copied, and one layer returns the input unchanged.
     let n_layers = if model.is_some() {
@@ -267,73 +374,10 @@ pub fn classify(
     } else {
         1
     };
-
-    // Parallax of every pixel and the range over pixels that carry something.
-    let depth_at = |i: usize| gbuffer.depth.as_ref().map_or(f32::INFINITY, |d| d[i]);
-    let parallax_of = |d: f32| if d.is_finite() { 1.0 / d } else { 0.0 };
-    let motion_at = |i: usize| -> [f32; 2] {
-        match (&gbuffer.motion, effects.motion) {
-            (Some(m), true) => [m[i][0] * shutter, m[i][1] * shutter],
-            _ => [0.0, 0.0],
-        }
-    };
     let signed_coc = |d: f32| -> f32 { lens.map_or(0.0, |l| l.signed_coc_px(f64::from(d)) as f32) };
-
-    let mut counts = PathCounts {
-        dropped: gbuffer.dropped_pixels,
-        ..PathCounts::default()
-    };
-
-    // Fragments per pixel (up to two: edge split).
-    let mut fragments: Vec<(usize, Fragment)> = Vec::with_capacity(w * h);
-    for y in 0..h {
-        for x in 0..w {
-            let i = y * w + x;
-            let c = gbuffer.color[i];
-            if c == [0.0; 4] {
-                continue;
-            }
-            let d = depth_at(i);
-            let own = Fragment {
-                weight: 1.0,
-                parallax: parallax_of(d),
-                depth: d,
-                motion: motion_at(i),
-            };
-            let split = if options.edge_split && model.is_some() {
-                edge_split(gbuffer, x, y, &signed_coc, &depth_at)
-            } else {
-                None
-            };
-            match split {
-                Some((alpha, j)) => {
-                    counts.edge_split += 1;
-                    let dj = depth_at(j);
-                    fragments.push((
-                        i,
-                        Fragment {
-                            weight: alpha,
-                            parallax: parallax_of(dj),
-                            depth: dj,
-                            motion: motion_at(j),
-                        },
-                    ));
-                    fragments.push((
-                        i,
-                        Fragment {
-                            weight: 1.0 - alpha,
-                            ..own
-                        },
-                    ));
-                }
-                None => fragments.push((i, own)),
-            }
-        }
-    }
-
     let (pmin, pmax) = fragments
         .iter()
-        .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), (_, f)| {
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), f| {
             (a.min(f.parallax), b.max(f.parallax))
         });
     let span = if pmax > pmin { pmax - pmin } else { 0.0 };
@@ -353,13 +397,13 @@ pub fn classify(
     // Records per layer, then concatenated (deterministic order).
     let mut per_layer: Vec<Vec<SplatRecord>> = vec![Vec::new(); n_layers];
     let centre = [w as f32 * 0.5, h as f32 * 0.5];
-    for &(i, frag) in &fragments {
+    for frag in fragments {
         if frag.weight <= 0.0 {
             continue;
         }
-        let (x, y) = (i % w, i / w);
-        let color = gbuffer.color[i];
-        let coc = signed_coc(frag.depth).abs();
+        let (x, y) = (frag.x, frag.y);
+        let color = frag.color;
+        let coc = signed_coc(frag.depth).abs().max(options.min_coc_px);
         let m = frag.motion;
         let motion_len = (m[0] * m[0] + m[1] * m[1]).sqrt();
         let (mut rot_cos, mut rot_sin) = (1.0f32, 0.0f32);
@@ -429,8 +473,8 @@ pub fn classify(
         for &(layer, lw) in &targets[..n_targets] {
             let weight = frag.weight * lw;
             per_layer[layer].push(SplatRecord {
-                center_x: x as i32 + pad as i32,
-                center_y: y as i32 + pad as i32,
+                center_x: x + pad as i32,
+                center_y: y + pad as i32,
                 psf_index,
                 layer: layer as u32,
                 rot_cos,
@@ -546,7 +590,10 @@ fn edge_split(
         den += a * a;
     }
     // A colour difference too small to tell the parts apart: leave the pixel whole.
-    let scale = cf[..3].iter().chain(&cb[..3]).fold(0.0f32, |m, v| m.max(v.abs()));
+    let scale = cf[..3]
+        .iter()
+        .chain(&cb[..3])
+        .fold(0.0f32, |m, v| m.max(v.abs()));
     if den <= (0.05 * scale).powi(2) || den <= 1e-12 {
         return None;
     }
@@ -585,8 +632,13 @@ mod tests {
             None,
         )
         .expect("g");
-        let c = classify(&g, &camera(3, 2, false, 0.0), &DbSet::none(), &ClassifyOptions::default())
-            .expect("classify");
+        let c = classify(
+            &g,
+            &camera(3, 2, false, 0.0),
+            &DbSet::none(),
+            &ClassifyOptions::default(),
+        )
+        .expect("classify");
         assert_eq!(c.counts.copied, 6);
         assert_eq!(c.records.len(), 6);
         assert_eq!(c.frame.pad, ClassifyOptions::default().pad_margin);
@@ -595,17 +647,27 @@ mod tests {
 
     #[test]
     fn defocus_needs_a_thin_lens_database_and_rejects_motion() {
-        let g = GBuffer::from_planes(2, 1, vec![[1.0; 4]; 2], Some(vec![0.5, 3.0]), None)
-            .expect("g");
-        let err = classify(&g, &camera(2, 1, true, 0.0), &DbSet::none(), &ClassifyOptions::default())
-            .expect_err("no db");
+        let g =
+            GBuffer::from_planes(2, 1, vec![[1.0; 4]; 2], Some(vec![0.5, 3.0]), None).expect("g");
+        let err = classify(
+            &g,
+            &camera(2, 1, true, 0.0),
+            &DbSet::none(),
+            &ClassifyOptions::default(),
+        )
+        .expect_err("no db");
         assert!(err.to_string().contains("thin-lens"));
         assert_eq!(
             Effects::of(&camera(2, 1, true, 0.0), &g).cheapest_model(),
             Some(PsfModel::ThinLens)
         );
-        let err = classify(&g, &camera(3, 1, true, 0.0), &DbSet::none(), &ClassifyOptions::default())
-            .expect_err("size");
+        let err = classify(
+            &g,
+            &camera(3, 1, true, 0.0),
+            &DbSet::none(),
+            &ClassifyOptions::default(),
+        )
+        .expect_err("size");
         assert!(err.to_string().contains("3x1"));
     }
 

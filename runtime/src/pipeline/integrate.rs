@@ -33,9 +33,8 @@ pub struct IntegratedLayers {
 pub fn integrate(stack: &LayerStack, integrator: Integrator) -> IntegratedLayers {
     let frame = stack.frame;
     let (pw, ph) = (frame.padded_width as usize, frame.padded_height as usize);
-    let exact = (integrator == Integrator::Exact
-        && stack.laplacian.iter().any(|p| !p.is_empty()))
-    .then(|| ExactIntegrator::new(pw, ph));
+    let exact = (integrator == Integrator::Exact && stack.laplacian.iter().any(|p| !p.is_empty()))
+        .then(|| ExactIntegrator::new(pw, ph));
     let mut planes: Vec<Plane> = stack
         .laplacian
         .par_iter()

@@ -63,6 +63,9 @@ pub fn splat(
     let bands = ph.div_ceil(BAND_ROWS);
     let n_layers = frame.layers as usize;
     let extent = frame.pad as i32 + 2;
+    // Reach of each PSF (px, rounded up, +1 for bilinear splitting): a record only visits the
+    // bands its own PSF reaches.
+    let reach: Vec<i32> = db.map_or_else(Vec::new, psf_reach);
 
     // Tasks: (layer, band, kind) with kind 0 = Laplacian, 1 = direct.
     let mut tasks = Vec::new();
@@ -73,11 +76,12 @@ pub fn splat(
             }
         }
     }
-    let results: Vec<((usize, usize, usize), Vec<[f32; 4]>)> = tasks
+    let results: Vec<BandResult> = tasks
         .par_iter()
         .map(|&(l, b, kind)| {
             let info = &classified.layers[l];
-            let recs = &classified.records[info.first_record..info.first_record + info.record_count];
+            let recs =
+                &classified.records[info.first_record..info.first_record + info.record_count];
             let y0 = (b * BAND_ROWS) as i32;
             let y1 = ((b + 1) * BAND_ROWS).min(ph) as i32;
             // Records are in row order within a layer: the ones that can reach the band.
@@ -90,6 +94,11 @@ pub fn splat(
                 y1,
             };
             for r in &recs[lo..hi] {
+                if let Some(&k) = reach.get(r.psf_index as usize) {
+                    if r.center_y + k < y0 || r.center_y - k >= y1 {
+                        continue;
+                    }
+                }
                 match (kind, r.path) {
                     (0, p) if p == SplatPath::Sparse as u32 => {
                         if let Some(db) = db {
@@ -137,6 +146,35 @@ pub fn splat(
         direct,
     }
 }
+
+/// For every PSF of `db`, the largest distance (px, rounded up, plus one) of any of its
+/// spreadlets or dense pixels from its centre.
+pub fn psf_reach(db: &PsfDatabase) -> Vec<i32> {
+    (0..db.psf_count())
+        .map(|i| {
+            let r2 = match db.dense(i) {
+                Some(d) => {
+                    let xs = [d.origin[0], d.origin[0] + d.width as i32 - 1];
+                    let ys = [d.origin[1], d.origin[1] + d.height as i32 - 1];
+                    let mx = xs.iter().map(|x| x.abs()).max().unwrap_or(0);
+                    let my = ys.iter().map(|y| y.abs()).max().unwrap_or(0);
+                    mx * mx + my * my
+                }
+                None => db
+                    .spreadlets(i)
+                    .0
+                    .iter()
+                    .map(|p| i32::from(p[0]).pow(2) + i32::from(p[1]).pow(2))
+                    .max()
+                    .unwrap_or(0),
+            };
+            (f64::from(r2).sqrt().ceil() as i32) + 1
+        })
+        .collect()
+}
+
+/// A finished band: (layer, band, kind) and its RGBA rows.
+type BandResult = ((usize, usize, usize), Vec<[f32; 4]>);
 
 /// Rows `[y0, y1)` of a padded layer, RGBA interleaved.
 struct Band {
@@ -249,7 +287,17 @@ fn splat_dense(band: &mut Band, r: &SplatRecord, db: &PsfDatabase, sampling: Rot
     };
     let ch = view.channels;
     let identity = is_identity(r);
-    for v in 0..view.height {
+    // Unrotated: only the rows that fall inside the band.
+    let (v0, v1) = if identity {
+        let top = r.center_y + view.origin[1];
+        (
+            (band.y0 - top).clamp(0, view.height as i32) as usize,
+            (band.y1 - top).clamp(0, view.height as i32) as usize,
+        )
+    } else {
+        (0, view.height)
+    };
+    for v in v0..v1 {
         for u in 0..view.width {
             let at = (v * view.width + u) * ch;
             let vals = &view.data[at..at + ch];

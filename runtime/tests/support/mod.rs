@@ -20,9 +20,24 @@ pub fn test_db(model: PsfModel) -> &'static PsfDatabase {
         PsfModel::PhysicalLens => &DBS[2],
     };
     slot.get_or_init(|| {
+        runtime::condition::condition(raw_test_db(model))
+            .expect("condition")
+            .0
+    })
+}
+
+/// The Test-profile database of `model` as the precompute built it, once per test binary.
+pub fn raw_test_db(model: PsfModel) -> &'static PsfDatabase {
+    static DBS: [OnceLock<PsfDatabase>; 3] = [OnceLock::new(), OnceLock::new(), OnceLock::new()];
+    let slot = match model {
+        PsfModel::ThinLens => &DBS[0],
+        PsfModel::LensMotion => &DBS[1],
+        PsfModel::PhysicalLens => &DBS[2],
+    };
+    slot.get_or_init(|| {
         let cfg = BuildConfig::new(model, Profile::Test);
         match build_database(&cfg, false) {
-            Ok((db, _)) => runtime::condition::condition(&db).expect("condition").0,
+            Ok((db, _)) => db,
             Err(e) => panic!("building the {} test database failed: {e}", model.name()),
         }
     })

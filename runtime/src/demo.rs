@@ -1,0 +1,302 @@
+//! `spreadlet demo`: the whole job on built-in data, on a fresh machine, without arguments.
+//!
+//! Renders a built-in scene with the ground-truth renderer (a pinhole G-buffer, stochastic
+//! frames at 16 spp, a converged reference), builds or reuses the quick databases, runs
+//! synthesis from the G-buffer and reconstruction from 1 spp, and scores every result and the
+//! plain per-pixel averages of 1 and 16 spp against the reference (SSIM as the project defines
+//! it). Writes the images (EXR), a side-by-side PNG, `summary.json` and prints a table.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use serde::Serialize;
+
+use crate::camera::Camera;
+use crate::dbcache;
+use crate::dbset::DbSet;
+use crate::gbuffer::GBuffer;
+use crate::pipeline::Effects;
+use crate::reconstruct::reconstruct;
+use crate::rgba::RgbaImage;
+use crate::synth::{synthesize, SynthOptions};
+
+/// Knobs of the demo.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DemoOptions {
+    /// Output folder.
+    pub out: PathBuf,
+    /// Built-in scene name (`scene::BUILTIN_NAMES`).
+    pub scene: String,
+    /// Image size override, pixels (square); `None` keeps the scene's.
+    pub size: Option<u32>,
+    /// Samples per pixel of the reference.
+    pub reference_spp: usize,
+    /// Samples per pixel of the stochastic frames (the 1-spp input is their first sample).
+    pub stochastic_spp: usize,
+    /// Database profile.
+    pub profile: precompute::Profile,
+    /// Random seed of the renders.
+    pub seed: u64,
+    /// Show progress.
+    pub progress: bool,
+}
+
+impl Default for DemoOptions {
+    fn default() -> Self {
+        Self {
+            out: PathBuf::from("out/demo"),
+            scene: "crossing".into(),
+            size: None,
+            reference_spp: 1024,
+            stochastic_spp: 16,
+            profile: precompute::Profile::Quick,
+            seed: 1,
+            progress: true,
+        }
+    }
+}
+
+/// One step of the demo: its SSIM against the reference and its time.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct DemoStep {
+    /// SSIM against the reference (sRGB, sigma 1.5, mean over R, G, B).
+    pub ssim: f64,
+    /// PSNR against the reference, dB.
+    pub psnr: f64,
+    /// Wall-clock time of the step, milliseconds (renders of the inputs excluded).
+    pub ms: f64,
+    /// What the step is.
+    pub what: String,
+}
+
+/// The databases the effects call for, from the cache (built with `profile` when missing):
+/// thin-lens for defocus and still pixels, lens-motion in addition when there is motion.
+pub fn cached_dbs(
+    effects: Effects,
+    profile: precompute::Profile,
+    blades: u32,
+    progress: bool,
+) -> Result<DbSet> {
+    let Some(needed) = effects.cheapest_model() else {
+        return Ok(DbSet::none());
+    };
+    let load = |model| -> Result<psf_db::PsfDatabase> {
+        let cfg = dbcache::build_config(model, profile, blades);
+        let (db, _) = dbcache::cached_database(&cfg, &dbcache::cache_dir(), progress)?;
+        Ok(crate::condition::condition(&db)?.0)
+    };
+    let thin = load(psf_db::PsfModel::ThinLens)?;
+    let main = match needed {
+        psf_db::PsfModel::LensMotion => Some(load(psf_db::PsfModel::LensMotion)?),
+        _ => None,
+    };
+    Ok(DbSet::new(Some(thin), main)?)
+}
+
+fn to_runtime(image: &scene::RgbaImage) -> RgbaImage {
+    RgbaImage {
+        width: image.width,
+        height: image.height,
+        pixels: image.pixels.clone(),
+    }
+}
+
+fn score(result: &RgbaImage, reference: &RgbaImage, ms: f64, what: &str) -> Result<DemoStep> {
+    let flat = |i: &RgbaImage| -> Vec<f32> { i.pixels.iter().flatten().copied().collect() };
+    let (a, b) = (flat(result), flat(reference));
+    let ssim = metrics::ssim_rgb(&a, &b, result.width, result.height)
+        .context("SSIM of the demo images")?;
+    let psnr = metrics::psnr_rgb(&a, &b, result.width, result.height)
+        .context("PSNR of the demo images")?;
+    Ok(DemoStep {
+        ssim,
+        psnr,
+        ms,
+        what: what.into(),
+    })
+}
+
+/// Side-by-side PNG (sRGB) of `images`, left to right, with a 4-pixel gap.
+fn write_strip(path: &Path, images: &[&RgbaImage]) -> Result<()> {
+    let gap = 4;
+    let h = images.iter().map(|i| i.height).max().unwrap_or(0);
+    let w: usize = images
+        .iter()
+        .map(|i| i.width + gap)
+        .sum::<usize>()
+        .saturating_sub(gap);
+    let mut strip = RgbaImage::new(w, h);
+    let mut x0 = 0;
+    for image in images {
+        for y in 0..image.height {
+            for x in 0..image.width {
+                let p = image.get(x, y);
+                // Composite over black, opaque, for viewing.
+                strip.pixels[y * w + x0 + x] = [p[0], p[1], p[2], 1.0];
+            }
+        }
+        x0 += image.width + gap;
+    }
+    strip.write_preview_png(path)?;
+    Ok(())
+}
+
+/// Runs the demo; returns the steps in order.
+pub fn run(options: &DemoOptions) -> Result<Vec<(String, DemoStep)>> {
+    let out = &options.out;
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let mut scene = scene::builtin(&options.scene)?;
+    if let Some(size) = options.size {
+        scene = scene.with_size(size, size)?;
+    }
+    let render = scene::RenderOptions {
+        seed: options.seed,
+        progress: options.progress,
+        ..Default::default()
+    };
+    let camera = Camera::from_json_str(&scene.camera_json())?;
+    let say = |s: &str| {
+        if options.progress {
+            eprintln!("{s}");
+        }
+    };
+
+    say(&format!(
+        "rendering '{}' ({}x{}): G-buffer, {} spp stochastic frames, {} spp reference",
+        options.scene, camera.width, camera.height, options.stochastic_spp, options.reference_spp
+    ));
+    let g = scene::render_gbuffer(&scene, 16, &render)?;
+    let frames = scene::render_stochastic(&scene, options.stochastic_spp.max(1), &render)?;
+    let reference = to_runtime(&scene::render_reference(
+        &scene,
+        options.reference_spp,
+        &render,
+    )?);
+    g.write_exr(&out.join("gbuffer.exr"))?;
+    reference.write_exr(&out.join("reference.exr"))?;
+    std::fs::write(out.join("camera.json"), scene.camera_json())?;
+
+    let (w, h) = (g.width, g.height);
+    let motion: Vec<[f32; 2]> = (0..w * h)
+        .map(|i| {
+            let m = g.forward_motion(i % w, i / w);
+            [m.x as f32, m.y as f32]
+        })
+        .collect();
+    let gbuffer = GBuffer::from_planes(
+        w,
+        h,
+        g.color_image().pixels,
+        Some(g.depth.clone()),
+        Some(motion),
+    )?;
+
+    // One-sample frames: the first sample of every pixel.
+    let one_spp = scene::StochasticFrames {
+        width: frames.width,
+        height: frames.height,
+        spp: 1,
+        samples: frames.samples.iter().step_by(frames.spp).copied().collect(),
+    };
+
+    let effects = Effects::of(&camera, &gbuffer);
+    say("loading (or building) the databases");
+    let dbs = cached_dbs(
+        effects,
+        options.profile,
+        camera.aperture_blades,
+        options.progress,
+    )?;
+    let synth_options = SynthOptions::default();
+
+    let mut steps = Vec::new();
+    let t = Instant::now();
+    let (synthesis, _) = synthesize(&gbuffer, &camera, &dbs, &synth_options)?;
+    let ms = t.elapsed().as_secs_f64() * 1e3;
+    synthesis.write_exr(&out.join("synthesis.exr"))?;
+    steps.push((
+        "synthesis".to_string(),
+        score(
+            &synthesis,
+            &reference,
+            ms,
+            "spreadlet synthesis from the pinhole G-buffer",
+        )?,
+    ));
+
+    let mut recon_options = synth_options.clone();
+    recon_options.classify.min_coc_px = crate::reconstruct::min_footprint_px(1);
+    let t = Instant::now();
+    let (recon, _) = reconstruct(&one_spp, &camera, &dbs, &recon_options)?;
+    let ms = t.elapsed().as_secs_f64() * 1e3;
+    recon.write_exr(&out.join("reconstruct_1spp.exr"))?;
+    steps.push((
+        "reconstruct_1spp".to_string(),
+        score(
+            &recon,
+            &reference,
+            ms,
+            "spreadlet reconstruction from 1 spp",
+        )?,
+    ));
+
+    let t = Instant::now();
+    let avg1 = to_runtime(&one_spp.average());
+    let ms = t.elapsed().as_secs_f64() * 1e3;
+    steps.push((
+        "average_1spp".to_string(),
+        score(&avg1, &reference, ms, "per-pixel average of 1 spp")?,
+    ));
+    let t = Instant::now();
+    let avg_n = to_runtime(&frames.average());
+    let ms = t.elapsed().as_secs_f64() * 1e3;
+    let name = format!("average_{}spp", frames.spp);
+    steps.push((
+        name.clone(),
+        score(
+            &avg_n,
+            &reference,
+            ms,
+            &format!("per-pixel average of {} spp", frames.spp),
+        )?,
+    ));
+
+    let pinhole = to_runtime(&g.color_image());
+    write_strip(
+        &out.join("side_by_side.png"),
+        &[&pinhole, &synthesis, &recon, &avg1, &avg_n, &reference],
+    )?;
+    let summary: serde_json::Map<String, serde_json::Value> = steps
+        .iter()
+        .map(|(k, v)| Ok((k.clone(), serde_json::to_value(v)?)))
+        .collect::<Result<_>>()?;
+    let summary = serde_json::json!({
+        "scene": options.scene,
+        "width": w,
+        "height": h,
+        "reference_spp": options.reference_spp,
+        "side_by_side": "side_by_side.png: pinhole input | synthesis | reconstruct_1spp | average_1spp | average_Nspp | reference",
+        "steps": summary,
+    });
+    let summary_path = out.join("summary.json");
+    crate::rgba::write_atomically(&summary_path, |f| {
+        serde_json::to_writer_pretty(f, &summary).map_err(|e| crate::rgba::WriteError::Io {
+            path: summary_path.display().to_string(),
+            source: std::io::Error::other(e),
+        })
+    })?;
+    Ok(steps)
+}
+
+/// The demo's table, Markdown.
+pub fn table(steps: &[(String, DemoStep)]) -> String {
+    let mut s = String::from("| step | SSIM | PSNR (dB) | ms |\n| --- | --- | --- | --- |\n");
+    for (name, step) in steps {
+        s.push_str(&format!(
+            "| {name} | {:.4} | {:.2} | {:.1} |\n",
+            step.ssim, step.psnr, step.ms
+        ));
+    }
+    s
+}
