@@ -32,7 +32,9 @@ fn demo_writes_the_summary_and_reconstruction_beats_the_1spp_average() {
     let summary: serde_json::Value = serde_json::from_str(&text).expect("JSON");
     let steps = &summary["steps"];
     let ssim = |k: &str| {
-        let v = steps[k]["ssim"].as_f64().unwrap_or_else(|| panic!("{k} in {text}"));
+        let v = steps[k]["ssim"]
+            .as_f64()
+            .unwrap_or_else(|| panic!("{k} in {text}"));
         assert!(steps[k]["ms"].as_f64().is_some(), "{k}.ms in {text}");
         v
     };
@@ -48,7 +50,12 @@ fn demo_writes_the_summary_and_reconstruction_beats_the_1spp_average() {
     );
     assert!(avg16 > avg1, "16 spp average {avg16} vs 1 spp {avg1}");
     assert!(synthesis > 0.8, "synthesis {synthesis}");
-    for f in ["side_by_side.png", "synthesis.exr", "reconstruct_1spp.exr", "reference.exr"] {
+    for f in [
+        "side_by_side.png",
+        "synthesis.exr",
+        "reconstruct_1spp.exr",
+        "reference.exr",
+    ] {
         assert!(out.join(f).exists(), "{f} missing");
     }
 }

@@ -28,9 +28,9 @@ use std::path::Path;
 use bytemuck::{Pod, Zeroable};
 use serde::{Deserialize, Serialize};
 
-use crate::shard::ShardRange;
 use crate::error::DbError;
 use crate::model::PsfModel;
+use crate::shard::ShardRange;
 use crate::space::ParamSpace;
 
 /// The first 8 bytes of every database file.

@@ -99,7 +99,14 @@ fn first_difference(a: &DbHeader, b: &DbHeader) -> String {
             })*
         };
     }
-    differ!(model, seed, rays_per_psf, spreadlet_budget, prefilter, channels);
+    differ!(
+        model,
+        seed,
+        rays_per_psf,
+        spreadlet_budget,
+        prefilter,
+        channels
+    );
     if a.space != b.space {
         return "the parameter space (ranges, betas or grid) differs".into();
     }

@@ -41,6 +41,30 @@ enum Command {
     Reconstruct(ReconstructArgs),
     /// The whole job on built-in data: render a scene, synthesise, reconstruct, score.
     Demo(DemoArgs),
+    /// Per-stage and total times of both backends at several sizes (median of runs), as a
+    /// Markdown table.
+    #[cfg(feature = "gpu")]
+    Bench(BenchArgs),
+}
+
+#[cfg(feature = "gpu")]
+#[derive(Args, Debug)]
+struct BenchArgs {
+    /// Square frame sizes, pixels, comma-separated.
+    #[arg(long, default_value = "512,1024", value_delimiter = ',')]
+    sizes: Vec<u32>,
+    /// Runs per backend and size (the median is reported).
+    #[arg(long, default_value_t = 5)]
+    runs: usize,
+    /// Profile of the lens-motion database (built on demand into the cache).
+    #[arg(long, default_value = "quick")]
+    db_profile: String,
+    /// Skip the CPU backend.
+    #[arg(long)]
+    no_cpu: bool,
+    /// Skip the GPU backend.
+    #[arg(long)]
+    no_gpu: bool,
 }
 
 #[derive(Args, Debug)]
@@ -233,6 +257,8 @@ fn main() {
         Command::Compare(args) => run_compare(args),
         Command::Reconstruct(args) => run_reconstruct(args),
         Command::Demo(args) => run_demo(args),
+        #[cfg(feature = "gpu")]
+        Command::Bench(args) => run_bench(args),
     };
     if let Err(e) = result {
         eprintln!("error: {e:#}");
@@ -363,14 +389,8 @@ fn run_synth(args: SynthArgs) -> Result<()> {
             renormalize_coverage: !args.no_coverage_renormalization,
         },
     };
-    let backend = match args.backend {
-        Backend::Gpu => bail!(
-            "--backend gpu: the GPU synthesis path is not available in this build yet; use \
-             --backend cpu"
-        ),
-        Backend::Auto | Backend::Cpu => "cpu",
-    };
-    let (image, stats) = synthesize(&gbuffer, &camera, &dbs, &options)?;
+    let (backend, image, stats) =
+        run_backend(args.backend, &gbuffer, &camera, &dbs, &options, args.quiet)?;
     let t = Instant::now();
     image.write_exr(&args.out)?;
     if let Some(p) = &args.preview {
@@ -430,6 +450,57 @@ fn run_synth(args: SynthArgs) -> Result<()> {
         })?;
     }
     Ok(())
+}
+
+/// Runs synthesis on the chosen device. `auto` takes a hardware GPU when there is one and the
+/// CPU otherwise (a software adapter such as lavapipe is slower than the CPU path, so `auto`
+/// does not pick it; `--backend gpu` does).
+fn run_backend(
+    backend: Backend,
+    gbuffer: &GBuffer,
+    camera: &Camera,
+    dbs: &DbSet,
+    options: &SynthOptions,
+    quiet: bool,
+) -> Result<(String, RgbaImage, runtime::synth::SynthStats)> {
+    #[cfg(feature = "gpu")]
+    if backend != Backend::Cpu {
+        use runtime::gpu::{synthesize_gpu, GpuContext, GpuSynthOptions, GpuSynthesizer};
+        let ctx = GpuContext::with_requirement(backend == Backend::Gpu)?;
+        match ctx {
+            Some(ctx)
+                if backend == Backend::Gpu
+                    || ctx.adapter_info().device_type != wgpu::DeviceType::Cpu =>
+            {
+                let mut gpu = GpuSynthesizer::for_database(
+                    &ctx,
+                    dbs.combined.as_ref(),
+                    GpuSynthOptions::from_synth(options),
+                )?;
+                let (image, stats, _) = synthesize_gpu(&mut gpu, gbuffer, camera, dbs, options)?;
+                return Ok((format!("gpu ({})", ctx.adapter_name()), image, stats));
+            }
+            Some(ctx) => {
+                if !quiet {
+                    eprintln!(
+                        "backend auto: {} is a software adapter; using the CPU",
+                        ctx.adapter_name()
+                    );
+                }
+            }
+            None => {
+                if !quiet {
+                    eprintln!("backend auto: no GPU adapter; using the CPU");
+                }
+            }
+        }
+    }
+    #[cfg(not(feature = "gpu"))]
+    if backend == Backend::Gpu {
+        bail!("--backend gpu: this build has no GPU support (feature `gpu`)");
+    }
+    let (image, stats) = synthesize(gbuffer, camera, dbs, options)?;
+    Ok(("cpu".to_string(), image, stats))
 }
 
 fn read_rgba(path: &Path) -> Result<RgbaImage> {
@@ -545,5 +616,22 @@ fn run_demo(args: DemoArgs) -> Result<()> {
          average_16spp | reference), summary.json and the EXRs",
         args.out.display()
     );
+    Ok(())
+}
+
+#[cfg(feature = "gpu")]
+fn run_bench(args: BenchArgs) -> Result<()> {
+    let profile: precompute::Profile = args.db_profile.parse()?;
+    let cfg = dbcache::build_config(psf_db::PsfModel::LensMotion, profile, 0);
+    let (db, _) = dbcache::cached_database(&cfg, &dbcache::cache_dir(), true)?;
+    let config = runtime::bench::BenchConfig {
+        sizes: args.sizes,
+        runs: args.runs.max(1),
+        cpu: !args.no_cpu,
+        gpu: !args.no_gpu,
+        ..Default::default()
+    };
+    let report = runtime::bench::run_bench(&db, &config)?;
+    println!("{}", report.to_markdown());
     Ok(())
 }

@@ -25,7 +25,16 @@ pub fn binary(name: &str) -> PathBuf {
         BUILT.get_or_init(|| {
             let release = profile_dir().ends_with("release");
             let mut cmd = Command::new(env!("CARGO"));
-            cmd.args(["build", "--bins", "-p", "runtime", "-p", "precompute", "-p", "scene"]);
+            cmd.args([
+                "build",
+                "--bins",
+                "-p",
+                "runtime",
+                "-p",
+                "precompute",
+                "-p",
+                "scene",
+            ]);
             if release {
                 cmd.arg("--release");
             }
