@@ -169,9 +169,18 @@ struct CameraFlags {
 
 #[derive(Args, Debug)]
 struct SynthArgs {
-    /// Pinhole G-buffer: OpenEXR with colour, depth and (for motion blur) motion vectors.
+    /// Pinhole G-buffer: OpenEXR with colour, depth and (for motion blur) motion vectors. For a
+    /// sequence, a run of # stands for the frame number (frames/####.exr with --frames).
     #[arg(long)]
     input: PathBuf,
+    /// Frame range A-B of a sequence: # in --input, --out, --camera, --preview and --stats is
+    /// replaced by the frame number; databases and GPU pipelines are reused across frames.
+    #[arg(long)]
+    frames: Option<String>,
+    /// Synthesise only part K of N of the frame range (0-based; auto/N takes K from
+    /// SLURM_ARRAY_TASK_ID or JOB_COMPLETION_INDEX).
+    #[arg(long)]
+    shard: Option<String>,
     /// Camera description (`camera.json`); flags with the same names override its fields.
     #[arg(long)]
     camera: Option<PathBuf>,
@@ -300,9 +309,147 @@ fn load_camera(path: Option<&Path>, f: &CameraFlags) -> Result<Camera> {
     Ok(camera)
 }
 
+/// One frame of a `synth` run: its files.
+struct FrameJob {
+    input: PathBuf,
+    out: PathBuf,
+    camera: Option<PathBuf>,
+    preview: Option<PathBuf>,
+    stats: Option<PathBuf>,
+}
+
+/// What a sequence keeps from frame to frame: the databases (loaded and conditioned once) and
+/// the GPU synthesizer (pipelines compiled and the database uploaded once).
+#[derive(Default)]
+struct SequenceState {
+    /// The model the loaded set was chosen for, and the set.
+    dbs: Option<(Option<psf_db::PsfModel>, std::sync::Arc<DbSet>)>,
+    #[cfg(feature = "gpu")]
+    gpu: Option<(runtime::gpu::GpuContext, runtime::gpu::GpuSynthesizer)>,
+    /// The device chosen by the first frame ("cpu" or the GPU's name).
+    device: Option<String>,
+}
+
 fn run_synth(args: SynthArgs) -> Result<()> {
+    let jobs = frame_jobs(&args)?;
+    let mut state = SequenceState::default();
     let started = Instant::now();
-    let camera = load_camera(args.camera.as_deref(), &args.camera_flags)?;
+    let mut frame_ms = Vec::with_capacity(jobs.len());
+    for job in &jobs {
+        let t = Instant::now();
+        synth_frame(&args, job, &mut state)
+            .with_context(|| format!("frame {}", job.input.display()))?;
+        frame_ms.push(t.elapsed().as_secs_f64() * 1e3);
+    }
+    if jobs.len() > 1 && !args.quiet {
+        let first = frame_ms.first().copied().unwrap_or(0.0);
+        let mut rest = frame_ms[1..].to_vec();
+        rest.sort_by(f64::total_cmp);
+        eprintln!(
+            "{} frames in {:.1} s: first {:.0} ms, median of the others {:.0} ms",
+            jobs.len(),
+            started.elapsed().as_secs_f64(),
+            first,
+            rest.get(rest.len() / 2).copied().unwrap_or(0.0)
+        );
+    }
+    Ok(())
+}
+
+/// Replaces the run of `#` in `path` by `frame`, zero-padded to the run's length.
+fn frame_path(path: &Path, frame: u32) -> Result<PathBuf> {
+    let text = path.to_string_lossy();
+    let Some(start) = text.find('#') else {
+        return Ok(path.to_path_buf());
+    };
+    let len = text[start..].chars().take_while(|c| *c == '#').count();
+    if text[start + len..].contains('#') {
+        bail!("{}: only one run of # is allowed", path.display());
+    }
+    Ok(PathBuf::from(format!(
+        "{}{frame:0len$}{}",
+        &text[..start],
+        &text[start + len..]
+    )))
+}
+
+/// The frames of a `synth` run: one, or the range `--frames A-B` (its `--shard K/N` share)
+/// with `#` in the paths replaced by the frame number.
+fn frame_jobs(args: &SynthArgs) -> Result<Vec<FrameJob>> {
+    let has_hash = |p: &Path| p.to_string_lossy().contains('#');
+    let Some(range) = &args.frames else {
+        if has_hash(&args.input) || has_hash(&args.out) {
+            bail!("the paths hold # but no --frames A-B was given");
+        }
+        if args.shard.is_some() {
+            bail!("--shard splits a frame range: give --frames A-B too");
+        }
+        return Ok(vec![FrameJob {
+            input: args.input.clone(),
+            out: args.out.clone(),
+            camera: args.camera.clone(),
+            preview: args.preview.clone(),
+            stats: args.stats.clone(),
+        }]);
+    };
+    let bad = || anyhow::anyhow!("--frames takes A-B (first and last frame), got '{range}'");
+    let (a, b) = range.split_once('-').ok_or_else(bad)?;
+    let (a, b): (u32, u32) = (
+        a.trim().parse().map_err(|_| bad())?,
+        b.trim().parse().map_err(|_| bad())?,
+    );
+    if b < a {
+        return Err(bad());
+    }
+    if !has_hash(&args.input) || !has_hash(&args.out) {
+        bail!("with --frames, --input and --out need a run of # for the frame number (frames/####.exr)");
+    }
+    let all: Vec<u32> = (a..=b).collect();
+    let frames = match &args.shard {
+        Some(spec) => {
+            let (k, n) = parse_shard(spec)?;
+            let r = psf_db::ShardRange::of(k, n, all.len() as u32)?;
+            all[r.first_psf as usize..(r.first_psf + r.len) as usize].to_vec()
+        }
+        None => all,
+    };
+    let opt = |p: &Option<PathBuf>, f| p.as_deref().map(|p| frame_path(p, f)).transpose();
+    frames
+        .into_iter()
+        .map(|f| {
+            Ok(FrameJob {
+                input: frame_path(&args.input, f)?,
+                out: frame_path(&args.out, f)?,
+                camera: opt(&args.camera, f)?,
+                preview: opt(&args.preview, f)?,
+                stats: opt(&args.stats, f)?,
+            })
+        })
+        .collect()
+}
+
+/// `K/N`, or `auto/N` with K from the batch engine (SLURM_ARRAY_TASK_ID, JOB_COMPLETION_INDEX).
+fn parse_shard(spec: &str) -> Result<(u32, u32)> {
+    let spec = match spec.strip_prefix("auto/") {
+        Some(count) => {
+            let k = ["SLURM_ARRAY_TASK_ID", "JOB_COMPLETION_INDEX"]
+                .iter()
+                .find_map(|v| std::env::var(v).ok())
+                .ok_or_else(|| {
+                    anyhow::anyhow!(
+                        "--shard auto/{count}: neither SLURM_ARRAY_TASK_ID nor JOB_COMPLETION_INDEX is set"
+                    )
+                })?;
+            format!("{k}/{count}")
+        }
+        None => spec.to_string(),
+    };
+    Ok(psf_db::ShardRange::parse_spec(&spec)?)
+}
+
+fn synth_frame(args: &SynthArgs, job: &FrameJob, state: &mut SequenceState) -> Result<()> {
+    let started = Instant::now();
+    let camera = load_camera(job.camera.as_deref(), &args.camera_flags)?;
     let motion = match &args.motion_channels {
         Some(s) => match s.split_once(',') {
             Some((x, y)) => Some((x.trim().to_string(), y.trim().to_string())),
@@ -318,7 +465,7 @@ fn run_synth(args: SynthArgs) -> Result<()> {
         motion_y_up: args.motion_y_up,
     };
     let t = Instant::now();
-    let gbuffer = GBuffer::read_exr(&args.input, &channel_options)?;
+    let gbuffer = GBuffer::read_exr(&job.input, &channel_options)?;
     let read_ms = t.elapsed().as_secs_f64() * 1e3;
     if !(args.soft_layers.is_finite() && args.soft_layers >= 0.0) {
         bail!(
@@ -342,35 +489,58 @@ fn run_synth(args: SynthArgs) -> Result<()> {
         condition_reports.push(serde_json::json!({ "model": db.model().name(), "report": report }));
         Ok(db)
     };
-    let dbs = match (effects.cheapest_model(), &args.db) {
-        (None, _) => DbSet::none(),
-        (Some(needed), Some(path)) => {
-            let db = dbcache::explicit_database(path, needed)?;
-            db_sources.push(serde_json::json!({
-                "model": db.model().name(), "path": path, "built_now": false,
-            }));
-            DbSet::single(prepare(db)?)?
+    let needed_model = effects.cheapest_model();
+    let reuse = match &state.dbs {
+        // A set chosen for lens-motion also serves defocus alone; otherwise the same model.
+        Some((m, set))
+            if *m == needed_model
+                || (*m == Some(psf_db::PsfModel::LensMotion)
+                    && needed_model == Some(psf_db::PsfModel::ThinLens)) =>
+        {
+            Some(set.clone())
         }
-        (Some(needed), None) => {
-            let profile: precompute::Profile = args.db_profile.parse()?;
-            // Still pixels always use the thin-lens database; moving ones the lens-motion one.
-            let mut models = vec![psf_db::PsfModel::ThinLens];
-            if needed == psf_db::PsfModel::LensMotion {
-                models.push(psf_db::PsfModel::LensMotion);
-            }
-            let mut loaded = Vec::new();
-            for model in models {
-                let cfg = dbcache::build_config(model, profile, camera.aperture_blades);
-                let (db, source) =
-                    dbcache::cached_database(&cfg, &dbcache::cache_dir(), !args.quiet)?;
+        _ => None,
+    };
+    let dbs = if let Some(set) = reuse {
+        set
+    } else {
+        let set = match (needed_model, &args.db) {
+            (None, _) => DbSet::none(),
+            (Some(needed), Some(path)) => {
+                let db = dbcache::explicit_database(path, needed)?;
                 db_sources.push(serde_json::json!({
-                    "model": model.name(), "path": source.path, "built_now": source.built,
+                    "model": db.model().name(), "path": path, "built_now": false,
                 }));
-                loaded.push(prepare(db)?);
+                DbSet::single(prepare(db)?)?
             }
-            let main = (loaded.len() > 1).then(|| loaded.remove(1));
-            DbSet::new(loaded.pop(), main)?
+            (Some(needed), None) => {
+                let profile: precompute::Profile = args.db_profile.parse()?;
+                // Still pixels always use the thin-lens database; moving ones the lens-motion one.
+                let mut models = vec![psf_db::PsfModel::ThinLens];
+                if needed == psf_db::PsfModel::LensMotion {
+                    models.push(psf_db::PsfModel::LensMotion);
+                }
+                let mut loaded = Vec::new();
+                for model in models {
+                    let cfg = dbcache::build_config(model, profile, camera.aperture_blades);
+                    let (db, source) =
+                        dbcache::cached_database(&cfg, &dbcache::cache_dir(), !args.quiet)?;
+                    db_sources.push(serde_json::json!({
+                        "model": model.name(), "path": source.path, "built_now": source.built,
+                    }));
+                    loaded.push(prepare(db)?);
+                }
+                let main = (loaded.len() > 1).then(|| loaded.remove(1));
+                DbSet::new(loaded.pop(), main)?
+            }
+        };
+        let set = std::sync::Arc::new(set);
+        state.dbs = Some((needed_model, set.clone()));
+        #[cfg(feature = "gpu")]
+        {
+            state.gpu = None; // a new database: upload it again
         }
+        set
     };
     let db_ms = t.elapsed().as_secs_f64() * 1e3;
 
@@ -389,11 +559,18 @@ fn run_synth(args: SynthArgs) -> Result<()> {
             renormalize_coverage: !args.no_coverage_renormalization,
         },
     };
-    let (backend, image, stats) =
-        run_backend(args.backend, &gbuffer, &camera, &dbs, &options, args.quiet)?;
+    let (backend, image, stats, gpu_stages) = run_backend(
+        args.backend,
+        &gbuffer,
+        &camera,
+        &dbs,
+        &options,
+        args.quiet,
+        state,
+    )?;
     let t = Instant::now();
-    image.write_exr(&args.out)?;
-    if let Some(p) = &args.preview {
+    image.write_exr(&job.out)?;
+    if let Some(p) = &job.preview {
         image.write_preview_png(p)?;
     }
     let write_ms = t.elapsed().as_secs_f64() * 1e3;
@@ -423,15 +600,16 @@ fn run_synth(args: SynthArgs) -> Result<()> {
             stats.times.composite_ms,
         );
     }
-    if let Some(p) = &args.stats {
+    if let Some(p) = &job.stats {
         let json = serde_json::json!({
-            "input": args.input,
-            "output": args.out,
+            "input": job.input,
+            "output": job.out,
             "backend": backend,
             "effects": { "defocus": stats.defocus, "motion": stats.motion },
             "databases": db_sources,
             "conditioning": condition_reports,
             "synthesis": stats,
+            "gpu_stages_ms": gpu_stages,
             "times_ms": {
                 "read_input": read_ms,
                 "database": db_ms,
@@ -462,45 +640,61 @@ fn run_backend(
     dbs: &DbSet,
     options: &SynthOptions,
     quiet: bool,
-) -> Result<(String, RgbaImage, runtime::synth::SynthStats)> {
+    state: &mut SequenceState,
+) -> Result<(
+    String,
+    RgbaImage,
+    runtime::synth::SynthStats,
+    Option<serde_json::Value>,
+)> {
     #[cfg(feature = "gpu")]
-    if backend != Backend::Cpu {
+    if backend != Backend::Cpu && state.device.as_deref() != Some("cpu") {
         use runtime::gpu::{synthesize_gpu, GpuContext, GpuSynthOptions, GpuSynthesizer};
-        let ctx = GpuContext::with_requirement(backend == Backend::Gpu)?;
-        match ctx {
-            Some(ctx)
-                if backend == Backend::Gpu
-                    || ctx.adapter_info().device_type != wgpu::DeviceType::Cpu =>
-            {
-                let mut gpu = GpuSynthesizer::for_database(
-                    &ctx,
-                    dbs.combined.as_ref(),
-                    GpuSynthOptions::from_synth(options),
-                )?;
-                let (image, stats, _) = synthesize_gpu(&mut gpu, gbuffer, camera, dbs, options)?;
-                return Ok((format!("gpu ({})", ctx.adapter_name()), image, stats));
-            }
-            Some(ctx) => {
-                if !quiet {
-                    eprintln!(
-                        "backend auto: {} is a software adapter; using the CPU",
-                        ctx.adapter_name()
-                    );
+        if state.gpu.is_none() {
+            match GpuContext::with_requirement(backend == Backend::Gpu)? {
+                Some(ctx)
+                    if backend == Backend::Gpu
+                        || ctx.adapter_info().device_type != wgpu::DeviceType::Cpu =>
+                {
+                    let gpu = GpuSynthesizer::for_database(
+                        &ctx,
+                        dbs.combined.as_ref(),
+                        GpuSynthOptions::from_synth(options),
+                    )?;
+                    state.device = Some(format!("gpu ({})", ctx.adapter_name()));
+                    state.gpu = Some((ctx, gpu));
                 }
-            }
-            None => {
-                if !quiet {
-                    eprintln!("backend auto: no GPU adapter; using the CPU");
+                Some(ctx) => {
+                    if !quiet {
+                        eprintln!(
+                            "backend auto: {} is a software adapter; using the CPU",
+                            ctx.adapter_name()
+                        );
+                    }
+                    state.device = Some("cpu".into());
+                }
+                None => {
+                    if !quiet {
+                        eprintln!("backend auto: no GPU adapter; using the CPU");
+                    }
+                    state.device = Some("cpu".into());
                 }
             }
         }
+        if let Some((_, gpu)) = state.gpu.as_mut() {
+            let (image, stats, stages) = synthesize_gpu(gpu, gbuffer, camera, dbs, options)?;
+            let name = state.device.clone().unwrap_or_default();
+            return Ok((name, image, stats, Some(serde_json::to_value(stages)?)));
+        }
     }
+    #[cfg(not(feature = "gpu"))]
+    let _ = state;
     #[cfg(not(feature = "gpu"))]
     if backend == Backend::Gpu {
         bail!("--backend gpu: this build has no GPU support (feature `gpu`)");
     }
     let (image, stats) = synthesize(gbuffer, camera, dbs, options)?;
-    Ok(("cpu".to_string(), image, stats))
+    Ok(("cpu".to_string(), image, stats, None))
 }
 
 fn read_rgba(path: &Path) -> Result<RgbaImage> {
