@@ -11,55 +11,46 @@ fn a_sequence_equals_single_frames_and_shards_split_the_range() {
     let scene = scene::builtin("crossing")
         .and_then(|s| s.with_size(48, 48))
         .expect("scene");
-    let options = scene::RenderOptions::default();
-    let gbuffer = scene::render_gbuffer(&scene, 4, &options).expect("render");
-    std::fs::create_dir_all(d("frames")).expect("dir");
+    let gbuffer =
+        scene::render_gbuffer(&scene, 4, &scene::RenderOptions::default()).expect("render");
+    for sub in ["frames", "out", "shard"] {
+        std::fs::create_dir_all(d(sub)).expect("dir");
+    }
     for f in 1..=3 {
         gbuffer
             .write_exr(&dir.path().join(format!("frames/{f:04}.exr")))
             .expect("write");
     }
     std::fs::write(d("camera.json"), scene.camera_json()).expect("camera");
-    let common = [
-        "--camera",
-        &d("camera.json"),
-        "--db-profile",
-        "test",
-        "--backend",
-        "cpu",
-        "-q",
-    ];
     let cache = cache_dir();
+    // synth with `extra` arguments and the common ones.
+    let synth = |extra: &[String]| {
+        let mut args: Vec<String> = vec!["synth".into()];
+        args.extend_from_slice(extra);
+        for a in [
+            "--camera",
+            &d("camera.json"),
+            "--db-profile",
+            "test",
+            "--backend",
+            "cpu",
+            "-q",
+        ] {
+            args.push(a.to_string());
+        }
+        let refs: Vec<&str> = args.iter().map(String::as_str).collect();
+        run("spreadlet", &refs, &cache)
+    };
+    let s = |v: &[&str]| -> Vec<String> { v.iter().map(|x| x.to_string()).collect() };
 
-    let seq = [
-        &[
-            "synth",
-            "--input",
-            &d("frames/####.exr"),
-            "--frames",
-            "1-3",
-            "--out",
-            &d("out/####.exr"),
-        ][..],
-        &common[..],
-    ]
-    .concat();
-    std::fs::create_dir_all(d("out")).expect("dir");
-    assert_success(&run("spreadlet", &seq, &cache));
-    let single = [
-        &[
-            "synth",
-            "--input",
-            &d("frames/0002.exr"),
-            "--out",
-            &d("single.exr"),
-        ][..],
-        &common[..],
-    ]
-    .concat();
-    assert_success(&run("spreadlet", &single, &cache));
+    let (frames, out) = (d("frames/####.exr"), d("out/####.exr"));
+    assert_success(&synth(&s(&[
+        "--input", &frames, "--frames", "1-3", "--out", &out,
+    ])));
+    let (frame2, single) = (d("frames/0002.exr"), d("single.exr"));
+    assert_success(&synth(&s(&["--input", &frame2, "--out", &single])));
     let a = std::fs::read(d("out/0002.exr")).expect("frame 2");
-    let b = std::fs::read(d("single.exr")).expect("single");
+    let b = std::fs::read(&single).expect("single");
     assert!(
         a == b,
         "frame 2 of the sequence differs from a single-frame run"
@@ -69,23 +60,10 @@ fn a_sequence_equals_single_frames_and_shards_split_the_range() {
     }
 
     // Shard 1 of 3 of frames 1-3 is frame 2 alone.
-    std::fs::create_dir_all(d("shard")).expect("dir");
-    let shard = [
-        &[
-            "synth",
-            "--input",
-            &d("frames/####.exr"),
-            "--frames",
-            "1-3",
-            "--shard",
-            "1/3",
-            "--out",
-            &d("shard/####.exr"),
-        ][..],
-        &common[..],
-    ]
-    .concat();
-    assert_success(&run("spreadlet", &shard, &cache));
+    let shard_out = d("shard/####.exr");
+    assert_success(&synth(&s(&[
+        "--input", &frames, "--frames", "1-3", "--shard", "1/3", "--out", &shard_out,
+    ])));
     let written: Vec<_> = std::fs::read_dir(d("shard"))
         .expect("dir")
         .flatten()
@@ -93,31 +71,10 @@ fn a_sequence_equals_single_frames_and_shards_split_the_range() {
         .collect();
     assert_eq!(written, vec![std::ffi::OsString::from("0002.exr")]);
 
-    // A frame missing from the range.
-    let missing = [
-        &[
-            "synth",
-            "--input",
-            &d("frames/####.exr"),
-            "--frames",
-            "1-4",
-            "--out",
-            &d("out/####.exr"),
-        ][..],
-        &common[..],
-    ]
-    .concat();
-    assert_clean_failure(&run("spreadlet", &missing, &cache), "0004.exr");
-    let no_range = [
-        &[
-            "synth",
-            "--input",
-            &d("frames/####.exr"),
-            "--out",
-            &d("out/####.exr"),
-        ][..],
-        &common[..],
-    ]
-    .concat();
-    assert_clean_failure(&run("spreadlet", &no_range, &cache), "--frames");
+    // A frame missing from the range; # without a range.
+    assert_clean_failure(
+        &synth(&s(&["--input", &frames, "--frames", "1-4", "--out", &out])),
+        "0004.exr",
+    );
+    assert_clean_failure(&synth(&s(&["--input", &frames, "--out", &out])), "--frames");
 }
