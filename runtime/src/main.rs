@@ -617,15 +617,7 @@ fn synth_frame(args: &SynthArgs, job: &FrameJob, state: &mut SequenceState) -> R
                 "wall": started.elapsed().as_secs_f64() * 1e3,
             },
         });
-        let text = serde_json::to_string_pretty(&json)?;
-        runtime::rgba::write_atomically(p, |f| {
-            use std::io::Write;
-            f.write_all(text.as_bytes())
-                .map_err(|source| runtime::rgba::WriteError::Io {
-                    path: p.display().to_string(),
-                    source,
-                })
-        })?;
+        write_json(p, &json)?;
     }
     Ok(())
 }
@@ -695,6 +687,20 @@ fn run_backend(
     }
     let (image, stats) = synthesize(gbuffer, camera, dbs, options)?;
     Ok(("cpu".to_string(), image, stats, None))
+}
+
+/// Writes `value` as pretty JSON to `path`, atomically.
+fn write_json(path: &Path, value: &serde_json::Value) -> Result<()> {
+    let text = serde_json::to_string_pretty(value)?;
+    runtime::rgba::write_atomically(path, |f| {
+        use std::io::Write;
+        f.write_all(text.as_bytes())
+            .map_err(|source| runtime::rgba::WriteError::Io {
+                path: path.display().to_string(),
+                source,
+            })
+    })?;
+    Ok(())
 }
 
 fn read_rgba(path: &Path) -> Result<RgbaImage> {
@@ -778,17 +784,10 @@ fn run_reconstruct(args: ReconstructArgs) -> Result<()> {
         );
     }
     if let Some(p) = &args.stats {
-        let text = serde_json::to_string_pretty(&serde_json::json!({
+        let json = serde_json::json!({
             "input": args.input, "output": args.out, "spp": frames.spp, "reconstruction": stats,
-        }))?;
-        runtime::rgba::write_atomically(p, |f| {
-            use std::io::Write;
-            f.write_all(text.as_bytes())
-                .map_err(|source| runtime::rgba::WriteError::Io {
-                    path: p.display().to_string(),
-                    source,
-                })
-        })?;
+        });
+        write_json(p, &json)?;
     }
     Ok(())
 }

@@ -21,9 +21,9 @@ use scene::StochasticFrames;
 use crate::camera::Camera;
 use crate::dbset::DbSet;
 use crate::pipeline::classify::{classify_fragments, resolve_model, ClassifyError, Fragment};
-use crate::pipeline::{composite, integrate, splat, Effects, PathCounts};
+use crate::pipeline::{Effects, PathCounts};
 use crate::rgba::RgbaImage;
-use crate::synth::{SynthOptions, SynthStats};
+use crate::synth::{render_classified, SynthOptions, SynthStats};
 
 /// The effects a camera and stochastic frames call for.
 pub fn effects_of(camera: &Camera, frames: &StochasticFrames) -> Effects {
@@ -112,7 +112,6 @@ pub fn reconstruct(
         height: frames.height,
         layers: options.classify.layers,
         integrator: options.integrator,
-        models: dbs.models(),
         ..SynthStats::default()
     };
     let t = Instant::now();
@@ -133,25 +132,8 @@ pub fn reconstruct(
         counts,
     )?;
     stats.times.classify_ms = ms_since(t);
-    stats.counts = classified.counts;
-    stats.pad_px = classified.frame.pad;
-    stats.layers_used = classified
-        .layers
-        .iter()
-        .filter(|l| l.record_count > 0)
-        .count() as u32;
-
-    let t = Instant::now();
-    let stack = splat(&classified, dbs.combined.as_ref(), &options.splat);
-    stats.times.splat_ms = ms_since(t);
-    let t = Instant::now();
-    let layers = integrate(&stack, options.integrator);
-    stats.times.integrate_ms = ms_since(t);
-    drop(stack);
-    let t = Instant::now();
-    let mut image = composite(&layers, &options.composite);
+    let mut image = render_classified(&classified, dbs, options, &mut stats);
     normalize_density(&mut image);
-    stats.times.composite_ms = ms_since(t);
     stats.times.total_ms = ms_since(total);
     Ok((image, stats))
 }

@@ -115,6 +115,19 @@ pub fn synthesize(
     let t = Instant::now();
     let classified = classify(gbuffer, camera, dbs, &options.classify)?;
     stats.times.classify_ms = ms_since(t);
+    let image = render_classified(&classified, dbs, options, &mut stats);
+    stats.times.total_ms = ms_since(total);
+    Ok((image, stats))
+}
+
+/// The stages after classification, shared by synthesis and reconstruction: splat, integrate,
+/// composite, with their times, counts and layer use recorded in `stats`.
+pub fn render_classified(
+    classified: &crate::pipeline::Classified,
+    dbs: &DbSet,
+    options: &SynthOptions,
+    stats: &mut SynthStats,
+) -> RgbaImage {
     stats.models = dbs.models();
     stats.counts = classified.counts;
     stats.pad_px = classified.frame.pad;
@@ -125,7 +138,7 @@ pub fn synthesize(
         .count() as u32;
 
     let t = Instant::now();
-    let stack = splat(&classified, dbs.combined.as_ref(), &options.splat);
+    let stack = splat(classified, dbs.combined.as_ref(), &options.splat);
     stats.times.splat_ms = ms_since(t);
 
     let t = Instant::now();
@@ -136,6 +149,5 @@ pub fn synthesize(
     let t = Instant::now();
     let image = composite(&layers, &options.composite);
     stats.times.composite_ms = ms_since(t);
-    stats.times.total_ms = ms_since(total);
-    Ok((image, stats))
+    image
 }
