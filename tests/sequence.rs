@@ -78,3 +78,41 @@ fn a_sequence_equals_single_frames_and_shards_split_the_range() {
     );
     assert_clean_failure(&synth(&s(&["--input", &frames, "--out", &out])), "--frames");
 }
+
+#[test]
+fn reconstruct_takes_a_sequence_too() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let d = |name: &str| dir.path().join(name).to_string_lossy().into_owned();
+    let scene = scene::builtin("crossing")
+        .and_then(|s| s.with_size(40, 40))
+        .expect("scene");
+    std::fs::create_dir_all(d("out")).expect("dir");
+    for f in 1..=2u64 {
+        let options = scene::RenderOptions {
+            seed: f,
+            ..Default::default()
+        };
+        scene::render_stochastic(&scene, 2, &options)
+            .and_then(|s| s.write_exr(&dir.path().join(format!("{f:04}.exr"))))
+            .expect("stochastic frames");
+    }
+    std::fs::write(d("camera.json"), scene.camera_json()).expect("camera");
+    let cache = cache_dir();
+    let recon = |input: &str, out: &str, frames: Option<&str>| {
+        let camera = d("camera.json");
+        let mut args = vec!["reconstruct", "--input", input, "--out", out];
+        args.extend(["--camera", camera.as_str(), "--db-profile", "test", "-q"]);
+        if let Some(f) = frames {
+            args.extend(["--frames", f]);
+        }
+        run("spreadlet", &args, &cache)
+    };
+    assert_success(&recon(&d("####.exr"), &d("out/####.exr"), Some("1-2")));
+    assert_success(&recon(&d("0002.exr"), &d("single.exr"), None));
+    let a = std::fs::read(d("out/0002.exr")).expect("frame 2");
+    let b = std::fs::read(d("single.exr")).expect("single");
+    assert!(
+        a == b,
+        "frame 2 of the sequence differs from a single-frame run"
+    );
+}

@@ -69,9 +69,17 @@ struct BenchArgs {
 
 #[derive(Args, Debug)]
 struct ReconstructArgs {
-    /// Stochastic frames (OpenEXR, docs/STOCHASTIC.md).
+    /// Stochastic frames (OpenEXR, docs/STOCHASTIC.md); a run of # stands for the frame number
+    /// with --frames.
     #[arg(long)]
     input: PathBuf,
+    /// Frame range A-B of a sequence (# in the paths is replaced by the frame number).
+    #[arg(long)]
+    frames: Option<String>,
+    /// Only part K of N of the frame range (auto/N: K from SLURM_ARRAY_TASK_ID or
+    /// JOB_COMPLETION_INDEX).
+    #[arg(long)]
+    shard: Option<String>,
     /// Camera description (`camera.json`); flags with the same names override its fields.
     #[arg(long)]
     camera: Option<PathBuf>,
@@ -331,7 +339,15 @@ struct SequenceState {
 }
 
 fn run_synth(args: SynthArgs) -> Result<()> {
-    let jobs = frame_jobs(&args)?;
+    let jobs = frame_jobs(&FramePaths {
+        input: &args.input,
+        out: &args.out,
+        camera: &args.camera,
+        preview: &args.preview,
+        stats: &args.stats,
+        frames: &args.frames,
+        shard: &args.shard,
+    })?;
     let mut state = SequenceState::default();
     let started = Instant::now();
     let mut frame_ms = Vec::with_capacity(jobs.len());
@@ -373,20 +389,31 @@ fn frame_path(path: &Path, frame: u32) -> Result<PathBuf> {
     )))
 }
 
-/// The frames of a `synth` run: one, or the range `--frames A-B` (its `--shard K/N` share)
-/// with `#` in the paths replaced by the frame number.
-fn frame_jobs(args: &SynthArgs) -> Result<Vec<FrameJob>> {
+/// The path arguments of a run that may cover a frame range.
+struct FramePaths<'a> {
+    input: &'a Path,
+    out: &'a Path,
+    camera: &'a Option<PathBuf>,
+    preview: &'a Option<PathBuf>,
+    stats: &'a Option<PathBuf>,
+    frames: &'a Option<String>,
+    shard: &'a Option<String>,
+}
+
+/// The frames of a run: one, or the range `--frames A-B` (its `--shard K/N` share) with `#` in
+/// the paths replaced by the frame number.
+fn frame_jobs(args: &FramePaths) -> Result<Vec<FrameJob>> {
     let has_hash = |p: &Path| p.to_string_lossy().contains('#');
     let Some(range) = &args.frames else {
-        if has_hash(&args.input) || has_hash(&args.out) {
+        if has_hash(args.input) || has_hash(args.out) {
             bail!("the paths hold # but no --frames A-B was given");
         }
         if args.shard.is_some() {
             bail!("--shard splits a frame range: give --frames A-B too");
         }
         return Ok(vec![FrameJob {
-            input: args.input.clone(),
-            out: args.out.clone(),
+            input: args.input.to_path_buf(),
+            out: args.out.to_path_buf(),
             camera: args.camera.clone(),
             preview: args.preview.clone(),
             stats: args.stats.clone(),
@@ -401,7 +428,7 @@ fn frame_jobs(args: &SynthArgs) -> Result<Vec<FrameJob>> {
     if b < a {
         return Err(bad());
     }
-    if !has_hash(&args.input) || !has_hash(&args.out) {
+    if !has_hash(args.input) || !has_hash(args.out) {
         bail!("with --frames, --input and --out need a run of # for the frame number (frames/####.exr)");
     }
     let all: Vec<u32> = (a..=b).collect();
@@ -418,11 +445,11 @@ fn frame_jobs(args: &SynthArgs) -> Result<Vec<FrameJob>> {
         .into_iter()
         .map(|f| {
             Ok(FrameJob {
-                input: frame_path(&args.input, f)?,
-                out: frame_path(&args.out, f)?,
-                camera: opt(&args.camera, f)?,
-                preview: opt(&args.preview, f)?,
-                stats: opt(&args.stats, f)?,
+                input: frame_path(args.input, f)?,
+                out: frame_path(args.out, f)?,
+                camera: opt(args.camera, f)?,
+                preview: opt(args.preview, f)?,
+                stats: opt(args.stats, f)?,
             })
         })
         .collect()
@@ -747,47 +774,66 @@ fn run_compare(args: CompareArgs) -> Result<()> {
 }
 
 fn run_reconstruct(args: ReconstructArgs) -> Result<()> {
-    let camera = load_camera(args.camera.as_deref(), &args.camera_flags)?;
     if args.layers == 0 || args.layers > 64 {
         bail!("--layers must be between 1 and 64, got {}", args.layers);
     }
-    let frames = scene::StochasticFrames::read_exr(&args.input)
-        .with_context(|| format!("reading stochastic frames {}", args.input.display()))?;
-    let effects = runtime::reconstruct::effects_of(&camera, &frames);
     let profile: precompute::Profile = args.db_profile.parse()?;
-    let dbs = runtime::demo::cached_dbs(effects, profile, camera.aperture_blades, !args.quiet)?;
-    let options = SynthOptions {
-        classify: ClassifyOptions {
-            layers: args.layers,
-            min_coc_px: runtime::reconstruct::min_footprint_px(frames.spp),
-            ..ClassifyOptions::default()
-        },
-        integrator: args.integrate,
-        ..SynthOptions::default()
-    };
-    let (image, stats) = runtime::reconstruct::reconstruct(&frames, &camera, &dbs, &options)?;
-    image.write_exr(&args.out)?;
-    if let Some(p) = &args.preview {
-        image.write_preview_png(p)?;
-    }
-    if !args.quiet {
-        eprintln!(
-            "{}x{} from {} spp: {} sparse, {} dense, {} copied, {} dropped; {:.0} ms",
-            stats.width,
-            stats.height,
-            frames.spp,
-            stats.counts.sparse,
-            stats.counts.dense,
-            stats.counts.copied,
-            stats.counts.dropped,
-            stats.times.total_ms
-        );
-    }
-    if let Some(p) = &args.stats {
-        let json = serde_json::json!({
-            "input": args.input, "output": args.out, "spp": frames.spp, "reconstruction": stats,
-        });
-        write_json(p, &json)?;
+    let jobs = frame_jobs(&FramePaths {
+        input: &args.input,
+        out: &args.out,
+        camera: &args.camera,
+        preview: &args.preview,
+        stats: &args.stats,
+        frames: &args.frames,
+        shard: &args.shard,
+    })?;
+    // The databases of the previous frame, kept while the effects stay the same.
+    let mut loaded: Option<(runtime::pipeline::Effects, u32, DbSet)> = None;
+    for job in &jobs {
+        let camera = load_camera(job.camera.as_deref(), &args.camera_flags)?;
+        let frames = scene::StochasticFrames::read_exr(&job.input)
+            .with_context(|| format!("reading stochastic frames {}", job.input.display()))?;
+        let effects = runtime::reconstruct::effects_of(&camera, &frames);
+        let key = (effects, camera.aperture_blades);
+        let dbs = match loaded.take() {
+            Some((e, b, dbs)) if (e, b) == key => dbs,
+            _ => runtime::demo::cached_dbs(effects, profile, camera.aperture_blades, !args.quiet)?,
+        };
+        let options = SynthOptions {
+            classify: ClassifyOptions {
+                layers: args.layers,
+                min_coc_px: runtime::reconstruct::min_footprint_px(frames.spp),
+                ..ClassifyOptions::default()
+            },
+            integrator: args.integrate,
+            ..SynthOptions::default()
+        };
+        let (image, stats) = runtime::reconstruct::reconstruct(&frames, &camera, &dbs, &options)?;
+        image.write_exr(&job.out)?;
+        if let Some(p) = &job.preview {
+            image.write_preview_png(p)?;
+        }
+        if !args.quiet {
+            eprintln!(
+                "{}: {}x{} from {} spp: {} sparse, {} dense, {} copied, {} dropped; {:.0} ms",
+                job.out.display(),
+                stats.width,
+                stats.height,
+                frames.spp,
+                stats.counts.sparse,
+                stats.counts.dense,
+                stats.counts.copied,
+                stats.counts.dropped,
+                stats.times.total_ms
+            );
+        }
+        if let Some(p) = &job.stats {
+            let json = serde_json::json!({
+                "input": job.input, "output": job.out, "spp": frames.spp, "reconstruction": stats,
+            });
+            write_json(p, &json)?;
+        }
+        loaded = Some((key.0, key.1, dbs));
     }
     Ok(())
 }
