@@ -330,8 +330,8 @@ struct FrameJob {
 /// the GPU synthesizer (pipelines compiled and the database uploaded once).
 #[derive(Default)]
 struct SequenceState {
-    /// The model the loaded set was chosen for, and the set.
-    dbs: Option<(Option<psf_db::PsfModel>, std::sync::Arc<DbSet>)>,
+    /// The model and aperture blades the loaded set was chosen for, and the set.
+    dbs: Option<(Option<psf_db::PsfModel>, u32, std::sync::Arc<DbSet>)>,
     #[cfg(feature = "gpu")]
     gpu: Option<(runtime::gpu::GpuContext, runtime::gpu::GpuSynthesizer)>,
     /// The device chosen by the first frame ("cpu" or the GPU's name).
@@ -519,10 +519,11 @@ fn synth_frame(args: &SynthArgs, job: &FrameJob, state: &mut SequenceState) -> R
     let needed_model = effects.cheapest_model();
     let reuse = match &state.dbs {
         // A set chosen for lens-motion also serves defocus alone; otherwise the same model.
-        Some((m, set))
-            if *m == needed_model
-                || (*m == Some(psf_db::PsfModel::LensMotion)
-                    && needed_model == Some(psf_db::PsfModel::ThinLens)) =>
+        Some((m, blades, set))
+            if *blades == camera.aperture_blades
+                && (*m == needed_model
+                    || (*m == Some(psf_db::PsfModel::LensMotion)
+                        && needed_model == Some(psf_db::PsfModel::ThinLens))) =>
         {
             Some(set.clone())
         }
@@ -562,7 +563,7 @@ fn synth_frame(args: &SynthArgs, job: &FrameJob, state: &mut SequenceState) -> R
             }
         };
         let set = std::sync::Arc::new(set);
-        state.dbs = Some((needed_model, set.clone()));
+        state.dbs = Some((needed_model, camera.aperture_blades, set.clone()));
         #[cfg(feature = "gpu")]
         {
             state.gpu = None; // a new database: upload it again
