@@ -16,6 +16,7 @@ pub mod demo;
 pub mod gbuffer;
 #[cfg(feature = "gpu")]
 pub mod gpu;
+pub mod peer;
 pub mod pipeline;
 pub mod reconstruct;
 pub mod rgba;

@@ -181,6 +181,10 @@ struct SynthArgs {
     /// sequence, a run of # stands for the frame number (frames/####.exr with --frames).
     #[arg(long)]
     input: PathBuf,
+    /// Method: spreadlet, or a peer method for comparison (mcguire, guertin: motion blur from
+    /// the G-buffer, no defocus; docs/PEERS.md).
+    #[arg(long, default_value = "spreadlet")]
+    method: String,
     /// Frame range A-B of a sequence: # in --input, --out, --camera, --preview and --stats is
     /// replaced by the frame number; databases and GPU pipelines are reused across frames.
     #[arg(long)]
@@ -504,6 +508,25 @@ fn synth_frame(args: &SynthArgs, job: &FrameJob, state: &mut SequenceState) -> R
         bail!("--layers must be between 1 and 64, got {}", args.layers);
     }
 
+    if args.method != "spreadlet" {
+        let t = Instant::now();
+        let image = runtime::peer::synthesize_peer(&args.method, &gbuffer, &camera)?;
+        let ms = t.elapsed().as_secs_f64() * 1e3;
+        image.write_exr(&job.out)?;
+        if let Some(p) = &job.preview {
+            image.write_preview_png(p)?;
+        }
+        if !args.quiet {
+            eprintln!("{}: {} in {ms:.0} ms", job.out.display(), args.method);
+        }
+        if let Some(p) = &job.stats {
+            let json = serde_json::json!({
+                "input": job.input, "output": job.out, "method": args.method, "ms": ms,
+            });
+            write_json(p, &json)?;
+        }
+        return Ok(());
+    }
     let effects = Effects::of(&camera, &gbuffer);
     let t = Instant::now();
     let mut db_sources = Vec::new();
