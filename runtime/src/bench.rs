@@ -157,16 +157,8 @@ pub fn synthetic_frame(db: &PsfDatabase, size: u32, layers: u32) -> Classified {
             record_count: recs.len(),
             ..LayerInfo::default()
         };
-        for r in &recs {
-            match r.path {
-                p if p == SplatPath::Sparse as u32 => info.sparse += 1,
-                p if p == SplatPath::Dense as u32 => info.dense += 1,
-                _ => info.copied += 1,
-            }
-        }
-        counts.sparse += info.sparse;
-        counts.dense += info.dense;
-        counts.copied += info.copied;
+        info.count_paths(&recs);
+        counts.add_layer(&info);
         infos.push(info);
         records.extend(recs);
     }

@@ -73,15 +73,25 @@ fn ms_since(t: Instant) -> f64 {
     t.elapsed().as_secs_f64() * 1e3
 }
 
-/// Synthesises depth of field and motion blur from a pinhole G-buffer. `dbs` must hold a
-/// database of the model the camera and input call for ([`Effects::cheapest_model`]); it is
-/// not touched when they call for nothing.
-pub fn synthesize(
+/// The device-independent front of synthesis: what the input calls for, classified, or the
+/// input itself when it calls for nothing.
+#[derive(Clone, Debug)]
+pub enum Prepared {
+    /// Nothing to simulate (pinhole and still): the input, unchanged.
+    PassThrough(RgbaImage),
+    /// Records for the splat, integrate and composite stages (on either device).
+    Classified(crate::pipeline::Classified),
+}
+
+/// Classifies `gbuffer` (or recognises that it needs nothing) and starts the statistics of the
+/// run: effects, size, counts per path, layers used, classification time. Shared by the CPU
+/// path ([`synthesize`]) and the GPU path (`gpu::synthesize_gpu`), so both report alike.
+pub fn prepare(
     gbuffer: &GBuffer,
     camera: &Camera,
     dbs: &DbSet,
     options: &SynthOptions,
-) -> Result<(RgbaImage, SynthStats), crate::pipeline::classify::ClassifyError> {
+) -> Result<(Prepared, SynthStats), crate::pipeline::classify::ClassifyError> {
     let effects = Effects::of(camera, gbuffer);
     let mut stats = SynthStats {
         defocus: effects.defocus,
@@ -92,10 +102,9 @@ pub fn synthesize(
         integrator: options.integrator,
         ..SynthStats::default()
     };
-    let total = Instant::now();
+    let t = Instant::now();
     if effects.cheapest_model().is_none() {
         // Nothing to simulate: every PSF is a single pixel; the input comes back as it is.
-        let t = Instant::now();
         classify::classify_sizes(gbuffer, camera)?;
         stats.counts = PathCounts {
             copied: gbuffer.color.iter().filter(|c| **c != [0.0; 4]).count(),
@@ -109,25 +118,42 @@ pub fn synthesize(
             pixels: gbuffer.color.clone(),
         };
         stats.times.classify_ms = ms_since(t);
-        stats.times.total_ms = ms_since(total);
-        return Ok((image, stats));
+        return Ok((Prepared::PassThrough(image), stats));
     }
-    let t = Instant::now();
     let classified = classify(gbuffer, camera, dbs, &options.classify)?;
     stats.times.classify_ms = ms_since(t);
-    let image = render_classified(&classified, dbs, options, &mut stats);
+    record_classified(&classified, dbs, &mut stats);
+    Ok((Prepared::Classified(classified), stats))
+}
+
+/// Synthesises depth of field and motion blur from a pinhole G-buffer. `dbs` must hold a
+/// database of the model the camera and input call for ([`Effects::cheapest_model`]); it is
+/// not touched when they call for nothing.
+pub fn synthesize(
+    gbuffer: &GBuffer,
+    camera: &Camera,
+    dbs: &DbSet,
+    options: &SynthOptions,
+) -> Result<(RgbaImage, SynthStats), crate::pipeline::classify::ClassifyError> {
+    let total = Instant::now();
+    let (prepared, mut stats) = prepare(gbuffer, camera, dbs, options)?;
+    let image = match prepared {
+        Prepared::PassThrough(image) => image,
+        Prepared::Classified(classified) => {
+            render_classified(&classified, dbs, options, &mut stats)
+        }
+    };
     stats.times.total_ms = ms_since(total);
     Ok((image, stats))
 }
 
-/// The stages after classification, shared by synthesis and reconstruction: splat, integrate,
-/// composite, with their times, counts and layer use recorded in `stats`.
-pub fn render_classified(
+/// Records what classification produced in `stats`: models, counts per path, padding, layers
+/// holding at least one record.
+pub fn record_classified(
     classified: &crate::pipeline::Classified,
     dbs: &DbSet,
-    options: &SynthOptions,
     stats: &mut SynthStats,
-) -> RgbaImage {
+) {
     stats.models = dbs.models();
     stats.counts = classified.counts;
     stats.pad_px = classified.frame.pad;
@@ -136,6 +162,17 @@ pub fn render_classified(
         .iter()
         .filter(|l| l.record_count > 0)
         .count() as u32;
+}
+
+/// The CPU stages after classification, shared by synthesis and reconstruction: splat,
+/// integrate, composite, with their times (and what [`record_classified`] records) in `stats`.
+pub fn render_classified(
+    classified: &crate::pipeline::Classified,
+    dbs: &DbSet,
+    options: &SynthOptions,
+    stats: &mut SynthStats,
+) -> RgbaImage {
+    record_classified(classified, dbs, stats);
 
     let t = Instant::now();
     let stack = splat(classified, dbs.combined.as_ref(), &options.splat);

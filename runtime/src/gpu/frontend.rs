@@ -8,9 +8,8 @@ use super::{GpuContext, GpuError, GpuSynthOptions, GpuSynthesizer, StageTimes};
 use crate::camera::Camera;
 use crate::dbset::DbSet;
 use crate::gbuffer::GBuffer;
-use crate::pipeline::{classify, Effects, PathCounts};
 use crate::rgba::RgbaImage;
-use crate::synth::{SynthOptions, SynthStats};
+use crate::synth::{prepare, Prepared, SynthOptions, SynthStats};
 
 impl GpuSynthOptions {
     /// The GPU knobs matching the CPU path's `options` (rotation sampling, compositing).
@@ -35,46 +34,16 @@ pub fn synthesize_gpu(
     options: &SynthOptions,
 ) -> Result<(RgbaImage, SynthStats, StageTimes), GpuError> {
     gpu.check_database(dbs.combined.as_ref())?;
-    let effects = Effects::of(camera, gbuffer);
-    let mut stats = SynthStats {
-        defocus: effects.defocus,
-        motion: effects.motion,
-        width: gbuffer.width,
-        height: gbuffer.height,
-        layers: options.classify.layers,
-        integrator: options.integrator,
-        ..SynthStats::default()
-    };
     let total = Instant::now();
-    if effects.cheapest_model().is_none() {
-        // Nothing to simulate (as on the CPU path): the input comes back as it is.
-        classify::classify_sizes(gbuffer, camera).map_err(|e| GpuError::Input(e.to_string()))?;
-        stats.counts = PathCounts {
-            copied: gbuffer.color.iter().filter(|c| **c != [0.0; 4]).count(),
-            dropped: gbuffer.dropped_pixels,
-            ..PathCounts::default()
-        };
-        stats.layers_used = 1;
-        stats.times.total_ms = total.elapsed().as_secs_f64() * 1e3;
-        let image = RgbaImage {
-            width: gbuffer.width,
-            height: gbuffer.height,
-            pixels: gbuffer.color.clone(),
-        };
-        return Ok((image, stats, StageTimes::default()));
-    }
-    let t = Instant::now();
-    let classified = classify(gbuffer, camera, dbs, &options.classify)
-        .map_err(|e| GpuError::Input(e.to_string()))?;
-    stats.times.classify_ms = t.elapsed().as_secs_f64() * 1e3;
-    stats.models = dbs.models();
-    stats.counts = classified.counts;
-    stats.pad_px = classified.frame.pad;
-    stats.layers_used = classified
-        .layers
-        .iter()
-        .filter(|l| l.record_count > 0)
-        .count() as u32;
+    let (prepared, mut stats) =
+        prepare(gbuffer, camera, dbs, options).map_err(|e| GpuError::Input(e.to_string()))?;
+    let classified = match prepared {
+        Prepared::PassThrough(image) => {
+            stats.times.total_ms = total.elapsed().as_secs_f64() * 1e3;
+            return Ok((image, stats, StageTimes::default()));
+        }
+        Prepared::Classified(classified) => classified,
+    };
     let (image, gpu_times) = gpu.run(&classified.frame, &classified.records, options.integrator)?;
     stats.times.splat_ms = gpu_times.splat_ms;
     stats.times.integrate_ms = gpu_times.integrate_ms;

@@ -120,6 +120,19 @@ pub struct LayerInfo {
     pub copied: usize,
 }
 
+impl LayerInfo {
+    /// Adds the paths of the layer's `records` to `sparse`, `dense` and `copied`.
+    pub fn count_paths(&mut self, records: &[SplatRecord]) {
+        for r in records {
+            match r.path {
+                p if p == SplatPath::Sparse as u32 => self.sparse += 1,
+                p if p == SplatPath::Dense as u32 => self.dense += 1,
+                _ => self.copied += 1,
+            }
+        }
+    }
+}
+
 /// Record counts per path, over all layers.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
 pub struct PathCounts {
@@ -137,6 +150,15 @@ pub struct PathCounts {
     pub edge_split: usize,
     /// Pixels split into two layers by soft layering.
     pub soft_split: usize,
+}
+
+impl PathCounts {
+    /// Adds a layer's counts per path.
+    pub fn add_layer(&mut self, info: &LayerInfo) {
+        self.sparse += info.sparse;
+        self.dense += info.dense;
+        self.copied += info.copied;
+    }
 }
 
 /// Output of [`classify`].
@@ -496,16 +518,8 @@ pub fn classify_fragments(
             record_count: recs.len(),
             ..LayerInfo::default()
         };
-        for r in &recs {
-            match r.path {
-                p if p == SplatPath::Sparse as u32 => info.sparse += 1,
-                p if p == SplatPath::Dense as u32 => info.dense += 1,
-                _ => info.copied += 1,
-            }
-        }
-        counts.sparse += info.sparse;
-        counts.dense += info.dense;
-        counts.copied += info.copied;
+        info.count_paths(&recs);
+        counts.add_layer(&info);
         layers.push(info);
         records.extend(recs);
     }
