@@ -25,6 +25,9 @@ use crate::plane::Plane;
 /// Default margin (px) added on each axis before rounding up to an FFT-friendly size.
 pub const DEFAULT_MARGIN: usize = 8;
 
+/// Values per chunk of the deterministic parallel sum of the solution (see `solve`, step 4).
+const SUM_CHUNK: usize = 1 << 14;
+
 /// Smallest `m >= n` of the form 2^a 3^b 5^c (`n >= 1`).
 pub fn fft_friendly(n: usize) -> usize {
     let mut m = n.max(1);
@@ -261,8 +264,15 @@ impl ExactIntegrator {
         );
         // 4. The periodic solution has zero mean, so the margin's mean is
         //    -(sum over the plane) / (pixels in the margin).
+        //    Summed in fixed chunks, then the chunk sums in order: a plain parallel `sum` splits
+        //    the work where threads steal it, so its rounding (and the output's bits) would
+        //    depend on the thread count and timing.
         let margin_pixels = (pw * ph - w * h) as f64;
-        let c = -out.par_iter().sum::<f64>() / margin_pixels;
+        let chunk_sums: Vec<f64> = out
+            .par_chunks(SUM_CHUNK)
+            .map(|c| c.iter().sum::<f64>())
+            .collect();
+        let c = -chunk_sums.iter().sum::<f64>() / margin_pixels;
         out.par_iter_mut().for_each(|v| *v -= c);
         out
     }

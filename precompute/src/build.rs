@@ -58,14 +58,35 @@ impl BuildPlan {
         })?;
         let aperture = ApertureShape::from_blades(cfg.blades, f64::from(cfg.blade_rotation_rad));
         let mut notes = vec![("procedure".to_string(), cfg.procedure.name().to_string())];
+        if cfg.model == PsfModel::LensMotion {
+            let shutter = if cfg.analytic_shutter { "analytic" } else { "sampled" };
+            notes.push(("shutter".to_string(), shutter.to_string()));
+        }
         let (space, tracer, lens): (ParamSpace, Box<dyn LightTracer>, _) = match cfg.model {
             PsfModel::ThinLens | PsfModel::LensMotion => {
                 let ranges = cfg.ranges.clone().unwrap_or(spec.ranges.clone());
-                let space = ParamSpace::for_model(cfg.model, &ranges, n)?;
+                let space = match &spec.betas {
+                    Some(betas) => ParamSpace::new(
+                        ranges
+                            .iter()
+                            .zip(betas)
+                            .map(|(r, &beta)| psf_db::Dimension {
+                                min: r[0],
+                                max: r[1],
+                                beta,
+                            })
+                            .collect(),
+                        n,
+                    )?,
+                    None => ParamSpace::for_model(cfg.model, &ranges, n)?,
+                };
                 let tracer: Box<dyn LightTracer> = if cfg.model == PsfModel::ThinLens {
                     Box::new(ThinLensTracer { aperture })
                 } else {
-                    Box::new(LensMotionTracer { aperture })
+                    Box::new(LensMotionTracer {
+                        aperture,
+                        analytic_shutter: cfg.analytic_shutter,
+                    })
                 };
                 (space, tracer, None)
             }
@@ -149,18 +170,48 @@ impl BuildPlan {
         let (image, tstats) = self.trace(index)?;
         let target = Target::new(&image, self.config.procedure.split_signs());
         let opts = self.sparsify_options();
-        let mut rng = psf_rng(self.config.seed, index, 1);
-        let sparse = sparsify(&target, &opts, &mut rng).spreadlets;
-        let recon = integrate_spreadlets(&sparse, image.width, image.height);
-        let err = l1(&recon, &image.planes);
-        let sim = similarity(&recon, &image.planes, image.width, image.height);
+        let support = image.support();
+        let Candidate {
+            spreadlets: sparse,
+            similarity: sim,
+            l1: err,
+            budget,
+        } = match self.config.budget_tradeoff {
+            None => self.candidate(&image, &target, &opts, index, 0),
+            Some(lambda) => {
+                // Hill-climb the density ladder from the configured budget on
+                // `similarity - lambda * sparsity` (unimodal in practice).
+                let score = |c: &Candidate| {
+                    c.similarity - f64::from(lambda) * c.spreadlets.len() as f64 / support.max(1) as f64
+                };
+                let mut best = self.candidate(&image, &target, &opts, index, 0);
+                let mut best_score = score(&best);
+                for dir in [1i32, -1] {
+                    let mut k = dir;
+                    let mut moved = false;
+                    while (LADDER_MIN..=LADDER_MAX).contains(&k) {
+                        let c = self.candidate(&image, &target, &opts, index, k);
+                        let sc = score(&c);
+                        if sc > best_score {
+                            (best, best_score, moved) = (c, sc, true);
+                            k += dir;
+                        } else {
+                            break;
+                        }
+                    }
+                    if moved {
+                        break;
+                    }
+                }
+                best
+            }
+        };
         let abl = if self.config.ablation {
             let mut rng = psf_rng(self.config.seed, index, 2);
             Some(ablation(&target, &opts, &mut rng))
         } else {
             None
         };
-        let support = image.support();
         let cfg = &self.config;
         let dense = sparse.len() as f64 > f64::from(cfg.dense_ratio) * support as f64
             || ((sim < f64::from(cfg.dense_below_similarity)
@@ -175,6 +226,7 @@ impl BuildPlan {
             image_size: [image.width, image.height],
             rays: tstats.rays,
             spreadlets: sparse.len(),
+            budget,
             dense_support: support,
             sparsity: sparse.len() as f64 / support.max(1) as f64,
             similarity: sim,
@@ -189,6 +241,44 @@ impl BuildPlan {
             spreadlets: sparse,
             report,
         })
+    }
+}
+
+/// Rungs of the density ladder: budget `spreadlet_budget * 2^(k / 2)`, `k` in
+/// `LADDER_MIN..=LADDER_MAX` (0.35x to 4x).
+const LADDER_MIN: i32 = -3;
+const LADDER_MAX: i32 = 4;
+
+/// One sparsification of a PSF and its exact figures.
+struct Candidate {
+    spreadlets: Spreadlets,
+    similarity: f64,
+    l1: f64,
+    budget: f64,
+}
+
+impl BuildPlan {
+    /// Sparsifies `target` at rung `rung` of the density ladder (0 = the configured budget),
+    /// with the PSF's own random stream (the same for every rung), and scores it exactly.
+    fn candidate(
+        &self,
+        image: &PsfImage,
+        target: &Target,
+        opts: &SparsifyOptions,
+        index: u32,
+        rung: i32,
+    ) -> Candidate {
+        let budget = opts.budget * 2f64.powf(0.5 * f64::from(rung));
+        let opts = SparsifyOptions { budget, ..*opts };
+        let mut rng = psf_rng(self.config.seed, index, 1);
+        let spreadlets = sparsify(target, &opts, &mut rng).spreadlets;
+        let recon = integrate_spreadlets(&spreadlets, image.width, image.height);
+        Candidate {
+            similarity: similarity(&recon, &image.planes, image.width, image.height),
+            l1: l1(&recon, &image.planes),
+            spreadlets,
+            budget,
+        }
     }
 }
 

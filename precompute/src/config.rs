@@ -60,6 +60,14 @@ impl Profile {
             min_rays,
             max_rays,
             physical_image_width_px: image_width_px,
+            betas: match (self, model) {
+                // 48 PSFs instead of the paper's 400: with the paper's linear motion axis
+                // (beta 1) the first motion cell would span 0-13.7 px, so every slightly moving
+                // pixel got a ~7 px streak (visible on spinning objects). beta 2 makes the
+                // first cells 0-1 px and 1-3.9 px; the last stays 165-192 px.
+                (Quick, LensMotion) => Some(vec![2.0, 2.0]),
+                _ => None,
+            },
         }
     }
 }
@@ -100,6 +108,9 @@ pub struct ProfileSpec {
     pub max_rays: u64,
     /// Image width of the `physical-lens` sensor, pixels.
     pub physical_image_width_px: u32,
+    /// Power-remapping exponents per dimension, when the profile departs from the model's
+    /// paper values ([`PsfModel::default_beta`]); recorded in the database header either way.
+    pub betas: Option<Vec<f64>>,
 }
 
 /// The `physical-lens` model's lens, focus, sensor and parameter ranges.
@@ -228,6 +239,10 @@ impl LensOptions {
     }
 }
 
+/// The default `lambda` of [`BuildConfig::budget_tradeoff`]: 0.3, i.e. 3.3 % more spreadlets
+/// (per support pixel) must buy at least 0.01 of similarity.
+pub const DEFAULT_BUDGET_TRADEOFF: f32 = 0.3;
+
 /// Everything a database build needs. Start from [`BuildConfig::new`] and change fields.
 #[derive(Clone, Debug, PartialEq)]
 pub struct BuildConfig {
@@ -250,8 +265,20 @@ pub struct BuildConfig {
     pub blade_rotation_rad: f32,
     /// Lens for physical-lens (`None` = [`LensOptions::default`]).
     pub lens: Option<LensOptions>,
-    /// Sparsification procedure (default: [`Procedure::Paper`]).
+    /// Sparsification procedure (default: [`Procedure::Refit`]; [`Procedure::Paper`] for the
+    /// paper's).
     pub procedure: Procedure,
+    /// lens-motion: integrate the box shutter exactly per lens sample (each ray deposits its
+    /// whole motion segment) instead of sampling the time like the paper (default on: the
+    /// same PSFs in expectation with far less Monte Carlo noise).
+    pub analytic_shutter: bool,
+    /// Per-PSF density (beyond the paper): `Some(lambda)` sparsifies at budgets
+    /// `spreadlet_budget * 2^(k/2)`, `k` from -3 to 4, hill-climbing from `k = 0`, and keeps
+    /// the spreadlets maximising `similarity - lambda * sparsity` (so `lambda` is the
+    /// similarity one spreadlet per support pixel must buy: spreadlets go where they help
+    /// most, the mean similarity for a mean sparsity is maximised); `None` (the paper):
+    /// one run at `spreadlet_budget`.
+    pub budget_tradeoff: Option<f32>,
     /// Also measure the ablation (darts / +Lloyd / +annealing / full) per PSF; slower.
     pub ablation: bool,
     /// Override the profile's PSF count target.
@@ -272,7 +299,9 @@ pub struct BuildConfig {
 
 impl BuildConfig {
     /// Defaults for `model` and `profile`: seed 1, rays from the profile, budget 1,
-    /// pre-filtering on, circular aperture, default lens, the paper's procedure; stored dense
+    /// pre-filtering on, circular aperture, default lens, the analytic shutter, the paper's
+    /// procedure plus a least-squares re-fit ([`Procedure::Refit`]) on a per-PSF density ladder
+    /// ([`DEFAULT_BUDGET_TRADEOFF`]); [`BuildConfig::paper`] gives the paper's. Stored dense
     /// above 0.5 spreadlets per support pixel, or, when at most 4096 px, below similarity 0.9
     /// or above L1 0.15.
     pub fn new(model: PsfModel, profile: Profile) -> Self {
@@ -287,6 +316,8 @@ impl BuildConfig {
             blade_rotation_rad: 0.0,
             lens: None,
             procedure: Procedure::default(),
+            analytic_shutter: true,
+            budget_tradeoff: Some(DEFAULT_BUDGET_TRADEOFF),
             ablation: false,
             psf_count: None,
             ranges: None,
@@ -294,6 +325,17 @@ impl BuildConfig {
             dense_below_similarity: 0.9,
             dense_above_l1: 0.15,
             dense_max_support: 4096,
+        }
+    }
+
+    /// [`BuildConfig::new`] with the paper's method wherever this project goes beyond it:
+    /// sampled shutter time, the paper's procedure, one spreadlet budget for every PSF.
+    pub fn paper(model: PsfModel, profile: Profile) -> Self {
+        BuildConfig {
+            analytic_shutter: false,
+            procedure: Procedure::Paper,
+            budget_tradeoff: None,
+            ..BuildConfig::new(model, profile)
         }
     }
 
@@ -320,6 +362,11 @@ impl BuildConfig {
         }
         if !self.blade_rotation_rad.is_finite() {
             return bad("blade rotation must be finite".into());
+        }
+        if let Some(l) = self.budget_tradeoff {
+            if !(l.is_finite() && l >= 0.0) {
+                return bad(format!("budget trade-off must be >= 0, got {l}"));
+            }
         }
         if let Some(n) = self.psf_count {
             if n == 0 || n > 1_000_000 {

@@ -51,10 +51,24 @@ struct Args {
     /// Rotation of the bladed aperture, radians.
     #[arg(long, default_value_t = 0.0)]
     blade_rotation: f32,
-    /// Sparsification: paper (default) or improved (sign-separated cells + least-squares
-    /// values).
-    #[arg(long, default_value = "paper")]
+    /// Sparsification: refit (default: the paper's steps, then least-squares values), paper,
+    /// or improved (sign-separated cells + least-squares values).
+    #[arg(long, default_value = "refit")]
     procedure: String,
+    /// Per-PSF density: keep, among budgets 0.35x-4x `--spreadlet-budget`, the spreadlets
+    /// maximising similarity - LAMBDA * sparsity (default 0.3).
+    #[arg(long)]
+    budget_tradeoff: Option<f32>,
+    /// One spreadlet budget for every PSF (the paper), no per-PSF density ladder.
+    #[arg(long, conflicts_with = "budget_tradeoff")]
+    fixed_budget: bool,
+    /// The paper's method throughout: --procedure paper --fixed-budget --sampled-shutter.
+    #[arg(long, conflicts_with_all = ["procedure", "budget_tradeoff"])]
+    paper_method: bool,
+    /// lens-motion: sample the shutter time per ray like the paper instead of integrating
+    /// each lens sample's motion segment exactly (noisier PSFs).
+    #[arg(long)]
+    sampled_shutter: bool,
     /// Also measure the ablation (darts / +Lloyd / +annealing / full); slower.
     #[arg(long)]
     ablation: bool,
@@ -181,6 +195,18 @@ fn main() -> Result<()> {
     cfg.blade_rotation_rad = args.blade_rotation;
     cfg.procedure = procedure;
     cfg.ablation = args.ablation;
+    cfg.analytic_shutter = !args.sampled_shutter;
+    if let Some(l) = args.budget_tradeoff {
+        cfg.budget_tradeoff = Some(l);
+    }
+    if args.fixed_budget {
+        cfg.budget_tradeoff = None;
+    }
+    if args.paper_method {
+        cfg.procedure = Procedure::Paper;
+        cfg.budget_tradeoff = None;
+        cfg.analytic_shutter = false;
+    }
     cfg.psf_count = args.psfs;
     let mut lens = LensOptions::default();
     let mut lens_set = false;
@@ -248,11 +274,13 @@ fn main() -> Result<()> {
     );
     if let Some(a) = &report.ablation {
         eprintln!(
-            "ablation (mean L1, % of darts): darts {:.1}, +Lloyd {:.1}, +annealing {:.1}, full {:.1}",
+            "ablation (mean L1, % of darts): darts {:.1}, +Lloyd {:.1}, +annealing {:.1}, full {:.1}, \
+             full + re-fit {:.1}",
             a.percent_of_darts.darts,
             a.percent_of_darts.darts_lloyd,
             a.percent_of_darts.darts_annealing,
-            a.percent_of_darts.full
+            a.percent_of_darts.full,
+            a.percent_of_darts.refit
         );
     }
     Ok(())

@@ -21,6 +21,10 @@ pub struct PsfReport {
     pub rays: u64,
     /// Spreadlets of the sparse representation.
     pub spreadlets: usize,
+    /// Spreadlet budget (density) they were thrown with (the configured one, or the rung of
+    /// the density ladder chosen, see `BuildConfig::budget_tradeoff`).
+    #[serde(default)]
+    pub budget: f64,
     /// Pixels of the PSF's support (non-zero pixels).
     pub dense_support: usize,
     /// `spreadlets / dense_support`.
@@ -126,6 +130,7 @@ impl BuildReport {
                 darts_lloyd: abl.iter().map(|a| a.darts_lloyd).sum::<f64>() / k,
                 darts_annealing: abl.iter().map(|a| a.darts_annealing).sum::<f64>() / k,
                 full: abl.iter().map(|a| a.full).sum::<f64>() / k,
+                refit: abl.iter().map(|a| a.refit).sum::<f64>() / k,
             };
             let pct = |v: f64| 100.0 * v / mean.darts.max(1e-300);
             Some(AblationReport {
@@ -134,6 +139,7 @@ impl BuildReport {
                     darts_lloyd: pct(mean.darts_lloyd),
                     darts_annealing: pct(mean.darts_annealing),
                     full: pct(mean.full),
+                    refit: pct(mean.refit),
                 },
                 mean_l1: mean,
             })

@@ -350,3 +350,318 @@ impl BenchReport {
         s
     }
 }
+
+/// What `spreadlet bench --scaling` measures: CPU time against image size and against PSF
+/// size, for the spreadlet path and the dense splat (the same PSFs, every one drawn whole).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ScalingConfig {
+    /// Square sizes of the size sweep, px (the frame spans the database's whole CoC range).
+    pub sizes: Vec<u32>,
+    /// Largest size the dense splat is timed at in the size sweep (it grows with the PSF area).
+    pub dense_max_size: u32,
+    /// CoC radii of the PSF-size sweep, px (every pixel of the frame gets this PSF).
+    pub coc_radii: Vec<f32>,
+    /// Square size of the PSF-size sweep's frame, px.
+    pub psf_sweep_size: u32,
+    /// Runs per point (the median is reported); at least 1.
+    pub runs: usize,
+    /// Depth layers.
+    pub layers: u32,
+    /// Integration method of the spreadlet path.
+    pub integrator: Integrator,
+}
+
+impl Default for ScalingConfig {
+    fn default() -> Self {
+        ScalingConfig {
+            sizes: vec![256, 512, 1024, 2048],
+            dense_max_size: 1024,
+            coc_radii: vec![2.0, 4.0, 8.0, 16.0, 32.0, 64.0],
+            psf_sweep_size: 512,
+            runs: 3,
+            layers: 8,
+            integrator: Integrator::Pyramid,
+        }
+    }
+}
+
+/// One point of a scaling sweep (CPU, medians).
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct ScalingRow {
+    /// `size` or `psf`.
+    pub sweep: String,
+    /// `spreadlet` or `dense`.
+    pub method: String,
+    /// Frame edge, px.
+    pub size: u32,
+    /// CoC radius of every pixel (psf sweep), px; `None` for the size sweep (all radii).
+    pub coc_px: Option<f32>,
+    /// Mean support of the PSFs drawn (pixels with a non-zero value in the dense PSF).
+    pub mean_psf_px: f64,
+    /// Mean spreadlets per sparse record drawn (0 for dense).
+    pub mean_spreadlets: f64,
+    /// Records.
+    pub records: usize,
+    /// Splatting, ms.
+    pub splat_ms: f64,
+    /// Integration, ms.
+    pub integrate_ms: f64,
+    /// Compositing, ms.
+    pub composite_ms: f64,
+    /// Total after classification, ms.
+    pub total_ms: f64,
+    /// Runs.
+    pub runs: usize,
+}
+
+/// A `size x size` frame in which every pixel uses the PSF of CoC radius `coc` (one layer per
+/// band of rows, as [`synthetic_frame`] layers them), a checker of colours.
+pub fn uniform_frame(db: &PsfDatabase, size: u32, coc: f32, layers: u32) -> Classified {
+    let mut frame = synthetic_frame(db, size, layers);
+    let (psf, _) = db.lookup([coc, 0.0]);
+    let path = if db.dense(psf as usize).is_some() {
+        SplatPath::Dense
+    } else {
+        SplatPath::Sparse
+    };
+    for r in &mut frame.records {
+        r.psf_index = psf;
+        r.path = path as u32;
+        r.rot_cos = 1.0;
+        r.rot_sin = 0.0;
+    }
+    let mut counts = PathCounts::default();
+    for info in &mut frame.layers {
+        let recs = &frame.records[info.first_record..info.first_record + info.record_count];
+        *info = LayerInfo {
+            first_record: info.first_record,
+            record_count: info.record_count,
+            ..LayerInfo::default()
+        };
+        info.count_paths(recs);
+        counts.add_layer(info);
+    }
+    frame.counts = counts;
+    frame
+}
+
+/// `frame` with every record pointed at `db` instead (same PSF indices: `db` must share the
+/// parameter space), and its paths set from `db`.
+fn repath(frame: &Classified, db: &PsfDatabase) -> Classified {
+    let mut f = frame.clone();
+    for r in &mut f.records {
+        if r.path == SplatPath::Copy as u32 {
+            continue;
+        }
+        r.path = if db.dense(r.psf_index as usize).is_some() {
+            SplatPath::Dense
+        } else {
+            SplatPath::Sparse
+        } as u32;
+    }
+    let mut counts = PathCounts::default();
+    for info in &mut f.layers {
+        let recs = &f.records[info.first_record..info.first_record + info.record_count];
+        info.sparse = 0;
+        info.dense = 0;
+        info.copied = 0;
+        info.count_paths(recs);
+        counts.add_layer(info);
+    }
+    f.counts = counts;
+    f.frame.pad = f.frame.pad.max(db.max_extent_px() + 2);
+    f
+}
+
+/// Mean support (non-zero pixels of the dense PSF) and mean spreadlet count of the records of
+/// `frame` that are not copies; supports come from `dense_db`.
+fn psf_means(frame: &Classified, sparse_db: &PsfDatabase, dense_db: &PsfDatabase) -> (f64, f64) {
+    let support: Vec<usize> = (0..dense_db.psf_count())
+        .map(|i| {
+            dense_db.dense(i).map_or(0, |d| {
+                d.data
+                    .chunks(d.channels)
+                    .filter(|v| v.iter().any(|&x| x != 0.0))
+                    .count()
+            })
+        })
+        .collect();
+    let (mut s, mut n_sp, mut n) = (0.0f64, 0.0f64, 0usize);
+    for r in frame
+        .records
+        .iter()
+        .filter(|r| r.path != SplatPath::Copy as u32)
+    {
+        let i = r.psf_index as usize;
+        s += support.get(i).copied().unwrap_or(0) as f64;
+        if sparse_db.dense(i).is_none() {
+            n_sp += sparse_db.spreadlets(i).0.len() as f64;
+        }
+        n += 1;
+    }
+    if n == 0 {
+        (0.0, 0.0)
+    } else {
+        (s / n as f64, n_sp / n as f64)
+    }
+}
+
+fn scaling_row(
+    sweep: &str,
+    method: &str,
+    size: u32,
+    coc: Option<f32>,
+    frame: &Classified,
+    means: (f64, f64),
+    runs: &[[f64; 4]],
+) -> ScalingRow {
+    let col = |k: usize| median(runs.iter().map(|r| r[k]).collect());
+    ScalingRow {
+        sweep: sweep.into(),
+        method: method.into(),
+        size,
+        coc_px: coc,
+        mean_psf_px: means.0,
+        mean_spreadlets: if method == "dense" { 0.0 } else { means.1 },
+        records: frame.records.len(),
+        splat_ms: col(0),
+        integrate_ms: col(1),
+        composite_ms: col(2),
+        total_ms: col(3),
+        runs: runs.len(),
+    }
+}
+
+/// Runs the scaling sweeps on the CPU with `sparse_db` (as the spreadlet path uses it) and
+/// `dense_db` (the same PSFs stored dense, see `baseline::dense_build_config`); both
+/// conditioned, thin-lens. `progress` prints each point to stderr as it is measured.
+pub fn run_scaling(
+    sparse_db: &PsfDatabase,
+    dense_db: &PsfDatabase,
+    config: &ScalingConfig,
+    progress: bool,
+) -> Result<Vec<ScalingRow>, BenchError> {
+    if config.runs == 0 || (config.sizes.is_empty() && config.coc_radii.is_empty()) {
+        return Err(BenchError::Config(
+            "need at least one run and one point".into(),
+        ));
+    }
+    if config
+        .sizes
+        .iter()
+        .chain(std::iter::once(&config.psf_sweep_size))
+        .any(|&s| s == 0 || s > 8192)
+    {
+        return Err(BenchError::Config("sizes must be in 1..=8192 px".into()));
+    }
+    if sparse_db.psf_count() != dense_db.psf_count() {
+        return Err(BenchError::Config(
+            "the sparse and dense databases must share their PSF space".into(),
+        ));
+    }
+    let bench = BenchConfig {
+        runs: config.runs,
+        layers: config.layers,
+        integrator: config.integrator,
+        ..BenchConfig::default()
+    };
+    let mut rows = Vec::new();
+    let measure = |sweep: &str, size: u32, coc: Option<f32>, frame: Classified, dense: bool| {
+        let means = psf_means(&frame, sparse_db, dense_db);
+        let mut out = vec![];
+        let runs = time_cpu(sparse_db, &frame, &bench);
+        out.push(scaling_row(
+            sweep,
+            "spreadlet",
+            size,
+            coc,
+            &frame,
+            means,
+            &runs,
+        ));
+        if dense {
+            let dframe = repath(&frame, dense_db);
+            let runs = time_cpu(dense_db, &dframe, &bench);
+            out.push(scaling_row(
+                sweep, "dense", size, coc, &dframe, means, &runs,
+            ));
+        }
+        for r in &out {
+            if progress {
+                eprintln!(
+                    "{} sweep: {} {}x{} coc {:?}: {:.1} ms",
+                    r.sweep, r.method, r.size, r.size, r.coc_px, r.total_ms
+                );
+            }
+        }
+        out
+    };
+    for &size in &config.sizes {
+        let frame = synthetic_frame(sparse_db, size, config.layers);
+        rows.extend(measure(
+            "size",
+            size,
+            None,
+            frame,
+            size <= config.dense_max_size,
+        ));
+    }
+    for &coc in &config.coc_radii {
+        let frame = uniform_frame(sparse_db, config.psf_sweep_size, coc, config.layers);
+        rows.extend(measure(
+            "psf",
+            config.psf_sweep_size,
+            Some(coc),
+            frame,
+            true,
+        ));
+    }
+    Ok(rows)
+}
+
+/// The scaling rows as two Markdown tables (size sweep, PSF sweep) with the dense/spreadlet
+/// time ratio per point.
+pub fn scaling_markdown(rows: &[ScalingRow], database: &str) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "Database: {database}; CPU, {} threads; medians.\n",
+        rayon::current_num_threads()
+    );
+    for sweep in ["size", "psf"] {
+        let _ = writeln!(
+            s,
+            "| sweep | size | CoC px | mean PSF support px | mean spreadlets | spreadlet ms (splat / integrate / composite) | dense ms | dense / spreadlet |"
+        );
+        let _ = writeln!(s, "| --- | --- | --- | --- | --- | --- | --- | --- |");
+        for r in rows
+            .iter()
+            .filter(|r| r.sweep == sweep && r.method == "spreadlet")
+        {
+            let dense = rows.iter().find(|d| {
+                d.sweep == sweep && d.method == "dense" && d.size == r.size && d.coc_px == r.coc_px
+            });
+            let _ = writeln!(
+                s,
+                "| {} | {}x{} | {} | {:.0} | {:.0} | {:.1} ({:.1} / {:.1} / {:.1}) | {} | {} |",
+                sweep,
+                r.size,
+                r.size,
+                r.coc_px.map_or("all".to_string(), |c| format!("{c}")),
+                r.mean_psf_px,
+                r.mean_spreadlets,
+                r.total_ms,
+                r.splat_ms,
+                r.integrate_ms,
+                r.composite_ms,
+                dense.map_or("-".to_string(), |d| format!("{:.1}", d.total_ms)),
+                dense.map_or("-".to_string(), |d| format!(
+                    "{:.1}x",
+                    d.total_ms / r.total_ms
+                )),
+            );
+        }
+        s.push('\n');
+    }
+    s
+}

@@ -34,6 +34,40 @@ pub enum CameraError {
     /// A field's value cannot describe a real camera.
     #[error("camera: {0}")]
     Invalid(String),
+    /// Camera JSON text (not from a file) is malformed or lacks a field.
+    #[error("not valid camera JSON: {source}")]
+    Text {
+        /// The cause.
+        source: serde_json::Error,
+    },
+    /// A field has a value of the wrong type (a string for a number, a negative size...).
+    #[error("camera field `{field}`: {message}")]
+    Field {
+        /// The field.
+        field: &'static str,
+        /// What is wrong, in serde's words.
+        message: String,
+    },
+}
+
+/// Largest accepted CoC radius at infinite depth, pixels: beyond it the parameters (a tiny
+/// f-number, a tiny sensor) describe no camera, and the CoC arithmetic would overflow.
+pub const MAX_COC_SCALE_PX: f64 = 1e9;
+
+/// Checks one field of camera JSON by deserialising it alone as `T`.
+fn check_field<T: serde::de::DeserializeOwned>(
+    obj: &serde_json::Map<String, serde_json::Value>,
+    field: &'static str,
+) -> Result<(), CameraError> {
+    match obj.get(field) {
+        Some(v) => serde_json::from_value::<T>(v.clone())
+            .map(|_| ())
+            .map_err(|e| CameraError::Field {
+                field,
+                message: e.to_string(),
+            }),
+        None => Ok(()),
+    }
 }
 
 /// A camera as in `camera.json` (see `shared/examples/README.md`). Unknown fields are ignored.
@@ -76,7 +110,7 @@ impl Camera {
             source,
         })?;
         Self::from_json_str(&text).map_err(|e| match e {
-            CameraError::Json { source, .. } => CameraError::Json {
+            CameraError::Json { source, .. } | CameraError::Text { source } => CameraError::Json {
                 path: path.display().to_string(),
                 source,
             },
@@ -84,12 +118,39 @@ impl Camera {
         })
     }
 
-    /// Parses and validates camera JSON text.
+    /// Parses and validates camera JSON text. A field of the wrong type is named
+    /// ([`CameraError::Field`]).
     pub fn from_json_str(text: &str) -> Result<Self, CameraError> {
-        let camera: Camera = serde_json::from_str(text).map_err(|source| CameraError::Json {
-            path: "<text>".into(),
-            source,
-        })?;
+        let value: serde_json::Value =
+            serde_json::from_str(text).map_err(|source| CameraError::Text { source })?;
+        let Some(obj) = value.as_object() else {
+            return Err(CameraError::Invalid(format!(
+                "the camera must be a JSON object with named fields, got {}",
+                match &value {
+                    serde_json::Value::Array(_) => "an array",
+                    serde_json::Value::String(_) => "a string",
+                    serde_json::Value::Number(_) => "a number",
+                    serde_json::Value::Bool(_) => "a boolean",
+                    _ => "null",
+                }
+            )));
+        };
+        let camera: Camera = match serde_json::from_value(value.clone()) {
+            Ok(c) => c,
+            Err(source) => {
+                // serde's message does not say which field has the wrong type: find it.
+                check_field::<u32>(obj, "width")?;
+                check_field::<u32>(obj, "height")?;
+                check_field::<f64>(obj, "focal_length_mm")?;
+                check_field::<f64>(obj, "sensor_width_mm")?;
+                check_field::<Option<f64>>(obj, "f_stop")?;
+                check_field::<Option<f64>>(obj, "focus_distance")?;
+                check_field::<u32>(obj, "aperture_blades")?;
+                check_field::<f64>(obj, "shutter_frames")?;
+                check_field::<f64>(obj, "scene_unit_mm")?;
+                return Err(CameraError::Text { source });
+            }
+        };
         camera.validate()?;
         Ok(camera)
     }
@@ -154,6 +215,20 @@ impl Camera {
                 "shutter_frames must be zero or positive, got {}",
                 self.shutter_frames
             ));
+        }
+        if let Some(lens) = self.thin_lens() {
+            let k = lens.coc_scale_px;
+            if !(k.is_finite() && k <= MAX_COC_SCALE_PX) {
+                return bad(format!(
+                    "f_stop {:?} with focal_length_mm {:?}, sensor_width_mm {:?} and focus_distance {:?} \
+                     gives a blur of {k:e} px at infinity (limit {MAX_COC_SCALE_PX:e}): no real \
+                     camera",
+                    self.f_stop.unwrap_or(0.0),
+                    self.focal_length_mm,
+                    self.sensor_width_mm,
+                    lens.focus_distance
+                ));
+            }
         }
         if self.aperture_blades == 1 || self.aperture_blades == 2 {
             return bad(format!(
@@ -290,5 +365,19 @@ mod tests {
             .expect_err("missing")
             .to_string();
         assert!(err.contains("focal_length_mm"), "{err}");
+        // A field of the wrong type is named; not an object is said so; an absurd lens too.
+        let text = r#"{"width":"eight","height":8,"focal_length_mm":50,"sensor_width_mm":36}"#;
+        let err = Camera::from_json_str(text).expect_err("type").to_string();
+        assert!(err.contains("`width`"), "{err}");
+        let err = Camera::from_json_str("[8, 8]")
+            .expect_err("array")
+            .to_string();
+        assert!(err.contains("JSON object"), "{err}");
+        let tiny = r#"{"width":8,"height":8,"focal_length_mm":50,"sensor_width_mm":36,
+            "f_stop":1e-310,"focus_distance":1.0}"#;
+        let err = Camera::from_json_str(tiny)
+            .expect_err("tiny f-stop")
+            .to_string();
+        assert!(err.contains("f_stop"), "{err}");
     }
 }

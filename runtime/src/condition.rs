@@ -38,19 +38,66 @@ const SUBSAMPLES: usize = 6;
 /// pixel values summing to 1. Each pixel is the mean over `SUBSAMPLES`^2 points of the
 /// disk-convolved-with-segment intensity.
 pub fn analytic_psf(coc: f64, len: f64) -> ([i16; 2], u16, u16, Vec<f32>) {
+    let (rx, ry) = analytic_half_size(coc, len);
+    let (w, h) = ((2 * rx + 1) as usize, (2 * ry + 1) as usize);
+    let mut data = vec![0.0f64; w * h];
+    accumulate_analytic(coc, len, SUBSAMPLES, rx, ry, &mut data);
+    let sum: f64 = data.iter().sum();
+    let data = data.iter().map(|&v| (v / sum) as f32).collect();
+    ([-rx as i16, -ry as i16], w as u16, h as u16, data)
+}
+
+/// The analytic PSF pre-filtered over a cell of the PSF space like the database's own (CoC
+/// radius in `[coc.0, coc.1]` px, motion length in `[len.0, len.1]` px): the mean of the
+/// analytic PSFs at `CELL_SAMPLES`^2 stratified points of the cell, as a dense image summing to
+/// 1. Used for the dense twins of sparse PSFs that very bright pixels are drawn with.
+pub fn analytic_cell_psf(coc: (f64, f64), len: (f64, f64)) -> ([i16; 2], u16, u16, Vec<f32>) {
+    let (rx, ry) = analytic_half_size(coc.1, len.1);
+    let (w, h) = ((2 * rx + 1) as usize, (2 * ry + 1) as usize);
+    let mut data = vec![0.0f64; w * h];
+    let k = CELL_SAMPLES as f64;
+    for i in 0..CELL_SAMPLES {
+        for j in 0..CELL_SAMPLES {
+            let c = coc.0 + (coc.1 - coc.0) * (i as f64 + 0.5) / k;
+            let l = len.0 + (len.1 - len.0) * (j as f64 + 0.5) / k;
+            let mut one = vec![0.0f64; w * h];
+            accumulate_analytic(c, l, 2, rx, ry, &mut one);
+            let sum: f64 = one.iter().sum();
+            if sum > 0.0 {
+                for (d, o) in data.iter_mut().zip(&one) {
+                    *d += o / sum;
+                }
+            }
+        }
+    }
+    let sum: f64 = data.iter().sum();
+    let data = data.iter().map(|&v| (v / sum) as f32).collect();
+    ([-rx as i16, -ry as i16], w as u16, h as u16, data)
+}
+
+/// Points per cell axis that [`analytic_cell_psf`] averages.
+const CELL_SAMPLES: usize = 4;
+
+/// Half width and half height (px) of the image that holds the analytic PSF.
+fn analytic_half_size(coc: f64, len: f64) -> (i32, i32) {
+    let r = coc.max(0.5);
+    let half = 0.5 * len.max(0.0);
+    ((r + half + 1.0).ceil() as i32, (r + 1.0).ceil() as i32)
+}
+
+/// Adds the analytic PSF (unnormalised: each pixel the fraction of its `sub`^2 points inside
+/// the disk swept along the segment) into `data`, an image of half size `(rx, ry)`.
+fn accumulate_analytic(coc: f64, len: f64, sub: usize, rx: i32, ry: i32, data: &mut [f64]) {
     // Radii under half a pixel are drawn as half a pixel: the PSF then covers about a pixel.
     let r = coc.max(0.5);
     let half = 0.5 * len.max(0.0);
-    let rx = (r + half + 1.0).ceil() as i32;
-    let ry = (r + 1.0).ceil() as i32;
     let (w, h) = ((2 * rx + 1) as usize, (2 * ry + 1) as usize);
-    let mut data = vec![0.0f64; w * h];
-    let k = SUBSAMPLES as f64;
+    let k = sub as f64;
     for v in 0..h {
         for u in 0..w {
             let mut acc = 0.0;
-            for sy in 0..SUBSAMPLES {
-                for sx in 0..SUBSAMPLES {
+            for sy in 0..sub {
+                for sx in 0..sub {
                     let x = (u as i32 - rx) as f64 - 0.5 + (sx as f64 + 0.5) / k;
                     let y = (v as i32 - ry) as f64 - 0.5 + (sy as f64 + 0.5) / k;
                     if y.abs() >= r {
@@ -65,12 +112,9 @@ pub fn analytic_psf(coc: f64, len: f64) -> ([i16; 2], u16, u16, Vec<f32>) {
                     };
                 }
             }
-            data[v * w + u] = acc;
+            data[v * w + u] += acc;
         }
     }
-    let sum: f64 = data.iter().sum();
-    let data = data.iter().map(|&v| (v / sum) as f32).collect();
-    ([-rx as i16, -ry as i16], w as u16, h as u16, data)
 }
 
 /// What conditioning changed.

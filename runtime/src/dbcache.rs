@@ -72,9 +72,13 @@ pub fn build_config(model: PsfModel, profile: Profile, blades: u32) -> BuildConf
 pub const THIN_LENS_QUICK_PSFS: u32 = 64;
 
 /// The file name a configuration is cached under: model, profile, and a hash (FNV-1a 64) of
-/// every build setting and the database format version.
+/// every build setting, the profile's numbers and the database format version.
 pub fn cache_file_name(cfg: &BuildConfig) -> String {
-    let key = format!("{cfg:?} format={}", psf_db::FORMAT_VERSION);
+    let key = format!(
+        "{cfg:?} spec={:?} format={}",
+        cfg.profile.spec(cfg.model),
+        psf_db::FORMAT_VERSION
+    );
     let mut h: u64 = 0xcbf2_9ce4_8422_2325;
     for b in key.bytes() {
         h ^= u64::from(b);

@@ -19,7 +19,17 @@ pub struct DbSet {
     pub combined: Option<PsfDatabase>,
     /// Index of `main`'s first PSF in `combined`.
     pub main_offset: u32,
+    /// For each PSF of `combined` stored sparse: the index (in `combined`) of its dense twin,
+    /// or [`NO_TWIN`]. Twins are the analytic PSF pre-filtered over the same cell
+    /// ([`crate::condition::analytic_cell_psf`]), made for the thin-lens and lens-motion models
+    /// with a circular aperture. Very bright (HDR) pixels are drawn with them: a sparse PSF's
+    /// small relative error, multiplied by a highlight of 100, shows as dark holes and haze
+    /// beside it (the comets example: SSIM 0.9710 without, see docs/BENCHMARKS.md).
+    pub hdr_twins: Vec<u32>,
 }
+
+/// [`DbSet::hdr_twins`] entry of a PSF without a twin.
+pub const NO_TWIN: u32 = u32::MAX;
 
 impl DbSet {
     /// No database (nothing to simulate).
@@ -37,17 +47,35 @@ impl DbSet {
                 )));
             }
         }
-        let (combined, main_offset) = match (&thin_lens, &main) {
-            (None, None) => (None, 0),
-            (Some(t), None) => (Some(t.clone()), 0),
-            (None, Some(m)) => (Some(m.clone()), 0),
-            (Some(t), Some(m)) => (Some(concatenate(t, m)?), t.psf_count() as u32),
+        let sources: Vec<&PsfDatabase> = thin_lens.iter().chain(main.iter()).collect();
+        let main_offset = match (&thin_lens, &main) {
+            (Some(t), Some(_)) => t.psf_count() as u32,
+            _ => 0,
+        };
+        let base: usize = sources.iter().map(|d| d.psf_count()).sum();
+        let mut hdr_twins = vec![NO_TWIN; base];
+        let mut twins = Vec::new();
+        let mut first = 0usize;
+        for db in &sources {
+            for (i, twin) in dense_twins(db).into_iter().enumerate() {
+                if let Some(t) = twin {
+                    hdr_twins[first + i] = (base + twins.len()) as u32;
+                    twins.push(t);
+                }
+            }
+            first += db.psf_count();
+        }
+        let combined = match sources.as_slice() {
+            [] => None,
+            [one] if twins.is_empty() => Some((*one).clone()),
+            _ => Some(concatenate(&sources, &twins)?),
         };
         Ok(Self {
             thin_lens,
             main,
             combined,
             main_offset,
+            hdr_twins,
         })
     }
 
@@ -70,48 +98,76 @@ impl DbSet {
     }
 }
 
-/// `a`'s PSFs then `b`'s in one database (same channel count). The header is `b`'s with a
-/// one-dimensional index space large enough for both, labelled thin-lens (lookups are never
-/// made in it; unused trailing cells are empty PSFs).
-fn concatenate(a: &PsfDatabase, b: &PsfDatabase) -> Result<PsfDatabase, DbError> {
-    if a.channels() != b.channels() {
+/// A dense PSF image: offset of its top-left pixel from the centre (px), width, height, and
+/// one value per pixel (single channel, broadcast to the database's channels).
+type DenseImage = ([i16; 2], u16, u16, Vec<f32>);
+
+/// The dense twins of `db`'s sparse PSFs (see [`DbSet::hdr_twins`]); `None` where a PSF is
+/// dense already, empty, or of a model or aperture the analytic PSF does not describe.
+fn dense_twins(db: &PsfDatabase) -> Vec<Option<DenseImage>> {
+    use rayon::prelude::*;
+    let analytic = matches!(db.model(), PsfModel::ThinLens | PsfModel::LensMotion)
+        && db.header().aperture.blades == 0;
+    (0..db.psf_count())
+        .into_par_iter()
+        .map(|i| {
+            if !analytic || db.dense(i).is_some() || db.spreadlets(i).0.is_empty() {
+                return None;
+            }
+            let cell = db.space().cell_box(i as u32)?;
+            let len = if db.model() == PsfModel::LensMotion {
+                (cell.min[1], cell.max[1])
+            } else {
+                (0.0, 0.0)
+            };
+            Some(crate::condition::analytic_cell_psf(
+                (cell.min[0], cell.max[0]),
+                len,
+            ))
+        })
+        .collect()
+}
+
+/// The PSFs of `dbs` in order, then the dense `extra` ones, in one database (same channel
+/// count). The header is the last database's with a one-dimensional index space large enough
+/// for all, labelled thin-lens (lookups are never made in it; unused trailing cells are empty
+/// PSFs).
+fn concatenate(dbs: &[&PsfDatabase], extra: &[DenseImage]) -> Result<PsfDatabase, DbError> {
+    let Some(last) = dbs.last() else {
+        return Err(DbError::Invalid("no database to combine".into()));
+    };
+    let channels = last.channels();
+    if let Some(other) = dbs.iter().find(|d| d.channels() != channels) {
         return Err(DbError::Invalid(format!(
             "cannot combine databases of {} and {} channels",
-            a.channels(),
-            b.channels()
+            other.channels(),
+            channels
         )));
     }
-    let total = (a.psf_count() + b.psf_count()) as u32;
+    let total = (dbs.iter().map(|d| d.psf_count()).sum::<usize>() + extra.len()) as u32;
     let n = ParamSpace::resolution_for_count(1, total)
         .ok_or_else(|| DbError::Invalid(format!("no index space holds {total} PSFs")))?;
     let space = ParamSpace::for_model(PsfModel::ThinLens, &[[0.0, f64::from(total)]], n)
         .map_err(|e| DbError::Invalid(e.to_string()))?;
     let capacity = space.psf_count();
-    // Validation ties the model to the space's dimensions: the index space is 1-D, so the
-    // combined header says thin-lens (both parts are single-channel grey PSFs).
-    let mut header: DbHeader = b.header().clone();
+    let mut header: DbHeader = last.header().clone();
     header.model = PsfModel::ThinLens;
     header.space = space;
-    header.stats = a
-        .header()
-        .stats
+    header.stats = dbs
         .iter()
-        .chain(&b.header().stats)
-        .copied()
+        .flat_map(|d| d.header().stats.iter().copied())
         .collect();
-    header.stats.resize(
-        capacity as usize,
-        header.stats.last().copied().unwrap_or(psf_db::PsfStats {
-            coords: [0.0; 2],
-            spreadlets: 0,
-            dense_support: 0,
-            l1: 0.0,
-            ssim: 0.0,
-            extent_px: 0.0,
-        }),
-    );
+    let filler = header.stats.last().copied().unwrap_or(psf_db::PsfStats {
+        coords: [0.0; 2],
+        spreadlets: 0,
+        dense_support: 0,
+        l1: 0.0,
+        ssim: 0.0,
+        extent_px: 0.0,
+    });
+    header.stats.resize(capacity as usize, filler);
     let mut builder = DatabaseBuilder::new(header);
-    for db in [a, b] {
+    for db in dbs {
         for i in 0..db.psf_count() {
             match db.dense(i) {
                 Some(d) => {
@@ -129,8 +185,69 @@ fn concatenate(a: &PsfDatabase, b: &PsfDatabase) -> Result<PsfDatabase, DbError>
             }
         }
     }
+    for (origin, w, h, data) in extra {
+        let values: Vec<f32> = data
+            .iter()
+            .flat_map(|&v| std::iter::repeat_n(v, channels))
+            .collect();
+        builder.push_dense(*origin, *w, *h, &values)?;
+    }
     for _ in total..capacity {
         builder.push_sparse(&[], &[])?;
     }
     builder.finish()
+
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn test_db(model: PsfModel) -> PsfDatabase {
+        precompute::build_database(
+            &precompute::BuildConfig::new(model, precompute::Profile::Test),
+            false,
+        )
+        .expect("test database")
+        .0
+    }
+
+    /// Every sparse PSF of a circular thin-lens or lens-motion database gets a dense twin that
+    /// sums to one in every channel and is centred like its cell's PSF (centroid within a
+    /// pixel, since the analytic PSF is symmetric); dense PSFs get none.
+    #[test]
+    fn sparse_psfs_get_unit_dense_twins() {
+        let set = DbSet::new(
+            Some(test_db(PsfModel::ThinLens)),
+            Some(test_db(PsfModel::LensMotion)),
+        )
+        .expect("set");
+        let all = set.combined.as_ref().expect("combined");
+        let base = set.hdr_twins.len();
+        let mut twins = 0;
+        for (i, &t) in set.hdr_twins.iter().enumerate() {
+            let sparse = all.dense(i).is_none() && !all.spreadlets(i).0.is_empty();
+            assert_eq!(t != NO_TWIN, sparse, "PSF {i}: twin {t}, sparse {sparse}");
+            if t == NO_TWIN {
+                continue;
+            }
+            twins += 1;
+            assert!(t as usize >= base, "twins follow the original PSFs");
+            let d = all.dense(t as usize).expect("twin is dense");
+            for c in 0..d.channels {
+                let (mut sum, mut mx, mut my) = (0.0f64, 0.0f64, 0.0f64);
+                for y in 0..d.height {
+                    for x in 0..d.width {
+                        let v = f64::from(d.data[(y * d.width + x) * d.channels + c]);
+                        sum += v;
+                        mx += v * (x as f64 + f64::from(d.origin[0]));
+                        my += v * (y as f64 + f64::from(d.origin[1]));
+                    }
+                }
+                assert!((sum - 1.0).abs() < 1e-4, "PSF {i} twin sums to {sum}");
+                assert!((mx / sum).abs() < 1.0 && (my / sum).abs() < 1.0);
+            }
+        }
+        assert!(twins > 0, "the test databases have sparse PSFs");
+    }
 }

@@ -208,7 +208,11 @@ pub fn run(options: &DemoOptions) -> Result<Vec<(String, DemoStep)>> {
         camera.aperture_blades,
         options.progress,
     )?;
-    let synth_options = SynthOptions::default();
+    // The command line's default integrator, so the demo scores what `spreadlet synth` makes.
+    let synth_options = SynthOptions {
+        integrator: crate::pipeline::Integrator::Exact,
+        ..SynthOptions::default()
+    };
 
     let mut steps = Vec::new();
     let t = Instant::now();

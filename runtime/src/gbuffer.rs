@@ -19,6 +19,11 @@ use std::path::Path;
 /// Largest accepted pixel count (width x height): 8192 x 8192.
 pub const MAX_PIXELS: usize = 8192 * 8192;
 
+/// Largest accepted number of samples a file may declare (pixels x channels, over all its
+/// parts): 16 channels of the largest image. Bounds what the decoder allocates (4 GiB of f32)
+/// whatever a small file claims.
+pub const MAX_SAMPLES: usize = 16 * MAX_PIXELS;
+
 /// Errors of reading G-buffers.
 #[derive(Debug, thiserror::Error)]
 pub enum GBufferError {
@@ -150,20 +155,60 @@ impl GBuffer {
 
     /// Reads a G-buffer from an OpenEXR file.
     pub fn read_exr(path: &Path, options: &ChannelOptions) -> Result<Self, GBufferError> {
-        use exr::prelude::*;
         let name = path.display().to_string();
+        let open = || std::fs::File::open(path).map(std::io::BufReader::new);
+        Self::decode_exr(&name, open, options)
+    }
+
+    /// Reads a G-buffer from the bytes of an OpenEXR file; `name` names it in messages.
+    pub fn read_exr_bytes(
+        bytes: &[u8],
+        name: &str,
+        options: &ChannelOptions,
+    ) -> Result<Self, GBufferError> {
+        let open = || Ok(std::io::Cursor::new(bytes));
+        Self::decode_exr(name, open, options)
+    }
+
+    /// Decodes an OpenEXR from the source `open` gives (called twice: once for the header,
+    /// checked before anything large is allocated, once for the pixels).
+    fn decode_exr<R, F>(name: &str, open: F, options: &ChannelOptions) -> Result<Self, GBufferError>
+    where
+        R: std::io::Read + std::io::Seek + Send,
+        F: Fn() -> std::io::Result<R>,
+    {
+        use exr::prelude::*;
+        let name = name.to_string();
         let exr_err = |e: exr::error::Error| GBufferError::Exr {
             path: name.clone(),
             message: e.to_string(),
         };
-        // Check the declared size before decoding anything (a huge size in a tiny file).
-        let meta = exr::meta::MetaData::read_from_file(path, false).map_err(exr_err)?;
+        // Check the declared size before decoding anything (a huge size in a tiny file): every
+        // part's pixel count, and the samples the decoder would allocate (pixels x channels).
+        let meta =
+            exr::meta::MetaData::read_from_buffered(open().map_err(|e| exr_err(e.into()))?, false)
+                .map_err(exr_err)?;
         let header = meta.headers.first().ok_or_else(|| GBufferError::Layout {
             path: name.clone(),
             message: "the file has no image part".into(),
         })?;
         let size = header.layer_size;
         check_size(&name, size.width(), size.height())?;
+        let mut samples = 0usize;
+        for h in meta.headers.iter() {
+            let (w, ht) = (h.layer_size.width(), h.layer_size.height());
+            check_size(&name, w, ht)?;
+            samples = samples.saturating_add((w * ht).saturating_mul(h.channels.list.len()));
+        }
+        if samples > MAX_SAMPLES {
+            return Err(GBufferError::Layout {
+                path: name.clone(),
+                message: format!(
+                    "the file declares {samples} samples (pixels x channels over all parts), \
+                     more than the limit of {MAX_SAMPLES}"
+                ),
+            });
+        }
 
         let image = read()
             .no_deep_data()
@@ -171,7 +216,7 @@ impl GBuffer {
             .all_channels()
             .first_valid_layer()
             .all_attributes()
-            .from_file(path)
+            .from_buffered(open().map_err(|e| exr_err(e.into()))?)
             .map_err(exr_err)?;
         let layer = image.layer_data;
         let (width, height) = (layer.size.width(), layer.size.height());
@@ -269,6 +314,19 @@ impl GBuffer {
                 (rgba, depth, motion)
             }
         };
+        // Sub-sampled channels (EXR x/y sampling above 1) hold fewer values than pixels.
+        for plane in rgba.iter().flatten() {
+            if plane.len() != n {
+                return Err(GBufferError::Layout {
+                    path: name.clone(),
+                    message: format!(
+                        "a colour channel has {} values for {n} pixels (sub-sampled channels \
+                         are not supported)",
+                        plane.len()
+                    ),
+                });
+            }
+        }
         let mut color = vec![[0.0f32, 0.0, 0.0, 1.0]; n];
         for (c, plane) in rgba.iter().enumerate() {
             if let Some(plane) = plane {

@@ -6,6 +6,7 @@
 //! mirrors. Inputs come from [`gbuffer::GBuffer::read_exr`] and [`camera::Camera`]; databases
 //! from [`dbcache`].
 
+pub mod baseline;
 #[cfg(feature = "gpu")]
 pub mod bench;
 pub mod camera;
@@ -17,7 +18,9 @@ pub mod gbuffer;
 #[cfg(feature = "gpu")]
 pub mod gpu;
 pub mod peer;
+pub mod peer_study;
 pub mod pipeline;
 pub mod reconstruct;
 pub mod rgba;
+pub mod study;
 pub mod synth;

@@ -45,6 +45,53 @@ enum Command {
     /// Markdown table.
     #[cfg(feature = "gpu")]
     Bench(BenchArgs),
+    /// What accuracy costs in time: sweeps of every knob and the dense and filter baselines on
+    /// a scene, scored against a reference (CSV, Markdown, PNG; docs/STUDY.md).
+    Study(StudyArgs),
+}
+
+#[derive(Args, Debug)]
+struct StudyArgs {
+    /// Output folder (study.csv, study.md, study.png, study.json).
+    #[arg(long, default_value = "out/study")]
+    out: PathBuf,
+    /// Built-in scene to render (bokeh, crossing, occluder, rotating, physical).
+    #[arg(long, default_value = "occluder")]
+    scene: String,
+    /// Square image size of the built-in scene, pixels (default: the scene's).
+    #[arg(long)]
+    size: Option<u32>,
+    /// Pinhole G-buffer (OpenEXR) to study instead of a built-in scene (with --camera and
+    /// --reference).
+    #[arg(long, requires_all = ["camera", "reference"])]
+    input: Option<PathBuf>,
+    /// Camera description of --input.
+    #[arg(long)]
+    camera: Option<PathBuf>,
+    /// Reference image (OpenEXR) of --input.
+    #[arg(long)]
+    reference: Option<PathBuf>,
+    /// Larger sweeps (takes longer).
+    #[arg(long)]
+    full: bool,
+    /// Timed runs per configuration (the median is reported).
+    #[arg(long, default_value_t = 3)]
+    runs: usize,
+    /// Samples per pixel of the built-in scene's reference.
+    #[arg(long, default_value_t = 256)]
+    reference_spp: usize,
+    /// Profile of databases built on demand.
+    #[arg(long, default_value = "quick")]
+    db_profile: String,
+    /// Skip the GPU rows.
+    #[arg(long)]
+    no_gpu: bool,
+    /// Run the peer comparison (issue #8) instead.
+    #[arg(long)]
+    peers: bool,
+    /// Print no progress.
+    #[arg(long, short)]
+    quiet: bool,
 }
 
 #[cfg(feature = "gpu")]
@@ -65,6 +112,16 @@ struct BenchArgs {
     /// Skip the GPU backend.
     #[arg(long)]
     no_gpu: bool,
+    /// Instead: CPU time of spreadlet and dense splatting against image size (--sizes,
+    /// default 256,512,1024,2048) and against PSF size (--coc-radii), thin-lens database.
+    #[arg(long)]
+    scaling: bool,
+    /// CoC radii of the --scaling PSF-size sweep, px.
+    #[arg(long, default_value = "2,4,8,16,32,64", value_delimiter = ',')]
+    coc_radii: Vec<f32>,
+    /// Largest size the dense splat is timed at in the --scaling size sweep, px.
+    #[arg(long, default_value_t = 1024)]
+    dense_max_size: u32,
 }
 
 #[derive(Args, Debug)]
@@ -73,6 +130,16 @@ struct ReconstructArgs {
     /// with --frames.
     #[arg(long)]
     input: PathBuf,
+    /// Method: spreadlet, or a peer reconstruction method for comparison, on the same
+    /// samples and camera (shirley, shirley4, shirley-layered, vaidyanathan, munkberg,
+    /// munkberg44; docs/PEERS.md).
+    #[arg(long, default_value = "spreadlet")]
+    method: String,
+    /// Run a peer method even when it does not reproduce an effect of the input
+    /// (vaidyanathan and shirley-layered on moving samples ignore the motion blur); without
+    /// it that is an error.
+    #[arg(long)]
+    allow_unhandled_effects: bool,
     /// Frame range A-B of a sequence (# in the paths is replaced by the frame number).
     #[arg(long)]
     frames: Option<String>,
@@ -98,6 +165,10 @@ struct ReconstructArgs {
     /// visible around HDR highlights).
     #[arg(long, value_enum, default_value_t = Integrator::Exact)]
     integrate: Integrator,
+    /// Device for splatting, integration and compositing (`auto`: a hardware GPU when there is
+    /// one, else the CPU).
+    #[arg(long, value_enum, default_value_t = Backend::Auto)]
+    backend: Backend,
     /// Write an sRGB PNG preview.
     #[arg(long)]
     preview: Option<PathBuf>,
@@ -181,8 +252,10 @@ struct SynthArgs {
     /// sequence, a run of # stands for the frame number (frames/####.exr with --frames).
     #[arg(long)]
     input: PathBuf,
-    /// Method: spreadlet, or a peer method for comparison (mcguire, guertin: motion blur from
-    /// the G-buffer, no defocus; docs/PEERS.md).
+    /// Method: spreadlet; the baselines dense (every pre-filtered PSF drawn whole, no
+    /// Laplacian) and filter (gathering with the same PSFs, CPU; docs/STUDY.md); or a peer
+    /// method for comparison (mcguire, guertin: motion blur from the G-buffer, no defocus;
+    /// docs/PEERS.md).
     #[arg(long, default_value = "spreadlet")]
     method: String,
     /// Frame range A-B of a sequence: # in --input, --out, --camera, --preview and --stats is
@@ -280,6 +353,7 @@ fn main() {
         Command::Demo(args) => run_demo(args),
         #[cfg(feature = "gpu")]
         Command::Bench(args) => run_bench(args),
+        Command::Study(args) => run_study(args),
     };
     if let Err(e) = result {
         eprintln!("error: {e:#}");
@@ -508,7 +582,7 @@ fn synth_frame(args: &SynthArgs, job: &FrameJob, state: &mut SequenceState) -> R
         bail!("--layers must be between 1 and 64, got {}", args.layers);
     }
 
-    if args.method != "spreadlet" {
+    if !runtime::baseline::METHODS.contains(&args.method.as_str()) {
         let t = Instant::now();
         let image = runtime::peer::synthesize_peer(&args.method, &gbuffer, &camera)?;
         let ms = t.elapsed().as_secs_f64() * 1e3;
@@ -558,10 +632,23 @@ fn synth_frame(args: &SynthArgs, job: &FrameJob, state: &mut SequenceState) -> R
         let set = match (needed_model, &args.db) {
             (None, _) => DbSet::none(),
             (Some(needed), Some(path)) => {
-                let db = dbcache::explicit_database(path, needed)?;
+                let mut db = dbcache::explicit_database(path, needed)?;
                 db_sources.push(serde_json::json!({
                     "model": db.model().name(), "path": path, "built_now": false,
                 }));
+                if args.method == "dense" && runtime::baseline::sparse_psf_count(&db) > 0 {
+                    // Issue #6 baseline: a given database that stores PSFs sparse has no
+                    // pre-filtered images of them; integrate their spreadlets instead.
+                    let (dense, n) = runtime::baseline::densify(&db)?;
+                    if !args.quiet {
+                        eprintln!(
+                            "--method dense: {n} PSFs of {} are stored sparse; drawing their \
+                             integrated spreadlets (not the pre-filtered PSFs)",
+                            path.display()
+                        );
+                    }
+                    db = dense;
+                }
                 DbSet::single(prepare(db)?)?
             }
             (Some(needed), None) => {
@@ -573,7 +660,11 @@ fn synth_frame(args: &SynthArgs, job: &FrameJob, state: &mut SequenceState) -> R
                 }
                 let mut loaded = Vec::new();
                 for model in models {
-                    let cfg = dbcache::build_config(model, profile, camera.aperture_blades);
+                    let mut cfg = dbcache::build_config(model, profile, camera.aperture_blades);
+                    if args.method == "dense" {
+                        // Issue #6 baseline: the same PSFs, every one stored dense.
+                        cfg = runtime::baseline::dense_build_config(&cfg);
+                    }
                     let (db, source) =
                         dbcache::cached_database(&cfg, &dbcache::cache_dir(), !args.quiet)?;
                     db_sources.push(serde_json::json!({
@@ -610,9 +701,49 @@ fn synth_frame(args: &SynthArgs, job: &FrameJob, state: &mut SequenceState) -> R
             renormalize_coverage: !args.no_coverage_renormalization,
         },
     };
+    if args.method == "filter" {
+        // Issue #6 baseline: gathering with the same PSFs (CPU).
+        if args.backend == Backend::Gpu {
+            bail!("--method filter runs on the CPU only (no GPU version yet)");
+        }
+        let kernels = match &dbs.combined {
+            Some(db) => runtime::baseline::DenseKernels::from_db(db),
+            None => runtime::baseline::DenseKernels::default(),
+        };
+        let filter_options = runtime::baseline::FilterOptions {
+            rotation: args.rotation,
+            ..Default::default()
+        };
+        let (image, fstats) =
+            runtime::baseline::filter(&gbuffer, &camera, &dbs, &kernels, &filter_options)?;
+        image.write_exr(&job.out)?;
+        if let Some(p) = &job.preview {
+            image.write_preview_png(p)?;
+        }
+        if !args.quiet {
+            eprintln!(
+                "{}: filter baseline, {} pixels filtered ({} kernels integrated from \
+                 spreadlets), {} copied, in {:.0} ms on the cpu",
+                job.out.display(),
+                fstats.filtered,
+                kernels.integrated,
+                fstats.copied,
+                fstats.total_ms
+            );
+        }
+        if let Some(p) = &job.stats {
+            let json = serde_json::json!({
+                "input": job.input, "output": job.out, "method": "filter", "backend": "cpu",
+                "databases": db_sources, "filter": fstats,
+                "kernels_integrated_from_spreadlets": kernels.integrated,
+            });
+            write_json(p, &json)?;
+        }
+        return Ok(());
+    }
     let (backend, image, stats, gpu_stages) = run_backend(
         args.backend,
-        &gbuffer,
+        Work::Synthesis(&gbuffer),
         &camera,
         &dbs,
         &options,
@@ -673,12 +804,19 @@ fn synth_frame(args: &SynthArgs, job: &FrameJob, state: &mut SequenceState) -> R
     Ok(())
 }
 
-/// Runs synthesis on the chosen device. `auto` takes a hardware GPU when there is one and the
+/// What [`run_backend`] runs: synthesis from a G-buffer or reconstruction from stochastic frames.
+#[derive(Clone, Copy)]
+enum Work<'a> {
+    Synthesis(&'a GBuffer),
+    Reconstruction(&'a scene::StochasticFrames),
+}
+
+/// Runs synthesis or reconstruction on the chosen device. `auto` takes a hardware GPU when there is one and the
 /// CPU otherwise (a software adapter such as lavapipe is slower than the CPU path, so `auto`
 /// does not pick it; `--backend gpu` does).
 fn run_backend(
     backend: Backend,
-    gbuffer: &GBuffer,
+    work: Work,
     camera: &Camera,
     dbs: &DbSet,
     options: &SynthOptions,
@@ -725,7 +863,12 @@ fn run_backend(
             }
         }
         if let Some((_, gpu)) = state.gpu.as_mut() {
-            let (image, stats, stages) = synthesize_gpu(gpu, gbuffer, camera, dbs, options)?;
+            let (image, stats, stages) = match work {
+                Work::Synthesis(gbuffer) => synthesize_gpu(gpu, gbuffer, camera, dbs, options)?,
+                Work::Reconstruction(frames) => {
+                    runtime::gpu::reconstruct_gpu(gpu, frames, camera, dbs, options)?
+                }
+            };
             let name = state.device.clone().unwrap_or_default();
             return Ok((name, image, stats, Some(serde_json::to_value(stages)?)));
         }
@@ -736,7 +879,12 @@ fn run_backend(
     if backend == Backend::Gpu {
         bail!("--backend gpu: this build has no GPU support (feature `gpu`)");
     }
-    let (image, stats) = synthesize(gbuffer, camera, dbs, options)?;
+    let (image, stats) = match work {
+        Work::Synthesis(gbuffer) => synthesize(gbuffer, camera, dbs, options)?,
+        Work::Reconstruction(frames) => {
+            runtime::reconstruct::reconstruct(frames, camera, dbs, options)?
+        }
+    };
     Ok(("cpu".to_string(), image, stats, None))
 }
 
@@ -802,6 +950,7 @@ fn run_reconstruct(args: ReconstructArgs) -> Result<()> {
         bail!("--layers must be between 1 and 64, got {}", args.layers);
     }
     let profile: precompute::Profile = args.db_profile.parse()?;
+    runtime::peer::check_reconstruct_method(&args.method)?;
     let jobs = frame_jobs(&FramePaths {
         input: &args.input,
         out: &args.out,
@@ -813,15 +962,26 @@ fn run_reconstruct(args: ReconstructArgs) -> Result<()> {
     })?;
     // The databases of the previous frame, kept while the effects stay the same.
     let mut loaded: Option<(runtime::pipeline::Effects, u32, DbSet)> = None;
+    let mut state = SequenceState::default();
     for job in &jobs {
         let camera = load_camera(job.camera.as_deref(), &args.camera_flags)?;
         let frames = scene::StochasticFrames::read_exr(&job.input)
             .with_context(|| format!("reading stochastic frames {}", job.input.display()))?;
+        if args.method != "spreadlet" {
+            reconstruct_frame_peer(&args, job, &frames, &camera)?;
+            continue;
+        }
         let effects = runtime::reconstruct::effects_of(&camera, &frames);
         let key = (effects, camera.aperture_blades);
         let dbs = match loaded.take() {
             Some((e, b, dbs)) if (e, b) == key => dbs,
-            _ => runtime::demo::cached_dbs(effects, profile, camera.aperture_blades, !args.quiet)?,
+            _ => {
+                #[cfg(feature = "gpu")]
+                {
+                    state.gpu = None; // a new database: upload it again
+                }
+                runtime::demo::cached_dbs(effects, profile, camera.aperture_blades, !args.quiet)?
+            }
         };
         let options = SynthOptions {
             classify: ClassifyOptions {
@@ -832,14 +992,22 @@ fn run_reconstruct(args: ReconstructArgs) -> Result<()> {
             integrator: args.integrate,
             ..SynthOptions::default()
         };
-        let (image, stats) = runtime::reconstruct::reconstruct(&frames, &camera, &dbs, &options)?;
+        let (device, image, stats, gpu_stages) = run_backend(
+            args.backend,
+            Work::Reconstruction(&frames),
+            &camera,
+            &dbs,
+            &options,
+            args.quiet,
+            &mut state,
+        )?;
         image.write_exr(&job.out)?;
         if let Some(p) = &job.preview {
             image.write_preview_png(p)?;
         }
         if !args.quiet {
             eprintln!(
-                "{}: {}x{} from {} spp: {} sparse, {} dense, {} copied, {} dropped; {:.0} ms",
+                "{}: {}x{} from {} spp: {} sparse, {} dense, {} copied, {} dropped; {:.0} ms on the {device}",
                 job.out.display(),
                 stats.width,
                 stats.height,
@@ -853,12 +1021,99 @@ fn run_reconstruct(args: ReconstructArgs) -> Result<()> {
         }
         if let Some(p) = &job.stats {
             let json = serde_json::json!({
-                "input": job.input, "output": job.out, "spp": frames.spp, "reconstruction": stats,
+                "input": job.input, "output": job.out, "spp": frames.spp, "backend": device,
+                "reconstruction": stats, "gpu_stages_ms": gpu_stages,
             });
             write_json(p, &json)?;
         }
         loaded = Some((key.0, key.1, dbs));
     }
+    Ok(())
+}
+
+/// One frame of `reconstruct --method PEER` (runtime::peer::reconstruct_peer).
+fn reconstruct_frame_peer(
+    args: &ReconstructArgs,
+    job: &FrameJob,
+    frames: &scene::StochasticFrames,
+    camera: &Camera,
+) -> Result<()> {
+    let run = runtime::peer::reconstruct_peer(
+        &args.method,
+        frames,
+        camera,
+        args.allow_unhandled_effects,
+    )?;
+    run.image.write_exr(&job.out)?;
+    if let Some(p) = &job.preview {
+        run.image.write_preview_png(p)?;
+    }
+    if !args.quiet {
+        let ignored = if run.ignored.is_empty() {
+            String::new()
+        } else {
+            format!(" (warning: ignored {})", run.ignored.join(", "))
+        };
+        eprintln!(
+            "{}: {} from {} spp in {:.0} ms{ignored}",
+            job.out.display(),
+            args.method,
+            frames.spp,
+            run.ms
+        );
+    }
+    if let Some(p) = &job.stats {
+        let json = serde_json::json!({
+            "input": job.input, "output": job.out, "method": args.method, "spp": frames.spp,
+            "ms": run.ms, "ignored_effects": run.ignored,
+        });
+        write_json(p, &json)?;
+    }
+    Ok(())
+}
+
+fn run_study(args: StudyArgs) -> Result<()> {
+    if args.peers {
+        return runtime::peer_study::run(&runtime::peer_study::PeerStudyOptions {
+            out_dir: args.out,
+            full: args.full,
+            db_profile: args.db_profile,
+            quiet: args.quiet,
+        });
+    }
+    let input = match (args.input, args.camera, args.reference) {
+        (Some(gbuffer), Some(camera), Some(reference)) => Some(runtime::study::StudyInput {
+            gbuffer,
+            camera,
+            reference,
+        }),
+        (None, None, None) => None,
+        _ => bail!("--input, --camera and --reference go together"),
+    };
+    if args.runs == 0 || args.runs > 100 {
+        bail!("--runs must be between 1 and 100, got {}", args.runs);
+    }
+    let options = runtime::study::StudyOptions {
+        out_dir: args.out.clone(),
+        scene: args.scene,
+        size: args.size,
+        input,
+        full: args.full,
+        tiny: false,
+        profile: args.db_profile.parse()?,
+        runs: args.runs,
+        reference_spp: args.reference_spp,
+        gpu: !args.no_gpu,
+        quiet: args.quiet,
+    };
+    let rows = runtime::study::run(&options)?;
+    let f = runtime::study::findings(&rows);
+    println!("{}", serde_json::to_string_pretty(&f)?);
+    println!(
+        "wrote {} rows to {} (study.csv, study.md, study.png, study.json)",
+        rows.len(),
+        args.out.display()
+    );
     Ok(())
 }
 
@@ -885,6 +1140,37 @@ fn run_demo(args: DemoArgs) -> Result<()> {
 #[cfg(feature = "gpu")]
 fn run_bench(args: BenchArgs) -> Result<()> {
     let profile: precompute::Profile = args.db_profile.parse()?;
+    if args.scaling {
+        let cfg = dbcache::build_config(psf_db::PsfModel::ThinLens, profile, 0);
+        let load = |cfg: &precompute::BuildConfig| -> Result<psf_db::PsfDatabase> {
+            let (db, _) = dbcache::cached_database(cfg, &dbcache::cache_dir(), true)?;
+            Ok(runtime::condition::condition(&db)?.0)
+        };
+        let sparse = load(&cfg)?;
+        let dense = load(&runtime::baseline::dense_build_config(&cfg))?;
+        let sizes = if args.sizes == [512, 1024] {
+            vec![256, 512, 1024, 2048]
+        } else {
+            args.sizes.clone()
+        };
+        let config = runtime::bench::ScalingConfig {
+            sizes,
+            coc_radii: args.coc_radii.clone(),
+            dense_max_size: args.dense_max_size,
+            runs: args.runs.max(1),
+            ..Default::default()
+        };
+        let rows = runtime::bench::run_scaling(&sparse, &dense, &config, true)?;
+        let database = format!(
+            "thin-lens {} ({} PSFs, {} spreadlets, max extent {} px)",
+            profile,
+            sparse.psf_count(),
+            sparse.spreadlet_count(),
+            sparse.max_extent_px()
+        );
+        println!("{}", runtime::bench::scaling_markdown(&rows, &database));
+        return Ok(());
+    }
     let cfg = dbcache::build_config(psf_db::PsfModel::LensMotion, profile, 0);
     let (db, _) = dbcache::cached_database(&cfg, &dbcache::cache_dir(), true)?;
     let config = runtime::bench::BenchConfig {

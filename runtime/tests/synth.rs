@@ -429,3 +429,57 @@ fn compositing_a_single_opaque_layer_of_copies_is_the_identity() {
     let out = composite(&layers, &CompositeOptions::default());
     assert_eq!(out.pixels, color);
 }
+
+/// An HDR highlight (1e4) on a dim background (1e-3), both defocused: drawn with its PSF's
+/// dense twin, the highlight leaves the dim side non-negative and within 50% of its level
+/// (the background's own spreadlets err by far less); drawn with spreadlets
+/// (`hdr_dense_threshold` infinite), their small relative error times 1e4 swamps the dim side,
+/// which this test also checks, so that the twin path is shown to be what keeps it clean.
+#[test]
+fn hdr_highlight_keeps_the_dim_side_clean() {
+    let (w, h) = (64usize, 64usize);
+    let cam = camera(w as u32, h as u32, true, 0.0);
+    let depth = depth_for_coc(&cam, 6.0) as f32;
+    let dim = 1e-3f32;
+    let mut color = vec![[dim, dim, dim, 1.0]; w * h];
+    color[32 * w + 32] = [1e4, 1e4, 1e4, 1.0];
+    let g = GBuffer::from_planes(w, h, color, Some(vec![depth; w * h]), None).expect("gbuffer");
+    let dbs = set(test_db(PsfModel::ThinLens));
+    let run = |threshold: f32| {
+        let mut opts = plain_options(Integrator::Exact);
+        opts.classify.hdr_dense_threshold = threshold;
+        let (img, stats) = synthesize(&g, &cam, &dbs, &opts).expect("synthesis");
+        // The dim side: pixels at least 16 px from the highlight, 8 px from the border.
+        let mut lo = f32::INFINITY;
+        for y in 8..h - 8 {
+            for x in 8..w - 8 {
+                let (dx, dy) = (x as f32 - 32.0, y as f32 - 32.0);
+                if dx * dx + dy * dy >= 16.0 * 16.0 {
+                    lo = lo.min(img.get(x, y)[0]);
+                }
+            }
+        }
+        let mut hi = 0.0f32;
+        for y in 8..h - 8 {
+            for x in 8..w - 8 {
+                let (dx, dy) = (x as f32 - 32.0, y as f32 - 32.0);
+                if dx * dx + dy * dy >= 16.0 * 16.0 {
+                    hi = hi.max(img.get(x, y)[0]);
+                }
+            }
+        }
+        (lo, hi, stats.counts.hdr_dense)
+    };
+    let (lo, hi, twins) = run(ClassifyOptions::default().hdr_dense_threshold);
+    assert_eq!(twins, 1, "the highlight takes its dense twin");
+    assert!(
+        lo >= 0.5 * dim && hi <= 1.5 * dim,
+        "dim side with the twin: [{lo}, {hi}] around {dim}"
+    );
+    let (lo_sparse, hi_sparse, none) = run(f32::INFINITY);
+    assert_eq!(none, 0);
+    assert!(
+        lo_sparse < 0.5 * dim || hi_sparse > 1.5 * dim,
+        "spreadlets alone would keep the dim side clean too: [{lo_sparse}, {hi_sparse}]"
+    );
+}

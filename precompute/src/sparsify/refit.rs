@@ -2,13 +2,25 @@
 //! `min_v || A v - f ||_2`, where `A` integrates spreadlets ([`Operator`]) and `f` is the PSF.
 //! Solved per channel by CGLS (conjugate gradients on the normal equations), warm-started
 //! from the collapsed values, with two FFTs per operator application.
+//!
+//! With `zero_sum`, every step is projected onto values that keep each channel's sum (zero for
+//! a collapsed Laplacian: the light of a compact PSF): the spreadlets then stay the Laplacian
+//! of a compact image, which the optimiser's torus and the exact integrator reconstruct alike
+//! (a non-zero sum leaves a far-reaching logarithmic tail that depends on the padding).
 
 use super::collapse::Spreadlets;
 use super::green::{Operator, Torus};
 use super::target::Target;
 
-/// Re-fits the values of `s` with `iterations` CGLS steps per channel.
-pub fn refit(t: &Target, torus: &Torus, s: &Spreadlets, iterations: u32) -> Spreadlets {
+/// Re-fits the values of `s` with `iterations` CGLS steps per channel; `zero_sum` keeps each
+/// channel's sum of values.
+pub fn refit(
+    t: &Target,
+    torus: &Torus,
+    s: &Spreadlets,
+    iterations: u32,
+    zero_sum: bool,
+) -> Spreadlets {
     let ch = s.channels;
     let n = s.len();
     if n == 0 {
@@ -24,7 +36,14 @@ pub fn refit(t: &Target, torus: &Torus, s: &Spreadlets, iterations: u32) -> Spre
             .zip(&av)
             .map(|(&f, &a)| f64::from(f) - a)
             .collect();
+        let project = |g: &mut Vec<f64>| {
+            if zero_sum {
+                let mean = g.iter().sum::<f64>() / g.len() as f64;
+                g.iter_mut().for_each(|x| *x -= mean);
+            }
+        };
         let mut g = op.adjoint(&r);
+        project(&mut g);
         let mut p = g.clone();
         let mut gamma: f64 = g.iter().map(|x| x * x).sum();
         let gamma0 = gamma;
@@ -45,6 +64,7 @@ pub fn refit(t: &Target, torus: &Torus, s: &Spreadlets, iterations: u32) -> Spre
                 *ri -= alpha * qi;
             }
             g = op.adjoint(&r);
+            project(&mut g);
             let gamma_new: f64 = g.iter().map(|x| x * x).sum();
             let beta = gamma_new / gamma;
             for (pi, gi) in p.iter_mut().zip(&g) {

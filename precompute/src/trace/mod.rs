@@ -47,6 +47,11 @@ pub trait LightTracer: Sync {
     /// Traces one ray for parameters `s` (physical units) and uniform numbers `u`
     /// (`u.len() == ray_dims()`); `None` when the ray is blocked.
     fn trace(&self, s: [f64; 2], u: &[f64]) -> Option<Hit>;
+    /// Length, pixels, of a uniform sweep along +x that each hit stands for (centred on the
+    /// hit), integrated exactly by [`trace_psf`] instead of sampled; 0 (the default): a point.
+    fn sweep_px(&self, _s: [f64; 2]) -> f64 {
+        0.0
+    }
 }
 
 /// What tracing one PSF gave besides the image.
@@ -111,6 +116,9 @@ pub fn trace_psf(
     };
     let (cx, cy) = (image.centre[0] as f64, image.centre[1] as f64);
     let (w, h) = (image.width as f64, image.height as f64);
+    // Per channel, `width + 1` marks per row: +density where a sweep's interior starts, -density
+    // where it ends (allocated at the first sweep).
+    let mut ramps: Option<Vec<Vec<f64>>> = None;
     for i in 0..rays {
         seq.sample(i, &mut u);
         let s = params.sample(&u[..pd]);
@@ -118,8 +126,17 @@ pub fn trace_psf(
             stats.blocked += 1;
             continue;
         };
-        let px = (cx + hit.offset[0] + 0.5).floor();
+        let sweep = tracer.sweep_px(s);
+        let x = cx + hit.offset[0] + 0.5;
         let py = (cy + hit.offset[1] + 0.5).floor();
+        if sweep > 0.0 && py >= 0.0 && py < h {
+            let row = py as usize;
+            if !deposit_segment(&mut acc, &mut ramps, image.width, row, x, sweep, &hit.weight) {
+                stats.outside += 1;
+            }
+            continue;
+        }
+        let px = x.floor();
         if !(px >= 0.0 && py >= 0.0 && px < w && py < h) {
             stats.outside += 1;
             continue;
@@ -127,6 +144,19 @@ pub fn trace_psf(
         let k = py as usize * image.width + px as usize;
         for (c, plane) in acc.iter_mut().enumerate() {
             plane[k] += hit.weight[c];
+        }
+    }
+    // The interiors of the swept segments: a running sum of their start and end marks.
+    if let Some(ramps) = &ramps {
+        let wd = image.width;
+        for (plane, marks) in acc.iter_mut().zip(ramps) {
+            for y in 0..image.height {
+                let mut run = 0.0;
+                for x in 0..wd {
+                    run += marks[y * (wd + 1) + x];
+                    plane[y * wd + x] += run;
+                }
+            }
         }
     }
     for (c, plane) in acc.iter().enumerate() {
@@ -139,6 +169,52 @@ pub fn trace_psf(
         }
     }
     Ok((image, stats))
+}
+
+/// Adds a uniform segment of light along row `row`: `[x - len/2, x + len/2]` in coordinates where
+/// pixel `k` covers `[k, k + 1)`, carrying `weight` per channel in all. The two end pixels get
+/// their exact covered fraction directly; the pixels in between through `ramps` (start and end
+/// marks, summed later), so a sweep costs O(1) whatever its length. Returns false when part of
+/// the segment fell outside the image (that part is dropped).
+fn deposit_segment(
+    acc: &mut [Vec<f64>],
+    ramps: &mut Option<Vec<Vec<f64>>>,
+    width: usize,
+    row: usize,
+    x: f64,
+    len: f64,
+    weight: &[f64; 3],
+) -> bool {
+    let (a, b) = (x - 0.5 * len, x + 0.5 * len);
+    let wd = width as f64;
+    let inside = a >= 0.0 && b <= wd;
+    let (a, b) = (a.max(0.0), b.min(wd));
+    if !(b > a) {
+        return false;
+    }
+    let (ka, kb) = (a.floor() as usize, (b.floor() as usize).min(width - 1));
+    let base = row * width;
+    let channels = acc.len();
+    let height = acc.first().map_or(0, |p| p.len() / width.max(1));
+    if ka >= kb {
+        for (c, plane) in acc.iter_mut().enumerate() {
+            plane[base + ka] += weight[c] * (b - a) / len;
+        }
+        return inside;
+    }
+    let (fa, fb) = ((ka + 1) as f64 - a, b - kb as f64);
+    for (c, plane) in acc.iter_mut().enumerate() {
+        let d = weight[c] / len;
+        plane[base + ka] += d * fa;
+        plane[base + kb] += d * fb;
+        if kb > ka + 1 {
+            let m = &mut ramps.get_or_insert_with(|| vec![vec![0.0; (width + 1) * height]; channels])[c];
+            let mrow = row * (width + 1);
+            m[mrow + ka + 1] += d;
+            m[mrow + kb] -= d;
+        }
+    }
+    inside
 }
 
 /// A black image covering `bounds` plus [`BORDER_PX`] on each side.

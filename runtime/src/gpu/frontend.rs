@@ -52,6 +52,36 @@ pub fn synthesize_gpu(
     Ok((image, stats, gpu_times))
 }
 
+/// Reconstructs like [`crate::reconstruct::reconstruct`] from stochastic frames, with the
+/// stages after classification on the GPU (the same records as the CPU path), then the same
+/// density normalisation on the CPU.
+pub fn reconstruct_gpu(
+    gpu: &mut GpuSynthesizer,
+    frames: &scene::StochasticFrames,
+    camera: &Camera,
+    dbs: &DbSet,
+    options: &SynthOptions,
+) -> Result<(RgbaImage, SynthStats, StageTimes), GpuError> {
+    gpu.check_database(dbs.combined.as_ref())?;
+    let total = Instant::now();
+    let (classified, mut stats) = crate::reconstruct::prepare(
+        frames,
+        camera,
+        dbs,
+        options,
+        crate::reconstruct::SamplePlacement::default(),
+    )
+    .map_err(|e| GpuError::Input(e.to_string()))?;
+    let (mut image, gpu_times) =
+        gpu.run(&classified.frame, &classified.records, options.integrator)?;
+    crate::reconstruct::normalize_density(&mut image);
+    stats.times.splat_ms = gpu_times.splat_ms;
+    stats.times.integrate_ms = gpu_times.integrate_ms;
+    stats.times.composite_ms = gpu_times.composite_ms;
+    stats.times.total_ms = total.elapsed().as_secs_f64() * 1e3;
+    Ok((image, stats, gpu_times))
+}
+
 impl GpuSynthesizer {
     /// A synthesizer for `db` (`None`: copies only), the usual entry point of the binary
     /// (pass `DbSet::combined`).

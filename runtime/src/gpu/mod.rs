@@ -17,7 +17,7 @@ mod util;
 
 pub use context::{GpuContext, REQUIRE_GPU_ENV};
 pub use error::GpuError;
-pub use frontend::synthesize_gpu;
+pub use frontend::{reconstruct_gpu, synthesize_gpu};
 pub use pyramid::{GpuPyramid, PyramidLevels};
 pub use shaders::shader_sources_for_validation;
 pub use synth::{

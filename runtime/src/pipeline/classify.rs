@@ -21,7 +21,7 @@ use psf_db::{PsfDatabase, PsfModel};
 
 use super::types::{FrameParams, SplatPath, SplatRecord};
 use crate::camera::Camera;
-use crate::dbset::DbSet;
+use crate::dbset::{DbSet, NO_TWIN};
 use crate::gbuffer::GBuffer;
 
 /// Errors of classification.
@@ -86,6 +86,11 @@ pub struct ClassifyOptions {
     /// reconstruction the footprint that spreads sparse samples over the pixels between them
     /// (a reconstruction filter), which the PSF lookup then also pre-filters.
     pub min_coc_px: f32,
+    /// A fragment whose weighted colour exceeds this in any of R, G, B (linear, premultiplied)
+    /// is drawn with its PSF's dense twin ([`DbSet::hdr_twins`]) instead of spreadlets, where
+    /// one exists: the spreadlets' small relative error would be scaled by the highlight.
+    /// `f32::INFINITY` never does.
+    pub hdr_dense_threshold: f32,
 }
 
 impl Default for ClassifyOptions {
@@ -97,6 +102,7 @@ impl Default for ClassifyOptions {
             copy_threshold_px: 0.5,
             pad_margin: 2,
             min_coc_px: 0.0,
+            hdr_dense_threshold: 2.0,
         }
     }
 }
@@ -150,6 +156,8 @@ pub struct PathCounts {
     pub edge_split: usize,
     /// Pixels split into two layers by soft layering.
     pub soft_split: usize,
+    /// Fragments drawn with a dense twin because they are very bright (also in `dense`).
+    pub hdr_dense: usize,
 }
 
 impl PathCounts {
@@ -464,6 +472,20 @@ pub fn classify_fragments(
             _ => (SplatPath::Copy, 0, false),
         };
         counts.clamped += usize::from(clamped);
+        let bright = color[..3]
+            .iter()
+            .any(|&c| c * frag.weight > options.hdr_dense_threshold);
+        let twin = dbs
+            .hdr_twins
+            .get(psf_index as usize)
+            .copied()
+            .unwrap_or(NO_TWIN);
+        let (path, psf_index) = if path == SplatPath::Sparse && bright && twin != NO_TWIN {
+            counts.hdr_dense += 1;
+            (SplatPath::Dense, twin)
+        } else {
+            (path, psf_index)
+        };
 
         // Layer weights: hard, or blended near the boundary between two layer centres.
         let u = layer_coord(frag.parallax);

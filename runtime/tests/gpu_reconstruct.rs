@@ -1,0 +1,66 @@
+//! Reconstruction on the GPU (`runtime::gpu::reconstruct_gpu`) matches the CPU path
+//! (`runtime::reconstruct::reconstruct`) on a small built-in scene with defocus and motion:
+//! the same records, SSIM >= 0.999 and a bounded largest difference.
+#![cfg(feature = "gpu")]
+
+mod gpu_support;
+
+use gpu_support::{context, max_diff};
+use psf_db::PsfModel;
+use runtime::camera::Camera;
+use runtime::dbset::DbSet;
+use runtime::gpu::{reconstruct_gpu, GpuSynthOptions, GpuSynthesizer};
+use runtime::reconstruct::reconstruct;
+use runtime::synth::SynthOptions;
+
+/// Frame edge, px (small: lavapipe in CI).
+const SIZE: u32 = 96;
+/// Largest difference allowed, relative to the image's largest value (atomic adds in another
+/// order than the CPU's).
+const MAX_REL_DIFF: f32 = 1e-4;
+
+#[test]
+fn gpu_reconstruction_matches_cpu() {
+    let Some(ctx) = context() else { return };
+    let scene = scene::builtin("crossing")
+        .and_then(|s| s.with_size(SIZE, SIZE))
+        .expect("scene");
+    let camera = Camera::from_json_str(&scene.camera_json()).expect("camera");
+    let render = scene::RenderOptions {
+        seed: 3,
+        progress: false,
+        ..Default::default()
+    };
+    let frames = scene::render_stochastic(&scene, 2, &render).expect("frames");
+    let db = |m| {
+        precompute::build_database(
+            &precompute::BuildConfig::new(m, precompute::Profile::Test),
+            false,
+        )
+        .expect("test database")
+        .0
+    };
+    let dbs = DbSet::new(Some(db(PsfModel::ThinLens)), Some(db(PsfModel::LensMotion)))
+        .expect("db set");
+    let options = SynthOptions::default();
+    let (cpu, cpu_stats) = reconstruct(&frames, &camera, &dbs, &options).expect("CPU");
+    let mut gpu = GpuSynthesizer::for_database(
+        ctx,
+        dbs.combined.as_ref(),
+        GpuSynthOptions::from_synth(&options),
+    )
+    .expect("GPU synthesizer");
+    let (img, stats, _) =
+        reconstruct_gpu(&mut gpu, &frames, &camera, &dbs, &options).expect("GPU reconstruction");
+    assert_eq!(stats.counts, cpu_stats.counts);
+    assert!(stats.defocus && stats.motion, "the scene calls for both effects");
+    assert!(stats.counts.sparse + stats.counts.dense > 0, "nothing splatted");
+    let a: Vec<f32> = img.pixels.iter().flatten().copied().collect();
+    let b: Vec<f32> = cpu.pixels.iter().flatten().copied().collect();
+    let n = SIZE as usize;
+    let ssim = metrics::ssim_rgb(&a, &b, n, n).expect("ssim");
+    let (d, m) = max_diff(&a, &b);
+    eprintln!("reconstruction GPU vs CPU: SSIM {ssim:.6}, max diff {d:.2e} (max {m:.2})");
+    assert!(ssim >= 0.999, "SSIM {ssim}");
+    assert!(d <= MAX_REL_DIFF * m.max(1.0), "max difference {d} (max {m})");
+}
