@@ -59,7 +59,11 @@ impl BuildPlan {
         let aperture = ApertureShape::from_blades(cfg.blades, f64::from(cfg.blade_rotation_rad));
         let mut notes = vec![("procedure".to_string(), cfg.procedure.name().to_string())];
         if cfg.model == PsfModel::LensMotion {
-            let shutter = if cfg.analytic_shutter { "analytic" } else { "sampled" };
+            let shutter = if cfg.analytic_shutter {
+                "analytic"
+            } else {
+                "sampled"
+            };
             notes.push(("shutter".to_string(), shutter.to_string()));
         }
         let (space, tracer, lens): (ParamSpace, Box<dyn LightTracer>, _) = match cfg.model {
@@ -160,6 +164,7 @@ impl BuildPlan {
         SparsifyOptions {
             budget: f64::from(self.config.spreadlet_budget),
             procedure: self.config.procedure,
+            refit_iterations: self.config.refit_iterations,
             ..SparsifyOptions::default()
         }
     }
@@ -182,7 +187,8 @@ impl BuildPlan {
                 // Hill-climb the density ladder from the configured budget on
                 // `similarity - lambda * sparsity` (unimodal in practice).
                 let score = |c: &Candidate| {
-                    c.similarity - f64::from(lambda) * c.spreadlets.len() as f64 / support.max(1) as f64
+                    c.similarity
+                        - f64::from(lambda) * c.spreadlets.len() as f64 / support.max(1) as f64
                 };
                 let mut best = self.candidate(&image, &target, &opts, index, 0);
                 let mut best_score = score(&best);

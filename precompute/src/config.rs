@@ -279,6 +279,9 @@ pub struct BuildConfig {
     /// most, the mean similarity for a mean sparsity is maximised); `None` (the paper):
     /// one run at `spreadlet_budget`.
     pub budget_tradeoff: Option<f32>,
+    /// CGLS iterations of the least-squares re-fit ([`Procedure::Refit`], `Improved`); the fit
+    /// keeps each channel's sum and light and is kept only when it lowers the squared error.
+    pub refit_iterations: u32,
     /// Also measure the ablation (darts / +Lloyd / +annealing / full) per PSF; slower.
     pub ablation: bool,
     /// Override the profile's PSF count target.
@@ -318,6 +321,7 @@ impl BuildConfig {
             procedure: Procedure::default(),
             analytic_shutter: true,
             budget_tradeoff: Some(DEFAULT_BUDGET_TRADEOFF),
+            refit_iterations: 40,
             ablation: false,
             psf_count: None,
             ranges: None,

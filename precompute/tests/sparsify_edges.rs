@@ -33,14 +33,22 @@ fn run(img: &PsfImage, procedure: Procedure, budget: f64) -> (Spreadlets, f64, f
         ..SparsifyOptions::default()
     };
     let s = sparsify(&t, &opts, &mut psf_rng(3, 0, 1)).spreadlets;
-    assert!(s.values.iter().all(|v| v.is_finite()), "{procedure:?}: {s:?}");
+    assert!(
+        s.values.iter().all(|v| v.is_finite()),
+        "{procedure:?}: {s:?}"
+    );
     for p in &s.positions {
-        assert!(p[0] >= 0 && p[1] >= 0 && (p[0] as usize) < img.width && (p[1] as usize) < img.height);
+        assert!(
+            p[0] >= 0 && p[1] >= 0 && (p[0] as usize) < img.width && (p[1] as usize) < img.height
+        );
     }
     let rec = integrate_spreadlets(&s, img.width, img.height);
     let e = l1(&rec, &img.planes);
     let sim = similarity(&rec, &img.planes, img.width, img.height);
-    assert!(e.is_finite() && sim.is_finite(), "{procedure:?}: l1 {e}, similarity {sim}");
+    assert!(
+        e.is_finite() && sim.is_finite(),
+        "{procedure:?}: l1 {e}, similarity {sim}"
+    );
     (s, e, sim)
 }
 
@@ -165,7 +173,10 @@ fn collinear_support_and_sites() {
         .collect();
     lloyd(&t, &mut sites, 50);
     for s in &sites {
-        assert!(s.pos[0] >= 2.0 && s.pos[0] <= 18.0 && (s.pos[1] - 3.0).abs() <= 1.0, "{s:?}");
+        assert!(
+            s.pos[0] >= 2.0 && s.pos[0] <= 18.0 && (s.pos[1] - 3.0).abs() <= 1.0,
+            "{s:?}"
+        );
     }
 }
 

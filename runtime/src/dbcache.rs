@@ -33,6 +33,14 @@ pub enum CacheError {
     /// Reading or writing a database failed.
     #[error(transparent)]
     Db(#[from] psf_db::DbError),
+    /// A database file given explicitly could not be read (missing, truncated, corrupt).
+    #[error("database {path}: {source}")]
+    Read {
+        /// The file.
+        path: String,
+        /// The cause.
+        source: psf_db::DbError,
+    },
     /// A database file given explicitly is of another model than the scene needs.
     #[error("database {path} is a {found} database, but this input needs {needed}")]
     WrongModel {
@@ -143,7 +151,10 @@ pub fn cached_database(
 /// Reads a database given explicitly and checks that it is of a model usable for `needed`
 /// (a lens-motion database also serves defocus alone).
 pub fn explicit_database(path: &Path, needed: PsfModel) -> Result<PsfDatabase, CacheError> {
-    let db = PsfDatabase::read(path)?;
+    let db = PsfDatabase::read(path).map_err(|source| CacheError::Read {
+        path: path.display().to_string(),
+        source,
+    })?;
     let found = db.model();
     let ok = found == needed
         || (needed == PsfModel::ThinLens && found == PsfModel::LensMotion)

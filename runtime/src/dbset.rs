@@ -56,8 +56,12 @@ impl DbSet {
         let mut hdr_twins = vec![NO_TWIN; base];
         let mut twins = Vec::new();
         let mut first = 0usize;
+        // The combined database keeps the last one's header, so its PSF bound.
+        let bound = sources
+            .last()
+            .map_or(0, |d| d.header().psf_resolution as i32);
         for db in &sources {
-            for (i, twin) in dense_twins(db).into_iter().enumerate() {
+            for (i, twin) in dense_twins(db, bound).into_iter().enumerate() {
                 if let Some(t) = twin {
                     hdr_twins[first + i] = (base + twins.len()) as u32;
                     twins.push(t);
@@ -103,8 +107,9 @@ impl DbSet {
 type DenseImage = ([i16; 2], u16, u16, Vec<f32>);
 
 /// The dense twins of `db`'s sparse PSFs (see [`DbSet::hdr_twins`]); `None` where a PSF is
-/// dense already, empty, or of a model or aperture the analytic PSF does not describe.
-fn dense_twins(db: &PsfDatabase) -> Vec<Option<DenseImage>> {
+/// dense already, empty, of a model or aperture the analytic PSF does not describe, or where
+/// the twin would reach beyond `bound` px from the centre (the database's PSF resolution).
+fn dense_twins(db: &PsfDatabase, bound: i32) -> Vec<Option<DenseImage>> {
     use rayon::prelude::*;
     let analytic = matches!(db.model(), PsfModel::ThinLens | PsfModel::LensMotion)
         && db.header().aperture.blades == 0;
@@ -120,10 +125,13 @@ fn dense_twins(db: &PsfDatabase) -> Vec<Option<DenseImage>> {
             } else {
                 (0.0, 0.0)
             };
-            Some(crate::condition::analytic_cell_psf(
-                (cell.min[0], cell.max[0]),
-                len,
-            ))
+            let twin = crate::condition::analytic_cell_psf((cell.min[0], cell.max[0]), len);
+            let (origin, w, h) = (twin.0, i32::from(twin.1), i32::from(twin.2));
+            let fits = i32::from(origin[0]) >= -bound
+                && i32::from(origin[1]) >= -bound
+                && i32::from(origin[0]) + w - 1 <= bound
+                && i32::from(origin[1]) + h - 1 <= bound;
+            fits.then_some(twin)
         })
         .collect()
 }
@@ -196,7 +204,6 @@ fn concatenate(dbs: &[&PsfDatabase], extra: &[DenseImage]) -> Result<PsfDatabase
         builder.push_sparse(&[], &[])?;
     }
     builder.finish()
-
 }
 
 #[cfg(test)]

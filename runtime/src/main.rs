@@ -661,8 +661,9 @@ fn synth_frame(args: &SynthArgs, job: &FrameJob, state: &mut SequenceState) -> R
                 let mut loaded = Vec::new();
                 for model in models {
                     let mut cfg = dbcache::build_config(model, profile, camera.aperture_blades);
-                    if args.method == "dense" {
-                        // Issue #6 baseline: the same PSFs, every one stored dense.
+                    if args.method == "dense" || args.method == "filter" {
+                        // Issue #6 baselines: the same PSFs, every one stored dense (the
+                        // pre-filtered images the filter gathers with too).
                         cfg = runtime::baseline::dense_build_config(&cfg);
                     }
                     let (db, source) =
@@ -752,54 +753,72 @@ fn synth_frame(args: &SynthArgs, job: &FrameJob, state: &mut SequenceState) -> R
     )?;
     let t = Instant::now();
     image.write_exr(&job.out)?;
-    if let Some(p) = &job.preview {
-        image.write_preview_png(p)?;
-    }
-    let write_ms = t.elapsed().as_secs_f64() * 1e3;
-    if !args.quiet {
-        eprintln!(
-            "{}x{} ({}{}): {} sparse, {} dense, {} copied, {} dropped; {} of {} layers; \
+    // Everything after the image: on failure the image is removed too, so a failed run leaves
+    // no output behind.
+    let finish = || -> Result<()> {
+        if let Some(p) = &job.preview {
+            image.write_preview_png(p)?;
+        }
+        let write_ms = t.elapsed().as_secs_f64() * 1e3;
+        if !args.quiet {
+            eprintln!(
+                "{}x{} ({}{}): {} sparse, {} dense, {} copied, {} dropped; {} of {} layers; \
              synthesis {:.0} ms (classify {:.0}, splat {:.0}, integrate {:.0}, composite {:.0}) \
              on the {backend}",
-            stats.width,
-            stats.height,
-            if effects.defocus {
-                "defocus"
-            } else {
-                "no defocus"
-            },
-            if effects.motion { " + motion" } else { "" },
-            stats.counts.sparse,
-            stats.counts.dense,
-            stats.counts.copied,
-            stats.counts.dropped,
-            stats.layers_used,
-            stats.layers,
-            stats.times.total_ms,
-            stats.times.classify_ms,
-            stats.times.splat_ms,
-            stats.times.integrate_ms,
-            stats.times.composite_ms,
-        );
+                stats.width,
+                stats.height,
+                if effects.defocus {
+                    "defocus"
+                } else {
+                    "no defocus"
+                },
+                if effects.motion { " + motion" } else { "" },
+                stats.counts.sparse,
+                stats.counts.dense,
+                stats.counts.copied,
+                stats.counts.dropped,
+                stats.layers_used,
+                stats.layers,
+                stats.times.total_ms,
+                stats.times.classify_ms,
+                stats.times.splat_ms,
+                stats.times.integrate_ms,
+                stats.times.composite_ms,
+            );
+        }
+        if let Some(p) = &job.stats {
+            let json = serde_json::json!({
+                "input": job.input,
+                "output": job.out,
+                "backend": backend,
+                "effects": { "defocus": stats.defocus, "motion": stats.motion },
+                "databases": db_sources,
+                "conditioning": condition_reports,
+                "synthesis": stats,
+                "gpu_stages_ms": gpu_stages,
+                "times_ms": {
+                    "read_input": read_ms,
+                    "database": db_ms,
+                    "write_output": write_ms,
+                    "wall": started.elapsed().as_secs_f64() * 1e3,
+                },
+            });
+            write_json(p, &json)?;
+        }
+        Ok(())
+    };
+    if let Err(e) = finish() {
+        let _ = std::fs::remove_file(&job.out);
+        if let Some(p) = &job.preview {
+            let _ = std::fs::remove_file(p);
+        }
+        return Err(e);
     }
-    if let Some(p) = &job.stats {
-        let json = serde_json::json!({
-            "input": job.input,
-            "output": job.out,
-            "backend": backend,
-            "effects": { "defocus": stats.defocus, "motion": stats.motion },
-            "databases": db_sources,
-            "conditioning": condition_reports,
-            "synthesis": stats,
-            "gpu_stages_ms": gpu_stages,
-            "times_ms": {
-                "read_input": read_ms,
-                "database": db_ms,
-                "write_output": write_ms,
-                "wall": started.elapsed().as_secs_f64() * 1e3,
-            },
-        });
-        write_json(p, &json)?;
+    if stats.counts.clamped > 0 {
+        eprintln!(
+            "warning: {} pixel(s) asked for a PSF beyond the database's range and were drawn with its largest (see --stats: counts.clamped)",
+            stats.counts.clamped
+        );
     }
     Ok(())
 }
@@ -1107,8 +1126,9 @@ fn run_study(args: StudyArgs) -> Result<()> {
         quiet: args.quiet,
     };
     let rows = runtime::study::run(&options)?;
-    let f = runtime::study::findings(&rows);
-    println!("{}", serde_json::to_string_pretty(&f)?);
+    let md = std::fs::read_to_string(args.out.join("study.md")).unwrap_or_default();
+    let findings = md.split("## All configurations").next().unwrap_or_default();
+    println!("{}", findings.trim_end());
     println!(
         "wrote {} rows to {} (study.csv, study.md, study.png, study.json)",
         rows.len(),

@@ -44,7 +44,7 @@ pub enum SamplePlacement {
     Nearest,
     /// Split over the four nearest pixel centres with bilinear weights, so the sample keeps its
     /// sub-pixel position. On the crossing scene at 1 spp this lifts SSIM from 0.956 to 0.964
-    /// (`cargo run --release -p runtime --example recon_lab`), past the 16-spp average.
+    /// (`cargo run --release -p runtime --example recon_lab crossing`), past the 16-spp average.
     #[default]
     Bilinear,
 }

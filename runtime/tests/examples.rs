@@ -65,16 +65,21 @@ fn run(scene: &str, min_ssim: f64) {
     );
     println!("{scene}: ours {ours:.4}, blender_post {theirs:.4}");
     assert!(ours >= min_ssim, "{scene}: SSIM {ours:.4} < {min_ssim}");
+    // Issue 3 also asks to beat Blender's own compositor on both examples.
+    assert!(
+        ours > theirs,
+        "{scene}: SSIM {ours:.4} does not beat blender_post {theirs:.4}"
+    );
 }
 
 #[test]
-#[ignore = "builds the quick databases on first use (about a minute)"]
+#[ignore = "builds the quick databases on first use (minutes on 2 cores)"]
 fn fence_reaches_its_ssim_target() {
     run("fence", 0.925);
 }
 
 #[test]
-#[ignore = "builds the quick databases on first use (about a minute)"]
+#[ignore = "builds the quick databases on first use (minutes on 2 cores)"]
 fn comets_reaches_its_ssim_target() {
     run("comets", 0.965);
 }

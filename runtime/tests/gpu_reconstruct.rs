@@ -40,8 +40,8 @@ fn gpu_reconstruction_matches_cpu() {
         .expect("test database")
         .0
     };
-    let dbs = DbSet::new(Some(db(PsfModel::ThinLens)), Some(db(PsfModel::LensMotion)))
-        .expect("db set");
+    let dbs =
+        DbSet::new(Some(db(PsfModel::ThinLens)), Some(db(PsfModel::LensMotion))).expect("db set");
     let options = SynthOptions::default();
     let (cpu, cpu_stats) = reconstruct(&frames, &camera, &dbs, &options).expect("CPU");
     let mut gpu = GpuSynthesizer::for_database(
@@ -53,8 +53,14 @@ fn gpu_reconstruction_matches_cpu() {
     let (img, stats, _) =
         reconstruct_gpu(&mut gpu, &frames, &camera, &dbs, &options).expect("GPU reconstruction");
     assert_eq!(stats.counts, cpu_stats.counts);
-    assert!(stats.defocus && stats.motion, "the scene calls for both effects");
-    assert!(stats.counts.sparse + stats.counts.dense > 0, "nothing splatted");
+    assert!(
+        stats.defocus && stats.motion,
+        "the scene calls for both effects"
+    );
+    assert!(
+        stats.counts.sparse + stats.counts.dense > 0,
+        "nothing splatted"
+    );
     let a: Vec<f32> = img.pixels.iter().flatten().copied().collect();
     let b: Vec<f32> = cpu.pixels.iter().flatten().copied().collect();
     let n = SIZE as usize;
@@ -62,5 +68,8 @@ fn gpu_reconstruction_matches_cpu() {
     let (d, m) = max_diff(&a, &b);
     eprintln!("reconstruction GPU vs CPU: SSIM {ssim:.6}, max diff {d:.2e} (max {m:.2})");
     assert!(ssim >= 0.999, "SSIM {ssim}");
-    assert!(d <= MAX_REL_DIFF * m.max(1.0), "max difference {d} (max {m})");
+    assert!(
+        d <= MAX_REL_DIFF * m.max(1.0),
+        "max difference {d} (max {m})"
+    );
 }

@@ -1013,3 +1013,91 @@ fn huge_declared_size_in_a_tiny_file_is_an_error_without_a_huge_allocation() {
         );
     }
 }
+
+// ---------------------------------------------------------------------------------------
+// Stable-Rust mutation loop over the fuzzers' seeds (CI has no cargo-fuzz)
+
+/// The fuzz seeds (`fuzz/seeds/<target>/`) mutated 3,000 times each (seeded: bit flips, byte
+/// sets to extreme values, truncations, duplicated ranges) through the G-buffer reader and the
+/// camera parser: errors are fine, panics are not, and whatever loads satisfies the policy.
+#[test]
+fn readers_survive_seeded_mutations_of_the_fuzz_seeds() {
+    use runtime::gbuffer::ChannelOptions;
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../fuzz/seeds");
+    let mut s = 0x9E37_79B9_7F4A_7C15u64;
+    let mut next = move || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        s
+    };
+    let mut mutate = |seed: &[u8]| -> Vec<u8> {
+        let mut b = seed.to_vec();
+        for _ in 0..1 + next() % 4 {
+            if b.is_empty() {
+                break;
+            }
+            let i = (next() % b.len() as u64) as usize;
+            match next() % 5 {
+                0 => b[i] ^= 1 << (next() % 8),
+                1 => b[i] = [0x00, 0xff, 0x7f, 0x80][(next() % 4) as usize],
+                2 => b.truncate(i),
+                3 => {
+                    let j = (i + 1 + (next() % 16) as usize).min(b.len());
+                    let chunk = b[i..j].to_vec();
+                    b.splice(i..i, chunk);
+                }
+                _ => {
+                    let j = (i + 4).min(b.len());
+                    b[i..j].fill(0xff);
+                }
+            }
+        }
+        b
+    };
+    let seeds = |sub: &str| -> Vec<Vec<u8>> {
+        let mut v: Vec<Vec<u8>> = std::fs::read_dir(root.join(sub))
+            .map(|rd| {
+                rd.filter_map(|e| e.ok())
+                    .filter_map(|e| std::fs::read(e.path()).ok())
+                    .collect()
+            })
+            .unwrap_or_default();
+        v.sort();
+        v
+    };
+    let exr = seeds("gbuffer_exr");
+    let cams = seeds("camera_json");
+    assert!(!exr.is_empty() && !cams.is_empty(), "fuzz seeds missing");
+    let (mut loaded, mut total) = (0usize, 0usize);
+    for seed in &exr {
+        for _ in 0..3000 {
+            let bytes = mutate(seed);
+            total += 1;
+            if let Ok(g) = GBuffer::read_exr_bytes(&bytes, "mutant", &ChannelOptions::default()) {
+                loaded += 1;
+                let n = g.width * g.height;
+                assert_eq!(g.color.len(), n);
+                assert!(g.color.iter().flatten().all(|v| v.is_finite()));
+                assert!(g.depth.as_ref().is_none_or(|d| d.iter().all(|&d| d > 0.0)));
+            }
+        }
+    }
+    for seed in &cams {
+        for _ in 0..3000 {
+            let bytes = mutate(seed);
+            total += 1;
+            if let Ok(c) = Camera::from_json_str(&String::from_utf8_lossy(&bytes)) {
+                loaded += 1;
+                if let Some(lens) = c.thin_lens() {
+                    assert!(lens.coc_scale_px.is_finite());
+                }
+            }
+        }
+    }
+    eprintln!("{total} mutants, {loaded} loaded");
+    assert!(
+        loaded > 0,
+        "no mutant loaded: the mutations test nothing but errors"
+    );
+}

@@ -206,6 +206,20 @@ impl Reconstruction {
         cost
     }
 
+    /// Squared L2 distance `sum_c sum_px (U_c - mean_c - psf_c)^2` to the PSF.
+    pub fn l2(&self, psf: &[Vec<f32>]) -> f64 {
+        self.image()
+            .iter()
+            .zip(psf)
+            .map(|(u, f)| {
+                u.iter()
+                    .zip(f)
+                    .map(|(&a, &b)| (f64::from(a) - f64::from(b)).powi(2))
+                    .sum::<f64>()
+            })
+            .sum()
+    }
+
     /// The reconstruction on the image, planar per channel.
     pub fn image(&self) -> Vec<Vec<f32>> {
         let t = &self.torus;

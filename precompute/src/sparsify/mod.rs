@@ -152,13 +152,9 @@ pub fn sparsify(t: &Target, opts: &SparsifyOptions, rng: &mut impl Rng) -> Spars
     lloyd(t, &mut sites, opts.lloyd_iterations);
     let c = collapse(t, round_sites(&sites, t.width, t.height));
     let (s, l1) = anneal(t, &torus, c, &opts.anneal, rng);
-    if opts.procedure == Procedure::Refit && !s.is_empty() {
-        let r = refit::refit(t, &torus, &s, opts.refit_iterations, true);
-        let l1r = reconstruct(&torus, &r).l1(&t.psf);
-        return Sparsified {
-            spreadlets: r,
-            l1: l1r,
-        };
+    if opts.procedure == Procedure::Refit {
+        let (spreadlets, l1) = constrained_refit(t, &torus, s, l1, opts.refit_iterations);
+        return Sparsified { spreadlets, l1 };
     }
     if opts.procedure == Procedure::Improved && !s.is_empty() {
         let r = refit::refit(t, &torus, &s, opts.refit_iterations, true);
@@ -171,6 +167,31 @@ pub fn sparsify(t: &Target, opts: &SparsifyOptions, rng: &mut impl Rng) -> Spars
         }
     }
     Sparsified { spreadlets: s, l1 }
+}
+
+/// The re-fit of [`Procedure::Refit`] (sum and light kept, see [`refit`]), kept when it lowers
+/// the squared error on the optimiser's integrator (with few, badly placed spreadlets, meeting
+/// the light constraint can cost more than the fit gains); returns the spreadlets and their
+/// L1 cost.
+fn constrained_refit(
+    t: &Target,
+    torus: &Torus,
+    s: Spreadlets,
+    l1: f64,
+    iterations: u32,
+) -> (Spreadlets, f64) {
+    if s.is_empty() {
+        return (s, l1);
+    }
+    let r = refit::refit(t, torus, &s, iterations, true);
+    let rec = reconstruct(torus, &r);
+    if r.values.iter().all(|v| v.is_finite()) && rec.l2(&t.psf) < reconstruct(torus, &s).l2(&t.psf)
+    {
+        let l1r = rec.l1(&t.psf);
+        (r, l1r)
+    } else {
+        (s, l1)
+    }
 }
 
 /// The ablation of the paper's procedure on `t`: L1 of darts only, darts + Lloyd,
@@ -193,12 +214,7 @@ pub fn ablation(t: &Target, opts: &SparsifyOptions, rng: &mut impl Rng) -> Ablat
     let l1_lloyd = reconstruct(&torus, &l.spreadlets).l1(&t.psf);
     let (_, l1_da) = anneal(t, &torus, d, &opts.anneal, rng);
     let (full, l1_full) = anneal(t, &torus, l, &opts.anneal, rng);
-    let l1_refit = if full.is_empty() {
-        l1_full
-    } else {
-        let r = refit::refit(t, &torus, &full, opts.refit_iterations, true);
-        reconstruct(&torus, &r).l1(&t.psf)
-    };
+    let (_, l1_refit) = constrained_refit(t, &torus, full, l1_full, opts.refit_iterations);
     AblationL1 {
         darts: l1_darts,
         darts_lloyd: l1_lloyd,

@@ -131,7 +131,15 @@ pub fn trace_psf(
         let py = (cy + hit.offset[1] + 0.5).floor();
         if sweep > 0.0 && py >= 0.0 && py < h {
             let row = py as usize;
-            if !deposit_segment(&mut acc, &mut ramps, image.width, row, x, sweep, &hit.weight) {
+            if !deposit_segment(
+                &mut acc,
+                &mut ramps,
+                image.width,
+                row,
+                x,
+                sweep,
+                &hit.weight,
+            ) {
                 stats.outside += 1;
             }
             continue;
@@ -189,7 +197,7 @@ fn deposit_segment(
     let wd = width as f64;
     let inside = a >= 0.0 && b <= wd;
     let (a, b) = (a.max(0.0), b.min(wd));
-    if !(b > a) {
+    if a.is_nan() || b.is_nan() || b <= a {
         return false;
     }
     let (ka, kb) = (a.floor() as usize, (b.floor() as usize).min(width - 1));
@@ -208,7 +216,8 @@ fn deposit_segment(
         plane[base + ka] += d * fa;
         plane[base + kb] += d * fb;
         if kb > ka + 1 {
-            let m = &mut ramps.get_or_insert_with(|| vec![vec![0.0; (width + 1) * height]; channels])[c];
+            let m = &mut ramps
+                .get_or_insert_with(|| vec![vec![0.0; (width + 1) * height]; channels])[c];
             let mrow = row * (width + 1);
             m[mrow + ka + 1] += d;
             m[mrow + kb] -= d;
