@@ -178,19 +178,7 @@ pub fn run(options: &DemoOptions) -> Result<Vec<(String, DemoStep)>> {
     std::fs::write(out.join("camera.json"), scene.camera_json())?;
 
     let (w, h) = (g.width, g.height);
-    let motion: Vec<[f32; 2]> = (0..w * h)
-        .map(|i| {
-            let m = g.forward_motion(i % w, i / w);
-            [m.x as f32, m.y as f32]
-        })
-        .collect();
-    let gbuffer = GBuffer::from_planes(
-        w,
-        h,
-        g.color_image().pixels,
-        Some(g.depth.clone()),
-        Some(motion),
-    )?;
+    let gbuffer = GBuffer::from_scene(&g)?;
 
     // One-sample frames: the first sample of every pixel.
     let one_spp = scene::StochasticFrames {

@@ -131,6 +131,25 @@ pub struct GBuffer {
 }
 
 impl GBuffer {
+    /// The G-buffer the scene renderer made (colour, planar depth, forward motion in pixels per
+    /// frame), validated like any other input.
+    pub fn from_scene(g: &scene::GBuffer) -> Result<Self, GBufferError> {
+        let (w, h) = (g.width, g.height);
+        let motion: Vec<[f32; 2]> = (0..w * h)
+            .map(|i| {
+                let m = g.forward_motion(i % w, i / w);
+                [m.x as f32, m.y as f32]
+            })
+            .collect();
+        Self::from_planes(
+            w,
+            h,
+            g.color_image().pixels,
+            Some(g.depth.clone()),
+            Some(motion),
+        )
+    }
+
     /// A G-buffer from planes already in memory; validates depth and motion and drops
     /// non-finite colours (counted), as the reader does.
     pub fn from_planes(

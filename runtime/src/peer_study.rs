@@ -434,20 +434,7 @@ fn study_scene(
         config.reference_spp,
         &render,
     )?);
-    let (w, h) = (g.width, g.height);
-    let motion: Vec<[f32; 2]> = (0..w * h)
-        .map(|i| {
-            let m = g.forward_motion(i % w, i / w);
-            [m.x as f32, m.y as f32]
-        })
-        .collect();
-    let gbuffer = GBuffer::from_planes(
-        w,
-        h,
-        g.color_image().pixels,
-        Some(g.depth.clone()),
-        Some(motion),
-    )?;
+    let gbuffer = GBuffer::from_scene(&g)?;
 
     let mut acc = SceneRows {
         scene: name,

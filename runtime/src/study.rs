@@ -441,19 +441,7 @@ fn prepare_input(options: &StudyOptions) -> Result<Prepared> {
     let g = scene::render_gbuffer(&scene, 16, &render)?;
     let reference = scene::render_reference(&scene, options.reference_spp.max(1), &render)?;
     let (w, h) = (g.width, g.height);
-    let motion: Vec<[f32; 2]> = (0..w * h)
-        .map(|i| {
-            let m = g.forward_motion(i % w, i / w);
-            [m.x as f32, m.y as f32]
-        })
-        .collect();
-    let gbuffer = GBuffer::from_planes(
-        w,
-        h,
-        g.color_image().pixels,
-        Some(g.depth.clone()),
-        Some(motion),
-    )?;
+    let gbuffer = GBuffer::from_scene(&g)?;
     Ok(Prepared {
         gbuffer,
         camera,
