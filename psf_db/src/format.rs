@@ -893,6 +893,23 @@ impl DatabaseBuilder {
         Ok(self.pushed() as u32 - 1)
     }
 
+    /// Appends PSF `index` of `db` as it is stored there (sparse or dense; same channel count).
+    /// Returns its index here.
+    pub fn push_copy(&mut self, db: &PsfDatabase, index: usize) -> Result<u32, DbError> {
+        match db.dense(index) {
+            Some(d) => self.push_dense(
+                [d.origin[0] as i16, d.origin[1] as i16],
+                d.width as u16,
+                d.height as u16,
+                d.data,
+            ),
+            None => {
+                let (positions, values) = db.spreadlets(index);
+                self.push_sparse(positions, values)
+            }
+        }
+    }
+
     /// Checks that every PSF was pushed and everything is in bounds, and returns the database.
     pub fn finish(self) -> Result<PsfDatabase, DbError> {
         let n = self.db.header.stored_psf_count();

@@ -190,16 +190,7 @@ pub fn merge_shards(parts: &[PsfDatabase]) -> Result<PsfDatabase, DbError> {
     let mut builder = DatabaseBuilder::new(header.clone());
     for part in by_index.iter().flatten() {
         for i in 0..part.psf_count() {
-            match part.dense(i) {
-                Some(d) => {
-                    let origin = [d.origin[0] as i16, d.origin[1] as i16];
-                    builder.push_dense(origin, d.width as u16, d.height as u16, d.data)?;
-                }
-                None => {
-                    let (positions, values) = part.spreadlets(i);
-                    builder.push_sparse(positions, values)?;
-                }
-            }
+            builder.push_copy(part, i)?;
         }
         if with_stats {
             header.stats.extend_from_slice(&part.header().stats);

@@ -131,20 +131,7 @@ pub fn without_recorded_error(db: &PsfDatabase) -> Result<PsfDatabase, DbError> 
     }
     let mut builder = DatabaseBuilder::new(header);
     for i in 0..db.psf_count() {
-        match db.dense(i) {
-            Some(d) => {
-                builder.push_dense(
-                    [d.origin[0] as i16, d.origin[1] as i16],
-                    d.width as u16,
-                    d.height as u16,
-                    d.data,
-                )?;
-            }
-            None => {
-                let (p, v) = db.spreadlets(i);
-                builder.push_sparse(p, v)?;
-            }
-        }
+        builder.push_copy(db, i)?;
     }
     builder.finish()
 }
