@@ -88,7 +88,8 @@ struct SplatTargets {
     direct: PlaneSet,
     // Border of the Laplacian planes, px (poisson::pyramid::PAD).
     border: u32,
-    // Rotated offsets: 0 = bilinear split, 1 = nearest pixel (runtime::pipeline::RotationSampling).
+    // Rotated offsets: 0 = bilinear split, 1 = nearest pixel, 2 = quadratic B-spline for Laplacian
+    // spreadlets and bilinear for dense pixels (runtime::pipeline::RotationSampling).
     rotation: u32,
     // Number of PSFs in the database (records with a larger index draw nothing).
     psf_count: u32,

@@ -65,6 +65,12 @@ fn add_rgba(to_laplacian: bool, layer: u32, x: i32, y: i32, v: vec4<f32>) {
     }
 }
 
+// runtime::pipeline::splat::quadratic_bspline_weights: pixels n - 1, n, n + 1 for a point at
+// offset d in [-0.5, 0.5] from pixel n.
+fn quadratic_bspline_weights(d: f32) -> vec3<f32> {
+    return vec3<f32>(0.5 * (0.5 - d) * (0.5 - d), 0.75 - d * d, 0.5 * (0.5 + d) * (0.5 + d));
+}
+
 // Rust's f32::round: half away from zero (WGSL's round() is half to even).
 fn round_away(v: f32) -> f32 {
     return sign(v) * floor(abs(v) + 0.5);
@@ -80,8 +86,25 @@ fn place(to_laplacian: bool, r: SplatRecord, ox: i32, oy: i32, v: vec4<f32>) {
     let fy = f32(oy);
     let rx = r.rot_cos * fx - r.rot_sin * fy;
     let ry = r.rot_sin * fx + r.rot_cos * fy;
-    if targets.rotation == 1u {
+    // Nearest pixel; a quarter turn maps pixels onto pixels, so the B-spline leaves it there.
+    if targets.rotation == 1u || (targets.rotation == 2u && (r.rot_cos == 0.0 || r.rot_sin == 0.0)) {
         add_rgba(to_laplacian, r.layer, r.center_x + i32(round_away(rx)), r.center_y + i32(round_away(ry)), v);
+        return;
+    }
+    if targets.rotation == 2u && to_laplacian {
+        // 3x3 quadratic B-spline: every spreadlet keeps its value and centroid and gains the
+        // same variance (runtime::pipeline::splat::bspline_footprint).
+        let nx = round_away(rx);
+        let ny = round_away(ry);
+        let wx = quadratic_bspline_weights(rx - nx);
+        let wy = quadratic_bspline_weights(ry - ny);
+        let cx = r.center_x + i32(nx);
+        let cy = r.center_y + i32(ny);
+        for (var j = 0; j < 3; j++) {
+            for (var i = 0; i < 3; i++) {
+                add_rgba(true, r.layer, cx + i - 1, cy + j - 1, v * (wx[i] * wy[j]));
+            }
+        }
         return;
     }
     let flx = floor(rx);

@@ -319,6 +319,36 @@ impl PsfDatabase {
         (&self.positions[a..b], &self.values[a * c..b * c])
     }
 
+    /// Whether every PSF's spreadlets are in row order (offset y, then x, ascending). The
+    /// order of a PSF's spreadlets carries no meaning in the format; row order lets a renderer
+    /// that works in bands of rows visit only the spreadlets that fall into a band.
+    pub fn spreadlets_in_row_order(&self) -> bool {
+        (0..self.psf_count()).all(|i| {
+            self.spreadlets(i)
+                .0
+                .windows(2)
+                .all(|w| (w[0][1], w[0][0]) <= (w[1][1], w[1][0]))
+        })
+    }
+
+    /// A copy whose every PSF's spreadlets are in row order (see
+    /// [`PsfDatabase::spreadlets_in_row_order`]); everything else is unchanged.
+    pub fn with_spreadlets_in_row_order(&self) -> PsfDatabase {
+        let mut out = self.clone();
+        let ch = self.channels();
+        for i in 0..self.psf_count() {
+            let (a, b) = (self.cumulative[i] as usize, self.cumulative[i + 1] as usize);
+            let mut order: Vec<usize> = (a..b).collect();
+            order.sort_by_key(|&k| (self.positions[k][1], self.positions[k][0]));
+            for (slot, &k) in (a..b).zip(&order) {
+                out.positions[slot] = self.positions[k];
+                out.values[slot * ch..(slot + 1) * ch]
+                    .copy_from_slice(&self.values[k * ch..(k + 1) * ch]);
+            }
+        }
+        out
+    }
+
     /// The dense image of PSF `i` when it is stored dense (fast track), else `None`.
     /// Panics if `i >= psf_count()`.
     #[inline]

@@ -463,11 +463,11 @@ fn gather(
             } else {
                 let rx = p.rot_cos * ox as f32 - p.rot_sin * oy as f32;
                 let ry = p.rot_sin * ox as f32 + p.rot_cos * oy as f32;
-                match sampling {
+                match sampling.for_image_space() {
                     RotationSampling::Nearest => {
                         fetch(x - rx.round() as i32, y - ry.round() as i32)
                     }
-                    RotationSampling::Bilinear => {
+                    RotationSampling::Bilinear | RotationSampling::Bspline => {
                         // The splat puts the value at centre + r split over the four pixels
                         // around it; its adjoint reads x - r from the same four weights.
                         let (fx, fy) = (rx.floor(), ry.floor());

@@ -175,8 +175,14 @@ impl GBuffer {
     /// Reads a G-buffer from an OpenEXR file.
     pub fn read_exr(path: &Path, options: &ChannelOptions) -> Result<Self, GBufferError> {
         let name = path.display().to_string();
+        let file_len = std::fs::metadata(path)
+            .map_err(|e| GBufferError::Exr {
+                path: name.clone(),
+                message: e.to_string(),
+            })?
+            .len();
         let open = || std::fs::File::open(path).map(std::io::BufReader::new);
-        Self::decode_exr(&name, open, options)
+        Self::decode_exr(&name, file_len, open, options)
     }
 
     /// Reads a G-buffer from the bytes of an OpenEXR file; `name` names it in messages.
@@ -186,12 +192,17 @@ impl GBuffer {
         options: &ChannelOptions,
     ) -> Result<Self, GBufferError> {
         let open = || Ok(std::io::Cursor::new(bytes));
-        Self::decode_exr(name, open, options)
+        Self::decode_exr(name, bytes.len() as u64, open, options)
     }
 
     /// Decodes an OpenEXR from the source `open` gives (called twice: once for the header,
     /// checked before anything large is allocated, once for the pixels).
-    fn decode_exr<R, F>(name: &str, open: F, options: &ChannelOptions) -> Result<Self, GBufferError>
+    fn decode_exr<R, F>(
+        name: &str,
+        file_len: u64,
+        open: F,
+        options: &ChannelOptions,
+    ) -> Result<Self, GBufferError>
     where
         R: std::io::Read + std::io::Seek + Send,
         F: Fn() -> std::io::Result<R>,
@@ -228,6 +239,12 @@ impl GBuffer {
                 ),
             });
         }
+        scene::exr_io::check_expansion(&meta, file_len).map_err(|message| {
+            GBufferError::Layout {
+                path: name.clone(),
+                message,
+            }
+        })?;
 
         let image = read()
             .no_deep_data()

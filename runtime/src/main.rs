@@ -298,7 +298,7 @@ struct SynthArgs {
     #[arg(long, value_enum, default_value_t = Integrator::Exact)]
     integrate: Integrator,
     /// Placement of rotated (motion-aligned) spreadlets.
-    #[arg(long, value_enum, default_value_t = RotationSampling::Bilinear)]
+    #[arg(long, value_enum, default_value_t = RotationSampling::Bspline)]
     rotation: RotationSampling,
     /// Write statistics (effects, databases, counts per path, stage times) as JSON.
     #[arg(long)]

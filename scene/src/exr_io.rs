@@ -99,8 +99,60 @@ pub fn write_channels(
     Ok(())
 }
 
+/// Most a compressed EXR's pixel data may expand over the whole file's size (uncompressed
+/// files: 1). Deflate (ZIP, ZIPS) cannot exceed 1032:1, RLE 64:1, PIZ, PXR24 and B44 less on
+/// any real image; twice deflate's limit leaves room for headers and odd files.
+pub const MAX_EXR_EXPANSION: u64 = 2048;
+
+/// Declared pixel bytes any file may have whatever its size (16 MiB), so that small images
+/// with large constant areas are never refused.
+pub const EXR_EXPANSION_ALLOWANCE: u64 = 16 << 20;
+
+/// Pixel bytes the parts of `meta` declare (at their stored sample types), and whether any
+/// part is compressed.
+pub fn declared_pixel_bytes(meta: &exr::meta::MetaData) -> (u64, bool) {
+    let mut bytes = 0u64;
+    let mut compressed = false;
+    for h in meta.headers.iter() {
+        let pixels = (h.layer_size.width() as u64).saturating_mul(h.layer_size.height() as u64);
+        for c in h.channels.list.iter() {
+            let per_sample = match c.sample_type {
+                SampleType::F16 => 2u64,
+                SampleType::F32 | SampleType::U32 => 4u64,
+            };
+            let sampling = (c.sampling.x().max(1) as u64) * (c.sampling.y().max(1) as u64);
+            bytes = bytes.saturating_add(pixels.saturating_mul(per_sample) / sampling);
+        }
+        compressed |= h.compression != Compression::Uncompressed;
+    }
+    (bytes, compressed)
+}
+
+/// The decoder allocates a part's declared image before it reads its chunks: refuses a
+/// header that declares more pixel bytes than a file of `file_len` bytes can hold
+/// ([`MAX_EXR_EXPANSION`], at least [`EXR_EXPANSION_ALLOWANCE`]), so that what a file makes
+/// the reader allocate grows with the file, not with what it claims. The message says why.
+pub fn check_expansion(
+    meta: &exr::meta::MetaData,
+    file_len: u64,
+) -> std::result::Result<(), String> {
+    let (declared, compressed) = declared_pixel_bytes(meta);
+    let expansion = if compressed { MAX_EXR_EXPANSION } else { 1 };
+    let allowed = file_len
+        .saturating_mul(expansion)
+        .max(EXR_EXPANSION_ALLOWANCE);
+    if declared > allowed {
+        return Err(format!(
+            "the file declares {declared} bytes of pixels in {file_len} bytes, more than its \
+             compression can expand to (at most {expansion}x, or {EXR_EXPANSION_ALLOWANCE} bytes \
+             for any file): truncated or corrupt"
+        ));
+    }
+    Ok(())
+}
+
 /// Reads the first part of an EXR file: checks the header's size against
-/// [`MAX_CHANNEL_SAMPLES`] before any pixel is decoded.
+/// [`MAX_CHANNEL_SAMPLES`] and [`check_expansion`] before any pixel is decoded.
 pub fn read_channels(path: &Path) -> Result<Channels> {
     let exr_error = |source| Error::Exr {
         path: path.to_path_buf(),
@@ -128,6 +180,13 @@ pub fn read_channels(path: &Path) -> Result<Channels> {
             message: "deep images are not supported".to_string(),
         });
     }
+    let file_len = std::fs::metadata(path)
+        .map_err(|e| exr_error(e.into()))?
+        .len();
+    check_expansion(&meta, file_len).map_err(|message| Error::Layout {
+        path: path.to_path_buf(),
+        message,
+    })?;
     let image = read_first_flat_layer_from_file(path).map_err(exr_error)?;
     let layer = image.layer_data;
     let mut out = Channels {

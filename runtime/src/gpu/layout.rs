@@ -68,7 +68,8 @@ pub struct SplatTargets {
     pub direct: PlaneSet,
     /// Border of the Laplacian planes, px (`poisson::pyramid::PAD`).
     pub border: u32,
-    /// Rotated offsets: 0 = bilinear split, 1 = nearest pixel.
+    /// Rotated offsets: 0 = bilinear split, 1 = nearest pixel, 2 = quadratic B-spline on
+    /// Laplacian spreadlets and bilinear on dense pixels.
     pub rotation: u32,
     /// Number of PSFs in the database.
     pub psf_count: u32,

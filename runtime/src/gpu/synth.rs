@@ -654,6 +654,7 @@ impl GpuSynthesizer {
                     rotation: match self.options.rotation {
                         RotationSampling::Bilinear => 0,
                         RotationSampling::Nearest => 1,
+                        RotationSampling::Bspline => 2,
                     },
                     psf_count: self.db.psf_count,
                     channels: self.db.channels,
