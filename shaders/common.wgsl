@@ -102,3 +102,36 @@ struct SplatTargets {
     _pad0: u32,
     _pad1: u32,
 }
+
+// Parameters of the filter baseline (twin of runtime::gpu::layout::FilterParams, 16 bytes).
+struct FilterParams {
+    width: u32,
+    height: u32,
+    // Values per kernel pixel: 1 or 3.
+    channels: u32,
+    // Rotated offsets: 0 = bilinear reads, 1 = nearest pixel.
+    rotation: u32,
+}
+
+// One output pixel of the filter baseline (twin of runtime::gpu::layout::FilterPixel,
+// 16 bytes): its kernel (NO_KERNEL: keep the input colour) and rotation.
+struct FilterPixel {
+    kernel: u32,
+    rot_cos: f32,
+    rot_sin: f32,
+    _pad: u32,
+}
+
+const NO_KERNEL: u32 = 0xffffffffu;
+
+// A dense kernel of the filter baseline (twin of runtime::gpu::layout::KernelEntry, 24 bytes):
+// element offset into the kernel data, size (px) and the top-left pixel's offset from the
+// centre (px).
+struct KernelEntry {
+    offset: u32,
+    width: u32,
+    height: u32,
+    origin_x: i32,
+    origin_y: i32,
+    _pad: u32,
+}

@@ -329,27 +329,26 @@ pub struct FilterStats {
     pub total_ms: f64,
 }
 
-/// The PSF a pixel gathers with.
-#[derive(Clone, Copy, Debug)]
-struct PixelPsf {
-    psf: u32,
-    rot_cos: f32,
-    rot_sin: f32,
+/// The PSF a pixel gathers with in the filter baseline.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PixelPsf {
+    /// Index of its kernel (PSF) in the database and in [`DenseKernels::kernels`].
+    pub psf: u32,
+    /// Cosine of the kernel's rotation (motion direction).
+    pub rot_cos: f32,
+    /// Sine of the kernel's rotation.
+    pub rot_sin: f32,
 }
 
-/// The filter baseline on the CPU: every output pixel gathers the input (premultiplied RGBA)
-/// with its own PSF from `kernels` (built from `dbs.combined`, see [`DenseKernels::from_db`]).
-/// Colour values of RGB kernels weight R, G, B separately and alpha by their mean (as the splat
-/// does). Pixels whose PSF lies under a pixel keep their colour. Where the gathered alpha
-/// exceeds one, the pixel is divided by it; negative values are clamped to zero.
-pub fn filter(
+/// Every pixel's kernel for the filter baseline, row-major (`None`: the pixel keeps its
+/// colour), with the lookup's counts and time in the stats. The CPU ([`filter`]) and GPU
+/// (`gpu::filter_gpu`) gathers share it.
+pub fn filter_plan(
     gbuffer: &GBuffer,
     camera: &Camera,
     dbs: &DbSet,
-    kernels: &DenseKernels,
     options: &FilterOptions,
-) -> Result<(RgbaImage, FilterStats), BaselineError> {
-    let total = Instant::now();
+) -> Result<(Vec<Option<PixelPsf>>, FilterStats), BaselineError> {
     let (w, h) = (gbuffer.width, gbuffer.height);
     let mut stats = FilterStats::default();
     let t = Instant::now();
@@ -387,7 +386,27 @@ pub fn filter(
     } else {
         crate::pipeline::classify::classify_sizes(gbuffer, camera)?;
     }
+    stats.filtered = per_pixel.iter().filter(|p| p.is_some()).count();
+    stats.copied = w * h - stats.filtered;
     stats.classify_ms = t.elapsed().as_secs_f64() * 1e3;
+    Ok((per_pixel, stats))
+}
+
+/// The filter baseline on the CPU: every output pixel gathers the input (premultiplied RGBA)
+/// with its own PSF from `kernels` (built from `dbs.combined`, see [`DenseKernels::from_db`]).
+/// Colour values of RGB kernels weight R, G, B separately and alpha by their mean (as the splat
+/// does). Pixels whose PSF lies under a pixel keep their colour. Where the gathered alpha
+/// exceeds one, the pixel is divided by it; negative values are clamped to zero.
+pub fn filter(
+    gbuffer: &GBuffer,
+    camera: &Camera,
+    dbs: &DbSet,
+    kernels: &DenseKernels,
+    options: &FilterOptions,
+) -> Result<(RgbaImage, FilterStats), BaselineError> {
+    let total = Instant::now();
+    let (w, h) = (gbuffer.width, gbuffer.height);
+    let (per_pixel, mut stats) = filter_plan(gbuffer, camera, dbs, options)?;
 
     let t = Instant::now();
     let input = &gbuffer.color;
@@ -413,8 +432,6 @@ pub fn filter(
                 *px = px.map(|v| v.max(0.0));
             }
         });
-    stats.filtered = per_pixel.iter().filter(|p| p.is_some()).count();
-    stats.copied = w * h - stats.filtered;
     stats.filter_ms = t.elapsed().as_secs_f64() * 1e3;
     stats.total_ms = total.elapsed().as_secs_f64() * 1e3;
     Ok((out, stats))

@@ -253,7 +253,7 @@ struct SynthArgs {
     #[arg(long)]
     input: PathBuf,
     /// Method: spreadlet; the baselines dense (every pre-filtered PSF drawn whole, no
-    /// Laplacian) and filter (gathering with the same PSFs, CPU; docs/STUDY.md); or a peer
+    /// Laplacian) and filter (gathering with the same PSFs; docs/STUDY.md); or a peer
     /// method for comparison (mcguire, guertin: motion blur from the G-buffer, no defocus;
     /// docs/PEERS.md).
     #[arg(long, default_value = "spreadlet")]
@@ -703,10 +703,7 @@ fn synth_frame(args: &SynthArgs, job: &FrameJob, state: &mut SequenceState) -> R
         },
     };
     if args.method == "filter" {
-        // Issue #6 baseline: gathering with the same PSFs (CPU).
-        if args.backend == Backend::Gpu {
-            bail!("--method filter runs on the CPU only (no GPU version yet)");
-        }
+        // Issue #6 baseline: gathering with the same PSFs (CPU or GPU).
         let kernels = match &dbs.combined {
             Some(db) => runtime::baseline::DenseKernels::from_db(db),
             None => runtime::baseline::DenseKernels::default(),
@@ -715,8 +712,15 @@ fn synth_frame(args: &SynthArgs, job: &FrameJob, state: &mut SequenceState) -> R
             rotation: args.rotation,
             ..Default::default()
         };
-        let (image, fstats) =
-            runtime::baseline::filter(&gbuffer, &camera, &dbs, &kernels, &filter_options)?;
+        let (backend, image, fstats) = run_filter(
+            args.backend,
+            &gbuffer,
+            &camera,
+            &dbs,
+            &kernels,
+            &filter_options,
+            args.quiet,
+        )?;
         image.write_exr(&job.out)?;
         if let Some(p) = &job.preview {
             image.write_preview_png(p)?;
@@ -724,7 +728,7 @@ fn synth_frame(args: &SynthArgs, job: &FrameJob, state: &mut SequenceState) -> R
         if !args.quiet {
             eprintln!(
                 "{}: filter baseline, {} pixels filtered ({} kernels integrated from \
-                 spreadlets), {} copied, in {:.0} ms on the cpu",
+                 spreadlets), {} copied, in {:.0} ms on the {backend}",
                 job.out.display(),
                 fstats.filtered,
                 kernels.integrated,
@@ -734,7 +738,7 @@ fn synth_frame(args: &SynthArgs, job: &FrameJob, state: &mut SequenceState) -> R
         }
         if let Some(p) = &job.stats {
             let json = serde_json::json!({
-                "input": job.input, "output": job.out, "method": "filter", "backend": "cpu",
+                "input": job.input, "output": job.out, "method": "filter", "backend": backend,
                 "databases": db_sources, "filter": fstats,
                 "kernels_integrated_from_spreadlets": kernels.integrated,
             });
@@ -905,6 +909,48 @@ fn run_backend(
         }
     };
     Ok(("cpu".to_string(), image, stats, None))
+}
+
+/// The filter baseline on `backend` (auto: a hardware GPU when there is one, as for synthesis).
+/// Returns the device's name, the image and the stats.
+fn run_filter(
+    backend: Backend,
+    gbuffer: &runtime::gbuffer::GBuffer,
+    camera: &Camera,
+    dbs: &DbSet,
+    kernels: &runtime::baseline::DenseKernels,
+    options: &runtime::baseline::FilterOptions,
+    quiet: bool,
+) -> Result<(String, RgbaImage, runtime::baseline::FilterStats)> {
+    #[cfg(feature = "gpu")]
+    if backend != Backend::Cpu {
+        use runtime::gpu::{filter_gpu, GpuContext, GpuFilter};
+        match GpuContext::with_requirement(backend == Backend::Gpu)? {
+            Some(ctx)
+                if backend == Backend::Gpu
+                    || ctx.adapter_info().device_type != wgpu::DeviceType::Cpu =>
+            {
+                let gpu = GpuFilter::new(&ctx, kernels)?;
+                let (image, stats) = filter_gpu(&gpu, gbuffer, camera, dbs, options)?;
+                return Ok((format!("gpu ({})", ctx.adapter_name()), image, stats));
+            }
+            Some(ctx) if !quiet => eprintln!(
+                "backend auto: {} is a software adapter; using the CPU",
+                ctx.adapter_name()
+            ),
+            None if !quiet => eprintln!("backend auto: no GPU adapter; using the CPU"),
+            _ => {}
+        }
+    }
+    #[cfg(not(feature = "gpu"))]
+    {
+        let _ = quiet;
+        if backend == Backend::Gpu {
+            bail!("--backend gpu: this build has no GPU support (feature `gpu`)");
+        }
+    }
+    let (image, stats) = runtime::baseline::filter(gbuffer, camera, dbs, kernels, options)?;
+    Ok(("cpu".to_string(), image, stats))
 }
 
 /// Writes `value` as pretty JSON to `path`, atomically.

@@ -333,6 +333,10 @@ fn configurations(options: &StudyOptions, gpu: bool) -> Vec<Config> {
     v.push(dense.clone());
     if gpu {
         v.push(dense.with("baseline", "dense-gpu", |c| c.gpu = true));
+        v.push(dense.with("baseline", "filter-gpu", |c| {
+            c.method = Method::Filter;
+            c.gpu = true;
+        }));
     }
     v.push(dense.with("baseline", "filter", |c| c.method = Method::Filter));
     if options.full {
@@ -542,16 +546,44 @@ fn run_config(
                 .map(DenseKernels::from_db)
                 .unwrap_or_default();
             let mut last = None;
-            for _ in 0..runs {
-                let (image, st) = filter(
-                    &input.gbuffer,
-                    &input.camera,
-                    dbs,
-                    &kernels,
-                    &FilterOptions::default(),
-                )?;
-                times.push([st.total_ms, st.classify_ms, st.filter_ms, 0.0, 0.0]);
-                last = Some((image, st));
+            if cfg.gpu {
+                #[cfg(feature = "gpu")]
+                {
+                    let Some(state) = gpu.as_ref() else {
+                        bail!("no GPU adapter");
+                    };
+                    let gpu_filter = crate::gpu::GpuFilter::new(&state.ctx, &kernels)?;
+                    let opts = FilterOptions::default();
+                    // Warm-up: pipeline compiled, kernels resident.
+                    crate::gpu::filter_gpu(&gpu_filter, &input.gbuffer, &input.camera, dbs, &opts)?;
+                    for _ in 0..runs {
+                        let (image, st) = crate::gpu::filter_gpu(
+                            &gpu_filter,
+                            &input.gbuffer,
+                            &input.camera,
+                            dbs,
+                            &opts,
+                        )?;
+                        times.push([st.total_ms, st.classify_ms, st.filter_ms, 0.0, 0.0]);
+                        last = Some((image, st));
+                    }
+                }
+                #[cfg(not(feature = "gpu"))]
+                {
+                    bail!("built without the `gpu` feature");
+                }
+            } else {
+                for _ in 0..runs {
+                    let (image, st) = filter(
+                        &input.gbuffer,
+                        &input.camera,
+                        dbs,
+                        &kernels,
+                        &FilterOptions::default(),
+                    )?;
+                    times.push([st.total_ms, st.classify_ms, st.filter_ms, 0.0, 0.0]);
+                    last = Some((image, st));
+                }
             }
             let Some((image, st)) = last else {
                 bail!("no run");

@@ -5,7 +5,9 @@
 use std::mem::{offset_of, size_of};
 
 use psf_db::DenseEntry;
-use runtime::gpu::layout::{PassParams, PlaneSet, SplatTargets};
+use runtime::gpu::layout::{
+    FilterParams, FilterPixel, KernelEntry, PassParams, PlaneSet, SplatTargets,
+};
 use runtime::pipeline::types::{FrameParams, SplatRecord};
 
 fn wgsl_struct(module: &naga::Module, name: &str) -> (u32, Vec<(String, u32)>) {
@@ -32,6 +34,9 @@ fn module() -> naga::Module {
         "@group(0) @binding(2) var<storage> c: array<DenseEntry>;\n",
         "@group(0) @binding(3) var<uniform> d: PassParams;\n",
         "@group(0) @binding(4) var<uniform> e: SplatTargets;\n",
+        "@group(0) @binding(5) var<uniform> f: FilterParams;\n",
+        "@group(0) @binding(6) var<storage> g: array<FilterPixel>;\n",
+        "@group(0) @binding(7) var<storage> h: array<KernelEntry>;\n",
     );
     naga::front::wgsl::parse_str(src).expect("common.wgsl parses")
 }
@@ -74,6 +79,16 @@ fn wgsl_structs_match_rust() {
         laplacian => "laplacian", direct => "direct", border => "border",
         rotation => "rotation", psf_count => "psf_count", channels => "channels",
         layer_base => "layer_base", layer_count => "layer_count", _pad0 => "_pad0", _pad1 => "_pad1",
+    ]);
+    check!(m, FilterParams, "FilterParams", [
+        width => "width", height => "height", channels => "channels", rotation => "rotation",
+    ]);
+    check!(m, FilterPixel, "FilterPixel", [
+        kernel => "kernel", rot_cos => "rot_cos", rot_sin => "rot_sin", _pad => "_pad",
+    ]);
+    check!(m, KernelEntry, "KernelEntry", [
+        offset => "offset", width => "width", height => "height", origin_x => "origin_x",
+        origin_y => "origin_y", _pad => "_pad",
     ]);
 }
 

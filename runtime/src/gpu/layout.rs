@@ -84,3 +84,52 @@ pub struct SplatTargets {
     /// Padding to 16 bytes.
     pub _pad1: u32,
 }
+
+/// Parameters of the filter baseline's pass.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
+pub struct FilterParams {
+    /// Image width, px.
+    pub width: u32,
+    /// Image height, px.
+    pub height: u32,
+    /// Values per kernel pixel (1 or 3).
+    pub channels: u32,
+    /// Rotated offsets: 0 = bilinear reads, 1 = nearest pixel.
+    pub rotation: u32,
+}
+
+/// [`FilterPixel::kernel`] of a pixel that keeps its input colour.
+pub const NO_KERNEL: u32 = u32::MAX;
+
+/// One output pixel of the filter baseline: the kernel it gathers with and its rotation.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct FilterPixel {
+    /// Index into the kernel table, or [`NO_KERNEL`].
+    pub kernel: u32,
+    /// Cosine of the kernel's rotation.
+    pub rot_cos: f32,
+    /// Sine of the kernel's rotation.
+    pub rot_sin: f32,
+    /// Padding to 16 bytes.
+    pub _pad: u32,
+}
+
+/// A dense kernel of the filter baseline in the kernel data buffer.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
+pub struct KernelEntry {
+    /// Element (f32) offset of its first value.
+    pub offset: u32,
+    /// Width, px.
+    pub width: u32,
+    /// Height, px.
+    pub height: u32,
+    /// Offset of the top-left pixel from the centre, px (x right).
+    pub origin_x: i32,
+    /// Offset of the top-left pixel from the centre, px (y down).
+    pub origin_y: i32,
+    /// Padding to 24 bytes.
+    pub _pad: u32,
+}

@@ -5,9 +5,12 @@
 //!   [`GpuSynthesizer::run`] takes the CPU path's classified records.
 //! - [`synthesize_gpu`]: the GPU twin of `synth::synthesize` (classification on the CPU).
 //! - [`GpuPyramid`]: the convolution pyramid alone (stage-level entry point).
+//! - [`GpuFilter`], [`filter_gpu`]: the filter baseline (gathering), twin of
+//!   `baseline::filter`.
 
 mod context;
 mod error;
+mod filter;
 mod frontend;
 pub mod layout;
 mod pyramid;
@@ -17,6 +20,7 @@ mod util;
 
 pub use context::{GpuContext, REQUIRE_GPU_ENV};
 pub use error::GpuError;
+pub use filter::{filter_gpu, GpuFilter};
 pub use frontend::{reconstruct_gpu, synthesize_gpu};
 pub use pyramid::{GpuPyramid, PyramidLevels};
 pub use shaders::shader_sources_for_validation;

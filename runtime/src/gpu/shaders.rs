@@ -7,6 +7,7 @@ const ATOMIC_CAS: &str = include_str!("../../../shaders/atomic_cas.wgsl");
 const SPLAT: &str = include_str!("../../../shaders/splat.wgsl");
 const DENSE: &str = include_str!("../../../shaders/dense.wgsl");
 const COMPOSITE: &str = include_str!("../../../shaders/composite.wgsl");
+const FILTER: &str = include_str!("../../../shaders/filter.wgsl");
 
 /// The pyramid passes.
 pub(crate) fn pyramid() -> String {
@@ -28,6 +29,11 @@ pub(crate) fn composite() -> String {
     format!("{COMMON}\n{COMPOSITE}")
 }
 
+/// The filter baseline.
+pub(crate) fn filter() -> String {
+    format!("{COMMON}\n{FILTER}")
+}
+
 /// Every stage's full source (each atomic variant), named, for validation in tests.
 pub fn shader_sources_for_validation() -> Vec<(&'static str, String)> {
     vec![
@@ -35,5 +41,6 @@ pub fn shader_sources_for_validation() -> Vec<(&'static str, String)> {
         ("splat (float atomics)", splat(true)),
         ("splat (compare-exchange)", splat(false)),
         ("composite", composite()),
+        ("filter", filter()),
     ]
 }

@@ -1,0 +1,76 @@
+//! The filter baseline on the GPU (`shaders/filter.wgsl`) against its CPU twin
+//! (`runtime::baseline::filter`): the same kernels, the same per-pixel plan, the sums in the
+//! same order, so the images agree to f32 rounding.
+#![cfg(feature = "gpu")]
+
+mod gpu_support;
+mod support;
+
+use gpu_support::{context, max_diff};
+use psf_db::PsfModel;
+use runtime::baseline::{filter, DenseKernels, FilterOptions};
+use runtime::dbset::DbSet;
+use runtime::gbuffer::GBuffer;
+use runtime::gpu::{filter_gpu, GpuFilter};
+use runtime::pipeline::RotationSampling;
+use support::{camera, depth_for_coc, test_db};
+
+/// Textured, with CoC from 0 to 10 px and motion up to 20 px in every direction (so kernels
+/// are rotated, copied and clamped), and a transparent corner.
+fn busy_gbuffer(w: usize, h: usize, cam: &runtime::camera::Camera) -> GBuffer {
+    let mut color = Vec::with_capacity(w * h);
+    let mut depth = Vec::with_capacity(w * h);
+    let mut motion = Vec::with_capacity(w * h);
+    for y in 0..h {
+        for x in 0..w {
+            let t = ((x as f32 * 0.45).sin() * (y as f32 * 0.3).cos()) * 0.5 + 0.5;
+            let a = if x < 6 && y < 6 { 0.0 } else { 1.0 };
+            color.push([t * a, (1.0 - t) * a, 0.4 * a, a]);
+            depth.push(depth_for_coc(cam, ((x * 3 + y * 5) % 11) as f64) as f32);
+            let angle = (x as f32 * 0.21 + y as f32 * 0.37).rem_euclid(std::f32::consts::TAU);
+            let len = ((x + 2 * y) % 21) as f32;
+            motion.push([len * angle.cos(), len * angle.sin()]);
+        }
+    }
+    GBuffer::from_planes(w, h, color, Some(depth), Some(motion)).expect("g-buffer")
+}
+
+#[test]
+fn gpu_filter_matches_the_cpu_filter() {
+    let Some(ctx) = context() else {
+        return;
+    };
+    let (w, h) = (48usize, 40usize);
+    let cam = camera(w as u32, h as u32, true, 1.0);
+    let g = busy_gbuffer(w, h, &cam);
+    let dbs = DbSet::single(test_db(PsfModel::LensMotion).clone()).expect("set");
+    let kernels = DenseKernels::from_db(dbs.combined.as_ref().expect("db"));
+    let gpu = GpuFilter::new(ctx, &kernels).expect("gpu filter");
+    for rotation in [RotationSampling::Bilinear, RotationSampling::Nearest] {
+        let options = FilterOptions {
+            rotation,
+            ..FilterOptions::default()
+        };
+        let (cpu, cpu_stats) = filter(&g, &cam, &dbs, &kernels, &options).expect("cpu");
+        let (gpu_image, gpu_stats) = filter_gpu(&gpu, &g, &cam, &dbs, &options).expect("gpu");
+        assert_eq!(cpu_stats.filtered, gpu_stats.filtered);
+        assert_eq!(cpu_stats.copied, gpu_stats.copied);
+        assert!(cpu_stats.filtered > w * h / 2, "{cpu_stats:?}");
+        let flat = |i: &runtime::rgba::RgbaImage| -> Vec<f32> {
+            i.pixels.iter().flat_map(|p| p.iter().copied()).collect()
+        };
+        let (diff, peak) = max_diff(&flat(&gpu_image), &flat(&cpu));
+        eprintln!("{rotation:?}: GPU vs CPU filter max difference {diff:e} (peak {peak})");
+        assert!(
+            diff <= 1e-5 * peak.max(1.0),
+            "{rotation:?}: {diff} (peak {peak})"
+        );
+        // The rotated kernels matter: the two placements give different images.
+        if rotation == RotationSampling::Nearest {
+            let (bilinear, _) =
+                filter(&g, &cam, &dbs, &kernels, &FilterOptions::default()).expect("cpu bilinear");
+            let (d, _) = max_diff(&flat(&bilinear), &flat(&cpu));
+            assert!(d > 1e-3, "nearest and bilinear agree to {d}");
+        }
+    }
+}
