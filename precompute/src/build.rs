@@ -176,12 +176,7 @@ impl BuildPlan {
         let target = Target::new(&image, self.config.procedure.split_signs());
         let opts = self.sparsify_options();
         let support = image.support();
-        let Candidate {
-            spreadlets: sparse,
-            similarity: sim,
-            l1: err,
-            budget,
-        } = match self.config.budget_tradeoff {
+        let candidate = match self.config.budget_tradeoff {
             None => self.candidate(&image, &target, &opts, index, 0),
             Some(lambda) => {
                 // Hill-climb the density ladder from the configured budget on
@@ -212,6 +207,29 @@ impl BuildPlan {
                 best
             }
         };
+        // A PSF only a few pixels across gets one or two Voronoi cells at any dart spacing, and
+        // a cell's collapsed value is the Laplacian's sum there, about zero: it sparsifies to
+        // (almost) nothing. When that leaves it poor, its exact Laplacian (small, and exact)
+        // takes its place. The ladder's score cannot decide this: its sparsity term exceeds 1
+        // for such PSFs and would always prefer nothing.
+        let candidate = if candidate.similarity < EXACT_FALLBACK_BELOW_SIMILARITY
+            && target.active.len() <= EXACT_FALLBACK_MAX_SPREADLETS
+        {
+            let exact = exact_candidate(&image, &target, candidate.budget);
+            if exact.similarity > candidate.similarity {
+                exact
+            } else {
+                candidate
+            }
+        } else {
+            candidate
+        };
+        let Candidate {
+            spreadlets: sparse,
+            similarity: sim,
+            l1: err,
+            budget,
+        } = candidate;
         let abl = if self.config.ablation {
             let mut rng = psf_rng(self.config.seed, index, 2);
             Some(ablation(&target, &opts, &mut rng))
@@ -247,6 +265,39 @@ impl BuildPlan {
             spreadlets: sparse,
             report,
         })
+    }
+}
+
+/// Largest exact Laplacian (non-zero pixels) that [`BuildPlan::process`] puts in place of a
+/// poor sparsification: PSFs up to about 2 px in radius, which darts and collapse cannot
+/// represent.
+const EXACT_FALLBACK_MAX_SPREADLETS: usize = 64;
+
+/// Similarity below which [`BuildPlan::process`] tries a small PSF's exact Laplacian.
+const EXACT_FALLBACK_BELOW_SIMILARITY: f64 = 0.9;
+
+/// Every non-zero Laplacian pixel of `target` as a spreadlet: integrates back to the PSF
+/// exactly (to rounding).
+fn exact_candidate(image: &PsfImage, target: &Target, budget: f64) -> Candidate {
+    let ch = target.channels();
+    let mut spreadlets = Spreadlets {
+        positions: Vec::with_capacity(target.active.len()),
+        values: Vec::with_capacity(target.active.len() * ch),
+        channels: ch,
+    };
+    for k in 0..target.active.len() {
+        let [x, y] = target.active_xy(k);
+        spreadlets.positions.push([x as i32, y as i32]);
+        for c in 0..ch {
+            spreadlets.values.push(target.active_lap(k, c));
+        }
+    }
+    let recon = integrate_spreadlets(&spreadlets, image.width, image.height);
+    Candidate {
+        similarity: similarity(&recon, &image.planes, image.width, image.height),
+        l1: l1(&recon, &image.planes),
+        spreadlets,
+        budget,
     }
 }
 

@@ -230,3 +230,41 @@ fn empty_and_tiny_images() {
         run(&one, procedure, 1.0);
     }
 }
+
+/// A database built with every dense rule off (every PSF sparse, as `spreadlet study`'s
+/// "fast track off" rows build it) keeps small PSFs: a PSF a few pixels across sparsifies to
+/// one or two Voronoi cells whose collapsed values are about zero, so the build compares it
+/// with its exact Laplacian and keeps the better. Every PSF then integrates back to at least
+/// 0.75 similarity (the Test profile's PSFs are noisy; before the fix every PSF under 2 px was
+/// empty or at 0.03) and keeps its light (energy within 2 %), those up to 2 px exactly.
+#[test]
+fn a_sparse_only_build_keeps_tiny_psfs() {
+    use precompute::{build_database, BuildConfig, Profile};
+    use psf_db::PsfModel;
+    let mut cfg = BuildConfig::new(PsfModel::ThinLens, Profile::Test);
+    cfg.psf_count = Some(16);
+    cfg.dense_ratio = 1e6;
+    cfg.dense_below_similarity = 0.0;
+    cfg.dense_above_l1 = 1e9;
+    let (db, report) = build_database(&cfg, false).expect("build");
+    assert_eq!(report.dense_count, 0, "every PSF is sparse");
+    for (i, p) in report.psfs.iter().enumerate() {
+        eprintln!(
+            "PSF {i}: CoC {:.3} px, {} spreadlets, similarity {:.4}",
+            p.coords[0], p.spreadlets, p.similarity
+        );
+        assert!(p.spreadlets > 0, "PSF {i} (CoC {}) is empty", p.coords[0]);
+        assert!(p.similarity >= 0.75, "PSF {i}: similarity {}", p.similarity);
+        if p.coords[0] <= 2.0 {
+            assert!(p.similarity > 0.999, "PSF {i}: similarity {}", p.similarity);
+        }
+        let (pos, val) = db.spreadlets(i);
+        let energy: f64 = pos
+            .iter()
+            .zip(val)
+            .map(|(q, &v)| f64::from(v) * (f64::from(q[0]).powi(2) + f64::from(q[1]).powi(2)))
+            .sum::<f64>()
+            / 4.0;
+        assert!((energy - 1.0).abs() < 0.02, "PSF {i}: energy {energy}");
+    }
+}

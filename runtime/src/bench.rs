@@ -14,7 +14,7 @@ use psf_db::PsfDatabase;
 use crate::pipeline::types::{FrameParams, SplatPath, SplatRecord};
 use crate::pipeline::{
     composite, integrate, splat, Classified, CompositeOptions, Integrator, LayerInfo, PathCounts,
-    SplatOptions,
+    RotationSampling, SplatOptions,
 };
 
 /// What to measure.
@@ -32,6 +32,8 @@ pub struct BenchConfig {
     pub cpu: bool,
     /// Measure the GPU path (skipped, with a note, when there is no adapter).
     pub gpu: bool,
+    /// Placement of rotated spreadlets.
+    pub rotation: RotationSampling,
 }
 
 impl Default for BenchConfig {
@@ -42,6 +44,7 @@ impl Default for BenchConfig {
             layers: 8,
             integrator: Integrator::Pyramid,
             cpu: true,
+            rotation: RotationSampling::default(),
             gpu: true,
         }
     }
@@ -202,7 +205,13 @@ fn time_cpu(db: &PsfDatabase, frame: &Classified, config: &BenchConfig) -> Vec<[
         .map(|_| {
             let t0 = Instant::now();
             let t = Instant::now();
-            let stack = splat(frame, Some(db), &SplatOptions::default());
+            let stack = splat(
+                frame,
+                Some(db),
+                &SplatOptions {
+                    rotation: config.rotation,
+                },
+            );
             let s = ms(t);
             let t = Instant::now();
             let layers = integrate(&stack, config.integrator);
@@ -268,7 +277,10 @@ pub fn run_bench(db: &PsfDatabase, config: &BenchConfig) -> Result<BenchReport, 
             Some(ctx) => Some(crate::gpu::GpuSynthesizer::new(
                 &ctx,
                 db,
-                Default::default(),
+                crate::gpu::GpuSynthOptions {
+                    rotation: config.rotation,
+                    ..Default::default()
+                },
             )?),
             None => {
                 report.notes.push("no GPU adapter: GPU rows skipped".into());
@@ -369,6 +381,8 @@ pub struct ScalingConfig {
     pub layers: u32,
     /// Integration method of the spreadlet path.
     pub integrator: Integrator,
+    /// Placement of rotated spreadlets (the synthetic frames rotate their PSFs like motion).
+    pub rotation: RotationSampling,
 }
 
 impl Default for ScalingConfig {
@@ -381,6 +395,7 @@ impl Default for ScalingConfig {
             runs: 3,
             layers: 8,
             integrator: Integrator::Pyramid,
+            rotation: RotationSampling::default(),
         }
     }
 }
@@ -563,7 +578,16 @@ pub fn run_scaling(
         runs: config.runs,
         layers: config.layers,
         integrator: config.integrator,
+        rotation: config.rotation,
         ..BenchConfig::default()
+    };
+    // As `DbSet` hands it to the pipeline: spreadlets in row order.
+    let sorted;
+    let sparse_db = if sparse_db.spreadlets_in_row_order() {
+        sparse_db
+    } else {
+        sorted = sparse_db.with_spreadlets_in_row_order();
+        &sorted
     };
     let mut rows = Vec::new();
     let measure = |sweep: &str, size: u32, coc: Option<f32>, frame: Classified, dense: bool| {

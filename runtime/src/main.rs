@@ -122,6 +122,9 @@ struct BenchArgs {
     /// Largest size the dense splat is timed at in the --scaling size sweep, px.
     #[arg(long, default_value_t = 1024)]
     dense_max_size: u32,
+    /// Placement of rotated (motion-aligned) spreadlets.
+    #[arg(long, value_enum, default_value_t = RotationSampling::Bspline)]
+    rotation: RotationSampling,
 }
 
 #[derive(Args, Debug)]
@@ -1224,6 +1227,7 @@ fn run_bench(args: BenchArgs) -> Result<()> {
             coc_radii: args.coc_radii.clone(),
             dense_max_size: args.dense_max_size,
             runs: args.runs.max(1),
+            rotation: args.rotation,
             ..Default::default()
         };
         let rows = runtime::bench::run_scaling(&sparse, &dense, &config, true)?;
@@ -1244,7 +1248,14 @@ fn run_bench(args: BenchArgs) -> Result<()> {
         runs: args.runs.max(1),
         cpu: !args.no_cpu,
         gpu: !args.no_gpu,
+        rotation: args.rotation,
         ..Default::default()
+    };
+    // As `DbSet` hands it to the pipeline: spreadlets in row order.
+    let db = if db.spreadlets_in_row_order() {
+        db
+    } else {
+        db.with_spreadlets_in_row_order()
     };
     let report = runtime::bench::run_bench(&db, &config)?;
     println!("{}", report.to_markdown());

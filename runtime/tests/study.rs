@@ -121,3 +121,43 @@ fn pareto_front_keeps_only_undominated_rows() {
     let flags: Vec<bool> = rows.iter().map(|r| r.pareto).collect();
     assert_eq!(flags, vec![true, true, false, true]);
 }
+
+/// The speed-up at equal SSIM compares rows that layer like the dense splat: a faster row
+/// with fewer layers does not count, a row with fewer spreadlets does; rows that draw most
+/// records through the fast track do not count either.
+#[test]
+fn equal_ssim_speedup_compares_like_with_like() {
+    let row = |method: &str, knob: &str, value: &str, ssim: f64, ms: f64, sparse: usize| StudyRow {
+        method: method.into(),
+        knob: knob.into(),
+        value: value.into(),
+        backend: "cpu".into(),
+        ssim,
+        ms,
+        sparse,
+        dense: 10,
+        ..StudyRow::default()
+    };
+    let rows = vec![
+        row("dense", "baseline", "dense", 0.90, 100.0, 0),
+        row("spreadlet", "base", "-", 0.90, 40.0, 100),
+        row("spreadlet", "layers", "1", 0.899, 5.0, 100),
+        row(
+            "spreadlet",
+            "joint",
+            "budget=1; layers=2; integration=pyramid",
+            0.899,
+            6.0,
+            100,
+        ),
+        row("spreadlet", "fast_track", "1", 0.90, 8.0, 1),
+        row("spreadlet", "budget_pyramid", "0.5", 0.896, 20.0, 100),
+        row("spreadlet-sparse", "budget", "0.5", 0.80, 2.0, 100),
+    ];
+    let f = findings(&rows);
+    let (cfg, ssim, ms) = f.spreadlet_at_dense_ssim.expect("a row within 0.005");
+    assert_eq!(cfg, "spreadlet budget_pyramid=0.5");
+    assert_eq!((ssim, ms), (0.896, 20.0));
+    assert_eq!(f.speedup_at_equal_ssim, Some(5.0));
+    assert_eq!(f.speedup_base, Some(2.5));
+}
