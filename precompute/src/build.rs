@@ -212,8 +212,9 @@ impl BuildPlan {
         // (almost) nothing. When that leaves it poor, its exact Laplacian (small, and exact)
         // takes its place. The ladder's score cannot decide this: its sparsity term exceeds 1
         // for such PSFs and would always prefer nothing.
-        let candidate = if candidate.similarity < EXACT_FALLBACK_BELOW_SIMILARITY
-            && target.active.len() <= EXACT_FALLBACK_MAX_SPREADLETS
+        let poor = candidate.similarity < EXACT_FALLBACK_BELOW_SIMILARITY
+            || candidate.l1 > EXACT_FALLBACK_ABOVE_L1;
+        let candidate = if poor && target.active.len() <= EXACT_FALLBACK_MAX_SPREADLETS
         {
             let exact = exact_candidate(&image, &target, candidate.budget);
             if exact.similarity > candidate.similarity {
@@ -269,12 +270,18 @@ impl BuildPlan {
 }
 
 /// Largest exact Laplacian (non-zero pixels) that [`BuildPlan::process`] puts in place of a
-/// poor sparsification: PSFs up to about 2 px in radius, which darts and collapse cannot
-/// represent.
-const EXACT_FALLBACK_MAX_SPREADLETS: usize = 64;
+/// poor sparsification: PSFs up to about 5 px in radius, where darts and collapse leave
+/// too few cells.
+const EXACT_FALLBACK_MAX_SPREADLETS: usize = 256;
 
-/// Similarity below which [`BuildPlan::process`] tries a small PSF's exact Laplacian.
+/// Similarity below which [`BuildPlan::process`] tries a small PSF's exact Laplacian (the
+/// default `dense_below_similarity`).
 const EXACT_FALLBACK_BELOW_SIMILARITY: f64 = 0.9;
+
+/// L1 (fraction of the PSF's light) above which [`BuildPlan::process`] tries a small PSF's
+/// exact Laplacian (the default `dense_above_l1`). Similarity alone is lenient on PSFs of a
+/// few pixels: a 1.5 px disk drawn by 10 spreadlets scored 0.98 at L1 0.52.
+const EXACT_FALLBACK_ABOVE_L1: f64 = 0.15;
 
 /// Every non-zero Laplacian pixel of `target` as a spreadlet: integrates back to the PSF
 /// exactly (to rounding).
