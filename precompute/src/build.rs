@@ -214,8 +214,7 @@ impl BuildPlan {
         // for such PSFs and would always prefer nothing.
         let poor = candidate.similarity < EXACT_FALLBACK_BELOW_SIMILARITY
             || candidate.l1 > EXACT_FALLBACK_ABOVE_L1;
-        let candidate = if poor && target.active.len() <= EXACT_FALLBACK_MAX_SPREADLETS
-        {
+        let candidate = if poor && target.active.len() <= EXACT_FALLBACK_MAX_SPREADLETS {
             let exact = exact_candidate(&image, &target, candidate.budget);
             if exact.similarity > candidate.similarity {
                 exact
