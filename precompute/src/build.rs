@@ -298,13 +298,7 @@ fn exact_candidate(image: &PsfImage, target: &Target, budget: f64) -> Candidate 
             spreadlets.values.push(target.active_lap(k, c));
         }
     }
-    let recon = integrate_spreadlets(&spreadlets, image.width, image.height);
-    Candidate {
-        similarity: similarity(&recon, &image.planes, image.width, image.height),
-        l1: l1(&recon, &image.planes),
-        spreadlets,
-        budget,
-    }
+    Candidate::scored(spreadlets, image, budget)
 }
 
 /// Rungs of the density ladder: budget `spreadlet_budget * 2^(k / 2)`, `k` in
@@ -318,6 +312,19 @@ struct Candidate {
     similarity: f64,
     l1: f64,
     budget: f64,
+}
+
+impl Candidate {
+    /// `spreadlets` of `image`, scored by integrating them exactly.
+    fn scored(spreadlets: Spreadlets, image: &PsfImage, budget: f64) -> Self {
+        let recon = integrate_spreadlets(&spreadlets, image.width, image.height);
+        Candidate {
+            similarity: similarity(&recon, &image.planes, image.width, image.height),
+            l1: l1(&recon, &image.planes),
+            spreadlets,
+            budget,
+        }
+    }
 }
 
 impl BuildPlan {
@@ -334,14 +341,7 @@ impl BuildPlan {
         let budget = opts.budget * 2f64.powf(0.5 * f64::from(rung));
         let opts = SparsifyOptions { budget, ..*opts };
         let mut rng = psf_rng(self.config.seed, index, 1);
-        let spreadlets = sparsify(target, &opts, &mut rng).spreadlets;
-        let recon = integrate_spreadlets(&spreadlets, image.width, image.height);
-        Candidate {
-            similarity: similarity(&recon, &image.planes, image.width, image.height),
-            l1: l1(&recon, &image.planes),
-            spreadlets,
-            budget,
-        }
+        Candidate::scored(sparsify(target, &opts, &mut rng).spreadlets, image, budget)
     }
 }
 
