@@ -161,13 +161,26 @@ fn concatenate(dbs: &[&PsfDatabase], extra: &[DenseImage]) -> Result<PsfDatabase
         )));
     }
     let total = (dbs.iter().map(|d| d.psf_count()).sum::<usize>() + extra.len()) as u32;
-    let n = ParamSpace::resolution_for_count(1, total)
-        .ok_or_else(|| DbError::Invalid(format!("no index space holds {total} PSFs")))?;
-    let space = ParamSpace::for_model(PsfModel::ThinLens, &[[0.0, f64::from(total)]], n)
-        .map_err(|e| DbError::Invalid(e.to_string()))?;
+    // The combined database's space only indexes its PSFs (lookups go through the sources'
+    // own spaces): one dimension while a 1-D nested grid holds them (at most 361 cells), two
+    // beyond (the paper profile's 404 lens-motion PSFs plus their HDR twins).
+    let range = [0.0, f64::from(total)];
+    let space = match ParamSpace::resolution_for_count(1, total) {
+        Some(n) => ParamSpace::for_model(PsfModel::ThinLens, &[range], n),
+        None => {
+            let n = ParamSpace::resolution_for_count(2, total)
+                .ok_or_else(|| DbError::Invalid(format!("no index space holds {total} PSFs")))?;
+            ParamSpace::for_model(PsfModel::LensMotion, &[range, range], n)
+        }
+    }
+    .map_err(|e| DbError::Invalid(e.to_string()))?;
     let capacity = space.psf_count();
     let mut header: DbHeader = last.header().clone();
-    header.model = PsfModel::ThinLens;
+    header.model = if space.dim_count() == 1 {
+        PsfModel::ThinLens
+    } else {
+        PsfModel::LensMotion
+    };
     header.space = space;
     header.stats = dbs
         .iter()
@@ -251,5 +264,39 @@ mod tests {
             }
         }
         assert!(twins > 0, "the test databases have sparse PSFs");
+    }
+
+    /// More PSFs than a 1-D nested grid holds (361): the paper profile's 404 lens-motion PSFs
+    /// plus their twins failed with "no index space holds 623 PSFs". The combined database
+    /// then indexes them on a 2-D grid, every PSF copied in order.
+    #[test]
+    fn more_psfs_than_a_one_dimensional_grid_holds() {
+        let space = ParamSpace::for_model(
+            PsfModel::LensMotion,
+            &[[0.0, 8.0], [0.0, 8.0]],
+            ParamSpace::resolution_for_count(2, 400).expect("resolution"),
+        )
+        .expect("space");
+        let count = space.psf_count();
+        assert!(count > 361, "{count}");
+        let mut b =
+            psf_db::DatabaseBuilder::new(psf_db::DbHeader::new(PsfModel::LensMotion, space, 64));
+        for i in 0..count {
+            // A delta's Laplacian, scaled so that every PSF can be told apart.
+            let v = 1.0 + i as f32;
+            b.push_sparse(
+                &[[0, 0], [1, 0], [-1, 0], [0, 1], [0, -1]],
+                &[-4.0 * v, v, v, v, v],
+            )
+            .expect("push");
+        }
+        let db = b.finish().expect("db");
+        let set = DbSet::new(Some(test_db(PsfModel::ThinLens)), Some(db)).expect("set");
+        let all = set.combined.as_ref().expect("combined");
+        let offset = set.main_offset as usize;
+        assert!(all.psf_count() >= offset + count as usize);
+        for i in 0..count as usize {
+            assert_eq!(all.spreadlets(offset + i).1[1], 1.0 + i as f32, "PSF {i}");
+        }
     }
 }
