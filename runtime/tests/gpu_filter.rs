@@ -74,3 +74,41 @@ fn gpu_filter_matches_the_cpu_filter() {
         }
     }
 }
+
+/// A pixel whose kernel is empty keeps its colour on the GPU as on the CPU (`filter`'s rule);
+/// one with a 1x1 kernel of weight 0.5 halves it.
+#[test]
+fn gpu_filter_keeps_the_colour_of_pixels_with_an_empty_kernel() {
+    use runtime::baseline::{DenseKernel, PixelPsf};
+    let Some(ctx) = context() else {
+        return;
+    };
+    let kernel = |data: Vec<f32>, size: usize| DenseKernel {
+        origin: [0, 0],
+        width: size,
+        height: size,
+        channels: 1,
+        data,
+    };
+    let kernels = DenseKernels {
+        kernels: vec![kernel(vec![], 0), kernel(vec![0.5], 1)],
+        integrated: 0,
+    };
+    let gpu = GpuFilter::new(ctx, &kernels).expect("gpu filter");
+    let input = vec![[0.8, 0.6, 0.4, 1.0]; 4];
+    let at = |psf: u32| {
+        Some(PixelPsf {
+            psf,
+            rot_cos: 1.0,
+            rot_sin: 0.0,
+        })
+    };
+    let plan = vec![at(0), at(1), None, at(7)];
+    let (image, _) = gpu
+        .run(&input, 2, 2, &plan, RotationSampling::Bilinear)
+        .expect("run");
+    assert_eq!(image.pixels[0], input[0], "empty kernel");
+    assert_eq!(image.pixels[1], [0.4, 0.3, 0.2, 0.5], "halving kernel");
+    assert_eq!(image.pixels[2], input[2], "no kernel");
+    assert_eq!(image.pixels[3], input[3], "kernel index beyond the table");
+}

@@ -28,7 +28,8 @@ pub struct GpuFilter {
     pipeline: wgpu::ComputePipeline,
     table: wgpu::Buffer,
     data: wgpu::Buffer,
-    kernel_count: usize,
+    /// Per kernel: whether it has values (an empty one keeps the pixel's colour, as on the CPU).
+    has_values: Vec<bool>,
     channels: u32,
 }
 
@@ -86,7 +87,7 @@ impl GpuFilter {
             pipeline,
             table: storage_init(ctx, "filter kernel table", bytemuck::cast_slice(&table)),
             data: storage_init(ctx, "filter kernel data", bytemuck::cast_slice(&data)),
-            kernel_count: table.len(),
+            has_values: kernels.kernels.iter().map(|k| !k.data.is_empty()).collect(),
             channels: channels as u32,
         })
     }
@@ -114,7 +115,7 @@ impl GpuFilter {
         let pixels: Vec<FilterPixel> = plan
             .iter()
             .map(|p| match p {
-                Some(p) if (p.psf as usize) < self.kernel_count => FilterPixel {
+                Some(p) if self.has_values.get(p.psf as usize) == Some(&true) => FilterPixel {
                     kernel: p.psf,
                     rot_cos: p.rot_cos,
                     rot_sin: p.rot_sin,
