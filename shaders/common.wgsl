@@ -103,6 +103,11 @@ struct SplatTargets {
     _pad1: u32,
 }
 
+// Rust's f32::round: half away from zero (WGSL's round() is half to even).
+fn round_away(v: f32) -> f32 {
+    return sign(v) * floor(abs(v) + 0.5);
+}
+
 // Parameters of the filter baseline (twin of runtime::gpu::layout::FilterParams, 16 bytes).
 struct FilterParams {
     width: u32,

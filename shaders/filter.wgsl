@@ -18,11 +18,6 @@ fn fetch(sx: i32, sy: i32) -> vec4<f32> {
     return colour_in[u32(sy) * params.width + u32(sx)];
 }
 
-// Rust's f32::round: half away from zero (WGSL's round() is half to even).
-fn round_half_away(v: f32) -> f32 {
-    return sign(v) * floor(abs(v) + 0.5);
-}
-
 // The kernel value(s) at element `at` applied to colour `c`: grey kernels scale every channel;
 // RGB kernels scale R, G, B apart and alpha by their mean.
 fn weigh(c: vec4<f32>, at: u32) -> vec4<f32> {
@@ -68,7 +63,7 @@ fn filter_pixels(@builtin(global_invocation_id) id: vec3<u32>) {
                     let rx = p.rot_cos * f32(ox) - p.rot_sin * f32(oy);
                     let ry = p.rot_sin * f32(ox) + p.rot_cos * f32(oy);
                     if params.rotation == 1u {
-                        gathered = fetch(x - i32(round_half_away(rx)), y - i32(round_half_away(ry)));
+                        gathered = fetch(x - i32(round_away(rx)), y - i32(round_away(ry)));
                     } else {
                         let fx = floor(rx);
                         let fy = floor(ry);

@@ -71,10 +71,6 @@ fn quadratic_bspline_weights(d: f32) -> vec3<f32> {
     return vec3<f32>(0.5 * (0.5 - d) * (0.5 - d), 0.75 - d * d, 0.5 * (0.5 + d) * (0.5 + d));
 }
 
-// Rust's f32::round: half away from zero (WGSL's round() is half to even).
-fn round_away(v: f32) -> f32 {
-    return sign(v) * floor(abs(v) + 0.5);
-}
 
 // Adds `v` at offset (ox, oy) from the record's centre, rotated by the record's rotation.
 fn place(to_laplacian: bool, r: SplatRecord, ox: i32, oy: i32, v: vec4<f32>) {

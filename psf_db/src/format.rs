@@ -331,6 +331,16 @@ impl PsfDatabase {
         })
     }
 
+    /// `self` with every PSF's spreadlets in row order: unchanged when they already are, else
+    /// [`PsfDatabase::with_spreadlets_in_row_order`].
+    pub fn into_spreadlets_in_row_order(self) -> PsfDatabase {
+        if self.spreadlets_in_row_order() {
+            self
+        } else {
+            self.with_spreadlets_in_row_order()
+        }
+    }
+
     /// A copy whose every PSF's spreadlets are in row order (see
     /// [`PsfDatabase::spreadlets_in_row_order`]); everything else is unchanged.
     pub fn with_spreadlets_in_row_order(&self) -> PsfDatabase {

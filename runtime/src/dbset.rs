@@ -75,13 +75,7 @@ impl DbSet {
             _ => Some(concatenate(&sources, &twins)?),
         };
         // Row order lets the CPU splat visit only the spreadlets of each band of rows.
-        let combined = combined.map(|c| {
-            if c.spreadlets_in_row_order() {
-                c
-            } else {
-                c.with_spreadlets_in_row_order()
-            }
-        });
+        let combined = combined.map(PsfDatabase::into_spreadlets_in_row_order);
         Ok(Self {
             thin_lens,
             main,

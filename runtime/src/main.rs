@@ -856,13 +856,10 @@ fn run_backend(
 )> {
     #[cfg(feature = "gpu")]
     if backend != Backend::Cpu && state.device.as_deref() != Some("cpu") {
-        use runtime::gpu::{synthesize_gpu, GpuContext, GpuSynthOptions, GpuSynthesizer};
+        use runtime::gpu::{synthesize_gpu, GpuSynthOptions, GpuSynthesizer};
         if state.gpu.is_none() {
-            match GpuContext::with_requirement(backend == Backend::Gpu)? {
-                Some(ctx)
-                    if backend == Backend::Gpu
-                        || ctx.adapter_info().device_type != wgpu::DeviceType::Cpu =>
-                {
+            match pick_gpu(backend, quiet)? {
+                Some(ctx) => {
                     let gpu = GpuSynthesizer::for_database(
                         &ctx,
                         dbs.combined.as_ref(),
@@ -871,21 +868,7 @@ fn run_backend(
                     state.device = Some(format!("gpu ({})", ctx.adapter_name()));
                     state.gpu = Some((ctx, gpu));
                 }
-                Some(ctx) => {
-                    if !quiet {
-                        eprintln!(
-                            "backend auto: {} is a software adapter; using the CPU",
-                            ctx.adapter_name()
-                        );
-                    }
-                    state.device = Some("cpu".into());
-                }
-                None => {
-                    if !quiet {
-                        eprintln!("backend auto: no GPU adapter; using the CPU");
-                    }
-                    state.device = Some("cpu".into());
-                }
+                None => state.device = Some("cpu".into()),
             }
         }
         if let Some((_, gpu)) = state.gpu.as_mut() {
@@ -900,7 +883,7 @@ fn run_backend(
         }
     }
     #[cfg(not(feature = "gpu"))]
-    let _ = state;
+    let _ = (state, quiet);
     #[cfg(not(feature = "gpu"))]
     if backend == Backend::Gpu {
         bail!("--backend gpu: this build has no GPU support (feature `gpu`)");
@@ -912,6 +895,39 @@ fn run_backend(
         }
     };
     Ok(("cpu".to_string(), image, stats, None))
+}
+
+/// The GPU `backend` asks for: `gpu` requires one (an error without), `auto` takes a hardware
+/// adapter and says why it falls back to the CPU otherwise (lavapipe is slower than the CPU
+/// path). `None`: run on the CPU.
+#[cfg(feature = "gpu")]
+fn pick_gpu(backend: Backend, quiet: bool) -> Result<Option<runtime::gpu::GpuContext>> {
+    if backend == Backend::Cpu {
+        return Ok(None);
+    }
+    match runtime::gpu::GpuContext::with_requirement(backend == Backend::Gpu)? {
+        Some(ctx)
+            if backend == Backend::Gpu
+                || ctx.adapter_info().device_type != wgpu::DeviceType::Cpu =>
+        {
+            Ok(Some(ctx))
+        }
+        Some(ctx) => {
+            if !quiet {
+                eprintln!(
+                    "backend auto: {} is a software adapter; using the CPU",
+                    ctx.adapter_name()
+                );
+            }
+            Ok(None)
+        }
+        None => {
+            if !quiet {
+                eprintln!("backend auto: no GPU adapter; using the CPU");
+            }
+            Ok(None)
+        }
+    }
 }
 
 /// The filter baseline on `backend` (auto: a hardware GPU when there is one, as for synthesis).
@@ -926,24 +942,10 @@ fn run_filter(
     quiet: bool,
 ) -> Result<(String, RgbaImage, runtime::baseline::FilterStats)> {
     #[cfg(feature = "gpu")]
-    if backend != Backend::Cpu {
-        use runtime::gpu::{filter_gpu, GpuContext, GpuFilter};
-        match GpuContext::with_requirement(backend == Backend::Gpu)? {
-            Some(ctx)
-                if backend == Backend::Gpu
-                    || ctx.adapter_info().device_type != wgpu::DeviceType::Cpu =>
-            {
-                let gpu = GpuFilter::new(&ctx, kernels)?;
-                let (image, stats) = filter_gpu(&gpu, gbuffer, camera, dbs, options)?;
-                return Ok((format!("gpu ({})", ctx.adapter_name()), image, stats));
-            }
-            Some(ctx) if !quiet => eprintln!(
-                "backend auto: {} is a software adapter; using the CPU",
-                ctx.adapter_name()
-            ),
-            None if !quiet => eprintln!("backend auto: no GPU adapter; using the CPU"),
-            _ => {}
-        }
+    if let Some(ctx) = pick_gpu(backend, quiet)? {
+        let gpu = runtime::gpu::GpuFilter::new(&ctx, kernels)?;
+        let (image, stats) = runtime::gpu::filter_gpu(&gpu, gbuffer, camera, dbs, options)?;
+        return Ok((format!("gpu ({})", ctx.adapter_name()), image, stats));
     }
     #[cfg(not(feature = "gpu"))]
     {
@@ -1252,11 +1254,7 @@ fn run_bench(args: BenchArgs) -> Result<()> {
         ..Default::default()
     };
     // As `DbSet` hands it to the pipeline: spreadlets in row order.
-    let db = if db.spreadlets_in_row_order() {
-        db
-    } else {
-        db.with_spreadlets_in_row_order()
-    };
+    let db = db.into_spreadlets_in_row_order();
     let report = runtime::bench::run_bench(&db, &config)?;
     println!("{}", report.to_markdown());
     Ok(())
