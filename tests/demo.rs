@@ -62,7 +62,7 @@ fn demo_writes_the_summary_and_reconstruction_beats_the_1spp_average() {
 
 /// Issue 5's stronger bar on a scene with large blur (bokeh highlights), small enough for CI:
 /// reconstruction from 1 spp beats the plain average of 16 spp of the same renderer. Measured
-/// at 96 px with the test databases: 0.939 against 0.864 (`spreadlet demo --scene bokeh
+/// at 96 px with the test databases: 0.941 against 0.864 (`spreadlet demo --scene bokeh
 /// --size 96 --reference-spp 256 --db-profile test`).
 #[test]
 fn reconstruction_from_1spp_beats_the_16spp_average_on_bokeh() {

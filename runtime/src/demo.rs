@@ -217,8 +217,7 @@ pub fn run(options: &DemoOptions) -> Result<Vec<(String, DemoStep)>> {
         )?,
     ));
 
-    let mut recon_options = synth_options.clone();
-    recon_options.classify.min_coc_px = crate::reconstruct::min_footprint_px(1);
+    let recon_options = synth_options.clone();
     let t = Instant::now();
     let (recon, _) = reconstruct(&one_spp, &camera, &dbs, &recon_options)?;
     let ms = t.elapsed().as_secs_f64() * 1e3;

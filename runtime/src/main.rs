@@ -1056,7 +1056,6 @@ fn run_reconstruct(args: ReconstructArgs) -> Result<()> {
         let options = SynthOptions {
             classify: ClassifyOptions {
                 layers: args.layers,
-                min_coc_px: runtime::reconstruct::min_footprint_px(frames.spp),
                 ..ClassifyOptions::default()
             },
             integrator: args.integrate,

@@ -37,8 +37,8 @@ use crate::dbset::DbSet;
 use crate::demo::cached_dbs;
 use crate::gbuffer::{ChannelOptions, GBuffer};
 use crate::peer::{reconstruct_peer, synthesize_peer, unhandled_effects};
-use crate::pipeline::{ClassifyOptions, Effects, Integrator};
-use crate::reconstruct::{effects_of, min_footprint_px, reconstruct};
+use crate::pipeline::{Effects, Integrator};
+use crate::reconstruct::{effects_of, reconstruct};
 use crate::rgba::{linear_to_srgb, write_atomically, RgbaImage, WriteError};
 use crate::synth::{synthesize, SynthOptions};
 
@@ -448,13 +448,7 @@ fn study_scene(
     let effects = effects_of(&camera, &frames);
     for spp in config.our_spp() {
         let sub = first_samples(&frames, spp);
-        let options = SynthOptions {
-            classify: ClassifyOptions {
-                min_coc_px: min_footprint_px(spp),
-                ..ClassifyOptions::default()
-            },
-            ..cli_synth_options()
-        };
+        let options = cli_synth_options();
         let set = dbs.get(effects, camera.aperture_blades)?;
         let t = Instant::now();
         let (image, _) = reconstruct(&sub, &camera, set, &options)?;

@@ -11,8 +11,10 @@
 //! with `p` the sample's sensor position (pixel centre plus jitter), `c(d)` the signed CoC
 //! radius at its depth, `(u, v)` its unit lens position, `m` its motion (pixels per frame) and
 //! `t` its time (frames from the frame time); see `docs/STOCHASTIC.md`. The samples of one
-//! pixel share its weight (1 / spp). Layering, splatting, integration and compositing are the
-//! synthesis stages, unchanged.
+//! pixel share its weight (1 / spp). Each moved sample is spread over the pixels around `q0`
+//! ([`SamplePlacement`]: at low sample counts a Gaussian footprint, so that neighbouring
+//! samples overlap), always with its own PSF. Layering, splatting, integration and compositing
+//! are the synthesis stages, unchanged; [`normalize_density`] then divides by the coverage.
 
 use std::time::Instant;
 
@@ -38,15 +40,51 @@ pub fn effects_of(camera: &Camera, frames: &StochasticFrames) -> Effects {
 }
 
 /// How a sample, once moved back to the lens and shutter centre, is put on the pixel grid.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub enum SamplePlacement {
     /// The pixel the moved sample falls in (up to a pixel of position error).
     Nearest,
     /// Split over the four nearest pixel centres with bilinear weights, so the sample keeps its
-    /// sub-pixel position. On the crossing scene at 1 spp this lifts SSIM from 0.956 to 0.964
-    /// (`cargo run --release -p runtime --example recon_lab crossing`), past the 16-spp average.
-    #[default]
+    /// sub-pixel position.
     Bilinear,
+    /// A normalised Gaussian of standard deviation `sigma_px` (pixels) over the pixel centres
+    /// around the moved sample, for samples whose own PSF is narrower than that (CoC radius
+    /// below `2 sigma_px`, a disk of the same variance); [`SamplePlacement::Bilinear`] for the
+    /// rest, whose PSF already spreads them. Sparse samples need a footprint that overlaps
+    /// their neighbours'; giving it here rather than by widening the PSF keeps each sample's
+    /// PSF lookup at its true CoC (a wider CoC moves in-focus moving samples into coarser cells
+    /// of the nested grid, whose motion streaks are pre-filtered over a much wider range).
+    Footprint {
+        /// Standard deviation of the footprint, pixels.
+        sigma_px: f32,
+    },
+}
+
+/// The footprint for one sample per pixel, pixels (the best of 0.4 to 0.8 on the built-in
+/// scenes at 256x256; `cargo run --release -p runtime --example recon_lab SCENE`).
+pub const FOOTPRINT_SIGMA_1SPP_PX: f32 = 0.6;
+
+/// Standard deviation of the bilinear (tent) footprint, pixels: sqrt(1/6).
+const BILINEAR_SIGMA_PX: f32 = 0.408;
+
+/// Widest footprint [`SamplePlacement::Footprint`] applies, pixels.
+pub const MAX_FOOTPRINT_SIGMA_PX: f32 = 4.0;
+
+/// Footprint taps below this fraction of the centre tap are dropped (each tap is a splat).
+const FOOTPRINT_TAP_CUTOFF: f32 = 1e-2;
+
+impl SamplePlacement {
+    /// The placement for `spp` samples per pixel: a Gaussian footprint whose area shrinks as
+    /// 1 / spp (sigma `FOOTPRINT_SIGMA_1SPP_PX / sqrt(spp)`), bilinear once that is no wider
+    /// than bilinear's own tent.
+    pub fn for_spp(spp: usize) -> Self {
+        let sigma_px = FOOTPRINT_SIGMA_1SPP_PX / (spp.max(1) as f32).sqrt();
+        if sigma_px <= BILINEAR_SIGMA_PX {
+            SamplePlacement::Bilinear
+        } else {
+            SamplePlacement::Footprint { sigma_px }
+        }
+    }
 }
 
 /// One fragment per finite sample (four with [`SamplePlacement::Bilinear`]), centred where the
@@ -65,6 +103,7 @@ pub fn sample_fragments(
     let per_sample = match placement {
         SamplePlacement::Nearest => 1,
         SamplePlacement::Bilinear => 4,
+        SamplePlacement::Footprint { .. } => 9,
     };
     let mut fragments = Vec::with_capacity(frames.samples.len() * per_sample);
     for (k, s) in frames.samples.iter().enumerate() {
@@ -101,9 +140,18 @@ pub fn sample_fragments(
             depth: s.depth,
             motion: [motion[0] * shutter, motion[1] * shutter],
         };
-        match placement {
-            SamplePlacement::Nearest => fragments.push(fragment(qx.floor(), qy.floor(), 1.0)),
-            SamplePlacement::Bilinear => {
+        let footprint = match placement {
+            SamplePlacement::Footprint { sigma_px } if coc.abs() < 2.0 * sigma_px => Some(sigma_px),
+            _ => None,
+        };
+        match (placement, footprint) {
+            (_, Some(sigma_px)) => push_footprint(qx, qy, sigma_px, |x, y, share| {
+                fragments.push(fragment(x, y, share))
+            }),
+            (SamplePlacement::Nearest, None) => {
+                fragments.push(fragment(qx.floor(), qy.floor(), 1.0))
+            }
+            (_, None) => {
                 // Pixel (x, y) has its centre at (x + 0.5, y + 0.5).
                 let (fx, fy) = (qx - 0.5, qy - 0.5);
                 let (x0, y0) = (fx.floor(), fy.floor());
@@ -125,6 +173,57 @@ pub fn sample_fragments(
     (fragments, dropped)
 }
 
+/// Calls `push(x, y, share)` for each pixel `(x, y)` (column and row, as floats) under a
+/// normalised Gaussian footprint of `sigma_px` centred at continuous sensor position
+/// `(qx, qy)` (pixel centres at +0.5); the shares sum to 1. Taps under
+/// [`FOOTPRINT_TAP_CUTOFF`] of the peak are left out.
+fn push_footprint(qx: f32, qy: f32, sigma_px: f32, mut push: impl FnMut(f32, f32, f32)) {
+    // A footprint is a fraction of a pixel to a few pixels; the clamp bounds the loop.
+    let sigma_px = if sigma_px.is_finite() {
+        sigma_px.clamp(0.1, MAX_FOOTPRINT_SIGMA_PX)
+    } else {
+        FOOTPRINT_SIGMA_1SPP_PX
+    };
+    let inv_two_var = 1.0 / (2.0 * sigma_px * sigma_px);
+    let reach = sigma_px * (2.0 * (1.0 / FOOTPRINT_TAP_CUTOFF).ln()).sqrt();
+    let (x0, x1) = ((qx - 0.5 - reach).ceil(), (qx - 0.5 + reach).floor());
+    let (y0, y1) = ((qy - 0.5 - reach).ceil(), (qy - 0.5 + reach).floor());
+    let tap = |x: f32, y: f32| -> f32 {
+        let (ex, ey) = (x + 0.5 - qx, y + 0.5 - qy);
+        let w = (-(ex * ex + ey * ey) * inv_two_var).exp();
+        if w >= FOOTPRINT_TAP_CUTOFF {
+            w
+        } else {
+            0.0
+        }
+    };
+    let mut total = 0.0f32;
+    let mut y = y0;
+    while y <= y1 {
+        let mut x = x0;
+        while x <= x1 {
+            total += tap(x, y);
+            x += 1.0;
+        }
+        y += 1.0;
+    }
+    if total <= 0.0 {
+        return;
+    }
+    let mut y = y0;
+    while y <= y1 {
+        let mut x = x0;
+        while x <= x1 {
+            let w = tap(x, y);
+            if w > 0.0 {
+                push(x, y, w / total);
+            }
+            x += 1.0;
+        }
+        y += 1.0;
+    }
+}
+
 /// Reconstructs depth of field and motion blur from stochastic frames with the synthesis
 /// pipeline. `dbs` must hold a database of the model the camera and samples call for.
 pub fn reconstruct(
@@ -133,7 +232,13 @@ pub fn reconstruct(
     dbs: &DbSet,
     options: &SynthOptions,
 ) -> Result<(RgbaImage, SynthStats), ClassifyError> {
-    reconstruct_with(frames, camera, dbs, options, SamplePlacement::default())
+    reconstruct_with(
+        frames,
+        camera,
+        dbs,
+        options,
+        SamplePlacement::for_spp(frames.spp),
+    )
 }
 
 /// [`reconstruct`] with a chosen [`SamplePlacement`].
@@ -219,14 +324,6 @@ pub fn normalize_density(image: &mut RgbaImage) {
             }
         }
     }
-}
-
-/// The footprint radius (pixels) that makes `spp` samples per pixel overlap: a disk of area
-/// `4 / spp` pixels, at least half a pixel.
-pub fn min_footprint_px(spp: usize) -> f32 {
-    (4.0 / (std::f32::consts::PI * spp.max(1) as f32))
-        .sqrt()
-        .max(0.5)
 }
 
 fn ms_since(t: Instant) -> f64 {
@@ -315,6 +412,126 @@ mod tests {
         };
         assert!((mean(|f| f.x) - (x as f32 + 0.5 + 0.2)).abs() < 1e-5);
         assert!((mean(|f| f.y) - (y as f32 + 0.5 - 0.35)).abs() < 1e-5);
+    }
+
+    /// One opaque sample at depth `depth` with jitter `jitter`, in pixel (6, 9) of a 16x16 frame.
+    fn lone_sample(depth: f32, jitter: [f32; 2], motion: [f32; 2]) -> StochasticFrames {
+        let mut frames = StochasticFrames {
+            width: 16,
+            height: 16,
+            spp: 1,
+            samples: vec![Sample::default(); 256],
+        };
+        frames.samples[9 * 16 + 6] = Sample {
+            color: [0.5, 0.25, 1.0, 1.0],
+            depth,
+            lens: [0.0, 0.0],
+            time: 0.0,
+            motion,
+            jitter,
+        };
+        frames
+    }
+
+    /// The Gaussian footprint keeps the sample's weight and, to 0.02 px (the cut-off tail is
+    /// not symmetric), its sub-pixel position, and spreads it with the variance it was given.
+    #[test]
+    fn footprint_keeps_weight_and_position_and_has_its_variance() {
+        let cam = camera();
+        let sigma = FOOTPRINT_SIGMA_1SPP_PX;
+        for jitter in [[0.0, 0.0], [0.2, -0.35], [0.49, 0.49], [-0.5, 0.1]] {
+            let frames = lone_sample(1.0, jitter, [6.0, 0.0]);
+            let effects = effects_of(&cam, &frames);
+            let (fragments, _) = sample_fragments(
+                &frames,
+                &cam,
+                effects,
+                SamplePlacement::Footprint { sigma_px: sigma },
+            );
+            assert!(fragments.len() > 4, "{} taps", fragments.len());
+            let total: f32 = fragments.iter().map(|f| f.weight).sum();
+            assert!((total - 1.0).abs() < 1e-5, "weights sum to {total}");
+            let centre = |f: &Fragment| [f.x as f32 + 0.5, f.y as f32 + 0.5];
+            let (qx, qy) = (6.5 + jitter[0], 9.5 + jitter[1]);
+            let mean_x: f32 = fragments.iter().map(|f| f.weight * centre(f)[0]).sum();
+            let mean_y: f32 = fragments.iter().map(|f| f.weight * centre(f)[1]).sum();
+            assert!((mean_x - qx).abs() < 0.02, "x {mean_x} vs {qx}");
+            assert!((mean_y - qy).abs() < 0.02, "y {mean_y} vs {qy}");
+            let var_x: f32 = fragments
+                .iter()
+                .map(|f| f.weight * (centre(f)[0] - qx).powi(2))
+                .sum();
+            // The 1 % cut-off trims the tails a little.
+            assert!(
+                (var_x.sqrt() - sigma).abs() < 0.06,
+                "footprint sigma {} vs {sigma}",
+                var_x.sqrt()
+            );
+            // Every tap keeps the sample's own motion: the footprint is not a PSF change.
+            assert!(fragments.iter().all(|f| f.motion == [6.0, 0.0]));
+        }
+    }
+
+    /// A sample whose own CoC already spreads it wider than the footprint is placed
+    /// bilinearly; one in focus gets the footprint.
+    #[test]
+    fn footprint_only_for_samples_narrower_than_it() {
+        let cam = camera();
+        let lens = cam.thin_lens().expect("lens");
+        let sigma = FOOTPRINT_SIGMA_1SPP_PX;
+        // In front of the focus plane, signed CoC = k (1 - s / d) reaches any radius.
+        let wide = f64::from(2.5 * sigma);
+        let blurred_depth = (lens.focus_distance / (1.0 + wide / lens.coc_scale_px)) as f32;
+        assert!(lens.signed_coc_px(f64::from(blurred_depth)).abs() > f64::from(2.0 * sigma));
+        let placement = SamplePlacement::Footprint { sigma_px: sigma };
+        let count = |depth| {
+            let frames = lone_sample(depth, [0.1, 0.2], [0.0; 2]);
+            sample_fragments(&frames, &cam, effects_of(&cam, &frames), placement)
+                .0
+                .len()
+        };
+        assert!(count(blurred_depth) <= 4);
+        assert!(count(1.0) > 4);
+    }
+
+    /// The placement follows the sample count: a footprint at 1 spp, narrower at 2, bilinear
+    /// from 4 on, and a non-finite footprint does not loop or lose the sample.
+    #[test]
+    fn placement_for_spp_narrows_with_more_samples() {
+        assert_eq!(
+            SamplePlacement::for_spp(1),
+            SamplePlacement::Footprint {
+                sigma_px: FOOTPRINT_SIGMA_1SPP_PX
+            }
+        );
+        match SamplePlacement::for_spp(2) {
+            SamplePlacement::Footprint { sigma_px } => {
+                assert!((sigma_px - FOOTPRINT_SIGMA_1SPP_PX / 2f32.sqrt()).abs() < 1e-6)
+            }
+            other => panic!("2 spp gave {other:?}"),
+        }
+        assert_eq!(SamplePlacement::for_spp(4), SamplePlacement::Bilinear);
+        assert_eq!(SamplePlacement::for_spp(0), SamplePlacement::for_spp(1));
+        let cam = camera();
+        let frames = lone_sample(1.0, [0.0; 2], [0.0; 2]);
+        for sigma_px in [f32::NAN, f32::INFINITY, 1e9, 0.0] {
+            let (fragments, _) = sample_fragments(
+                &frames,
+                &cam,
+                effects_of(&cam, &frames),
+                SamplePlacement::Footprint { sigma_px },
+            );
+            let total: f32 = fragments.iter().map(|f| f.weight).sum();
+            assert!(
+                (total - 1.0).abs() < 1e-5,
+                "sigma {sigma_px}: weight {total}"
+            );
+            assert!(
+                fragments.len() <= 1000,
+                "sigma {sigma_px}: {} taps",
+                fragments.len()
+            );
+        }
     }
 
     #[test]

@@ -69,7 +69,7 @@ pub fn reconstruct_gpu(
         camera,
         dbs,
         options,
-        crate::reconstruct::SamplePlacement::default(),
+        crate::reconstruct::SamplePlacement::for_spp(frames.spp),
     )
     .map_err(|e| GpuError::Input(e.to_string()))?;
     let (mut image, gpu_times) =

@@ -82,10 +82,6 @@ pub struct ClassifyOptions {
     pub copy_threshold_px: f32,
     /// Extra padding beyond the database's largest PSF extent, pixels.
     pub pad_margin: u32,
-    /// Smallest CoC radius a fragment is splatted with, pixels: 0 for synthesis; for
-    /// reconstruction the footprint that spreads sparse samples over the pixels between them
-    /// (a reconstruction filter), which the PSF lookup then also pre-filters.
-    pub min_coc_px: f32,
     /// A fragment whose weighted colour exceeds this in any of R, G, B (linear, premultiplied)
     /// is drawn with its PSF's dense twin ([`DbSet::hdr_twins`]) instead of spreadlets, where
     /// one exists: the spreadlets' small relative error would be scaled by the highlight.
@@ -101,7 +97,6 @@ impl Default for ClassifyOptions {
             edge_split: true,
             copy_threshold_px: 0.5,
             pad_margin: 2,
-            min_coc_px: 0.0,
             hdr_dense_threshold: 2.0,
         }
     }
@@ -433,7 +428,7 @@ pub fn classify_fragments(
         }
         let (x, y) = (frag.x, frag.y);
         let color = frag.color;
-        let coc = signed_coc(frag.depth).abs().max(options.min_coc_px);
+        let coc = signed_coc(frag.depth).abs();
         let m = frag.motion;
         let motion_len = (m[0] * m[0] + m[1] * m[1]).sqrt();
         let (mut rot_cos, mut rot_sin) = (1.0f32, 0.0f32);
