@@ -70,6 +70,9 @@ const BILINEAR_SIGMA_PX: f32 = 0.408;
 /// Widest footprint [`SamplePlacement::Footprint`] applies, pixels.
 pub const MAX_FOOTPRINT_SIGMA_PX: f32 = 4.0;
 
+/// Most footprint taps along one axis (the widest footprint needs 2 x 3.03 x 4 + 1 = 25).
+const MAX_FOOTPRINT_TAPS_PER_AXIS: usize = 32;
+
 /// Footprint taps below this fraction of the centre tap are dropped (each tap is a splat).
 const FOOTPRINT_TAP_CUTOFF: f32 = 1e-2;
 
@@ -186,41 +189,39 @@ fn push_footprint(qx: f32, qy: f32, sigma_px: f32, mut push: impl FnMut(f32, f32
     };
     let inv_two_var = 1.0 / (2.0 * sigma_px * sigma_px);
     let reach = sigma_px * (2.0 * (1.0 / FOOTPRINT_TAP_CUTOFF).ln()).sqrt();
-    let (x0, x1) = ((qx - 0.5 - reach).ceil(), (qx - 0.5 + reach).floor());
-    let (y0, y1) = ((qy - 0.5 - reach).ceil(), (qy - 0.5 + reach).floor());
-    let tap = |x: f32, y: f32| -> f32 {
+    // Integer tap counts: far from the origin (a huge but finite motion label) `x + 1.0 == x`
+    // in f32, and a float loop would never end.
+    let span = |q: f32| -> (f32, usize) {
+        let first = (q - 0.5 - reach).ceil();
+        let last = (q - 0.5 + reach).floor();
+        let count = if last >= first {
+            ((last - first) as usize + 1).min(MAX_FOOTPRINT_TAPS_PER_AXIS)
+        } else {
+            0
+        };
+        (first, count)
+    };
+    let ((x0, nx), (y0, ny)) = (span(qx), span(qy));
+    let tap = |i: usize, j: usize| -> (f32, f32, f32) {
+        let (x, y) = (x0 + i as f32, y0 + j as f32);
         let (ex, ey) = (x + 0.5 - qx, y + 0.5 - qy);
         let w = (-(ex * ex + ey * ey) * inv_two_var).exp();
-        if w >= FOOTPRINT_TAP_CUTOFF {
-            w
-        } else {
-            0.0
-        }
+        (x, y, if w >= FOOTPRINT_TAP_CUTOFF { w } else { 0.0 })
     };
-    let mut total = 0.0f32;
-    let mut y = y0;
-    while y <= y1 {
-        let mut x = x0;
-        while x <= x1 {
-            total += tap(x, y);
-            x += 1.0;
-        }
-        y += 1.0;
-    }
-    if total <= 0.0 {
+    let total: f32 = (0..ny)
+        .flat_map(|j| (0..nx).map(move |i| (i, j)))
+        .map(|(i, j)| tap(i, j).2)
+        .sum();
+    if total.is_nan() || total <= 0.0 {
         return;
     }
-    let mut y = y0;
-    while y <= y1 {
-        let mut x = x0;
-        while x <= x1 {
-            let w = tap(x, y);
+    for j in 0..ny {
+        for i in 0..nx {
+            let (x, y, w) = tap(i, j);
             if w > 0.0 {
                 push(x, y, w / total);
             }
-            x += 1.0;
         }
-        y += 1.0;
     }
 }
 
@@ -511,6 +512,18 @@ mod tests {
             other => panic!("2 spp gave {other:?}"),
         }
         assert_eq!(SamplePlacement::for_spp(4), SamplePlacement::Bilinear);
+        // A huge but finite motion puts the moved sample where f32 has no unit steps; the
+        // footprint must still end (bounded taps) and keep the weight.
+        let cam_moving = camera();
+        let mut far = lone_sample(1.0, [0.0; 2], [3e30, -3e30]);
+        far.samples[9 * 16 + 6].time = 0.5;
+        let (fragments, _) = sample_fragments(
+            &far,
+            &cam_moving,
+            effects_of(&cam_moving, &far),
+            SamplePlacement::for_spp(1),
+        );
+        assert!(fragments.len() <= MAX_FOOTPRINT_TAPS_PER_AXIS.pow(2));
         assert_eq!(SamplePlacement::for_spp(0), SamplePlacement::for_spp(1));
         let cam = camera();
         let frames = lone_sample(1.0, [0.0; 2], [0.0; 2]);
