@@ -217,9 +217,8 @@ pub fn run(options: &DemoOptions) -> Result<Vec<(String, DemoStep)>> {
         )?,
     ));
 
-    let recon_options = synth_options.clone();
     let t = Instant::now();
-    let (recon, _) = reconstruct(&one_spp, &camera, &dbs, &recon_options)?;
+    let (recon, _) = reconstruct(&one_spp, &camera, &dbs, &synth_options)?;
     let ms = t.elapsed().as_secs_f64() * 1e3;
     recon.write_exr(&out.join("reconstruct_1spp.exr"))?;
     steps.push((

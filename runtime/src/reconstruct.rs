@@ -202,24 +202,33 @@ fn push_footprint(qx: f32, qy: f32, sigma_px: f32, mut push: impl FnMut(f32, f32
         (first, count)
     };
     let ((x0, nx), (y0, ny)) = (span(qx), span(qy));
-    let tap = |i: usize, j: usize| -> (f32, f32, f32) {
-        let (x, y) = (x0 + i as f32, y0 + j as f32);
-        let (ex, ey) = (x + 0.5 - qx, y + 0.5 - qy);
-        let w = (-(ex * ex + ey * ey) * inv_two_var).exp();
-        (x, y, if w >= FOOTPRINT_TAP_CUTOFF { w } else { 0.0 })
+    // The Gaussian is separable: one exponential per column and per row, not per tap.
+    let axis_weights = |first: f32, count: usize, q: f32| {
+        let mut weights = [0.0f32; MAX_FOOTPRINT_TAPS_PER_AXIS];
+        for (i, w) in weights.iter_mut().take(count).enumerate() {
+            let e = first + i as f32 + 0.5 - q;
+            *w = (-e * e * inv_two_var).exp();
+        }
+        weights
     };
-    let total: f32 = (0..ny)
-        .flat_map(|j| (0..nx).map(move |i| (i, j)))
-        .map(|(i, j)| tap(i, j).2)
-        .sum();
+    let (wx, wy) = (axis_weights(x0, nx, qx), axis_weights(y0, ny, qy));
+    let tap = |i: usize, j: usize| -> f32 {
+        let w = wx[i] * wy[j];
+        if w >= FOOTPRINT_TAP_CUTOFF {
+            w
+        } else {
+            0.0
+        }
+    };
+    let total: f32 = (0..ny).flat_map(|j| (0..nx).map(move |i| tap(i, j))).sum();
     if total.is_nan() || total <= 0.0 {
         return;
     }
     for j in 0..ny {
         for i in 0..nx {
-            let (x, y, w) = tap(i, j);
+            let w = tap(i, j);
             if w > 0.0 {
-                push(x, y, w / total);
+                push(x0 + i as f32, y0 + j as f32, w / total);
             }
         }
     }
