@@ -8,11 +8,20 @@
 //! `structural_similarity(gaussian_weights=True, sigma=1.5, use_sample_covariance=False,
 //! data_range=L)`, which crops the same border before averaging.
 //!
+//! FLIP ([`flip_rgb`]) is NVIDIA's perceptual difference evaluator in its LDR mode on the same
+//! sRGB values; [`score_rgb`] gives every figure the project reports at once (SSIM, PSNR, FLIP
+//! mean and 99th percentile, the luminance of the frame's edges against the reference's).
+//!
 //! [`ssim_rgb`] and [`psnr_rgb`] take linear RGB(A) and compare sRGB-encoded values clamped to
 //! [0, 1] (L = 1), averaged over R, G and B; alpha is ignored. [`ssim_plane`] compares one
 //! linear channel as it is, with a caller-given dynamic range (used to score PSFs).
 
+pub mod flip;
+pub mod score;
 pub mod ssim;
+
+pub use flip::{flip_rgb, FlipError, FLIP_PIXELS_PER_DEGREE};
+pub use score::{edge_luminance_ratios, score_rgb, EdgeRatios, Scores, EDGE_BAND_PX};
 
 pub use ssim::{
     psnr_rgb, srgb_encode, ssim_plane, ssim_plane_f64, ssim_rgb, MetricsError, SSIM_K1, SSIM_K2,

@@ -118,7 +118,12 @@ fn check_window(width: usize, height: usize) -> Result<(), MetricsError> {
 }
 
 /// Channels per pixel (3 or 4) of two interleaved RGB(A) images of `width x height`.
-fn rgb_channels(a: &[f32], b: &[f32], width: usize, height: usize) -> Result<usize, MetricsError> {
+pub(crate) fn rgb_channels(
+    a: &[f32],
+    b: &[f32],
+    width: usize,
+    height: usize,
+) -> Result<usize, MetricsError> {
     let px = width * height;
     let err = |len| MetricsError::Size {
         width,

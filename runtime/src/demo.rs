@@ -57,13 +57,20 @@ impl Default for DemoOptions {
     }
 }
 
-/// One step of the demo: its SSIM against the reference and its time.
+/// One step of the demo: its scores against the reference and its time.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct DemoStep {
     /// SSIM against the reference (sRGB, sigma 1.5, mean over R, G, B).
     pub ssim: f64,
     /// PSNR against the reference, dB.
     pub psnr: f64,
+    /// Mean FLIP error against the reference (LDR, 67 px per degree; lower is better).
+    pub flip_mean: f64,
+    /// 99th percentile of the FLIP error.
+    pub flip_p99: f64,
+    /// Median luminance ratio to the reference over the outer 4 px of each frame edge (left,
+    /// top, right, bottom).
+    pub edge_luminance_ratio: metrics::EdgeRatios,
     /// Wall-clock time of the step, milliseconds (renders of the inputs excluded).
     pub ms: f64,
     /// What the step is.
@@ -105,13 +112,14 @@ fn to_runtime(image: &scene::RgbaImage) -> RgbaImage {
 fn score(result: &RgbaImage, reference: &RgbaImage, ms: f64, what: &str) -> Result<DemoStep> {
     let flat = |i: &RgbaImage| -> Vec<f32> { i.pixels.iter().flatten().copied().collect() };
     let (a, b) = (flat(result), flat(reference));
-    let ssim = metrics::ssim_rgb(&a, &b, result.width, result.height)
-        .context("SSIM of the demo images")?;
-    let psnr = metrics::psnr_rgb(&a, &b, result.width, result.height)
-        .context("PSNR of the demo images")?;
+    let (scores, _) = metrics::score_rgb(&a, &b, result.width, result.height)
+        .context("scoring the demo images")?;
     Ok(DemoStep {
-        ssim,
-        psnr,
+        ssim: scores.ssim,
+        psnr: scores.psnr_db.unwrap_or(f64::INFINITY),
+        flip_mean: scores.flip_mean,
+        flip_p99: scores.flip_p99,
+        edge_luminance_ratio: scores.edge_luminance_ratio,
         ms,
         what: what.into(),
     })
@@ -281,11 +289,19 @@ pub fn run(options: &DemoOptions) -> Result<Vec<(String, DemoStep)>> {
 
 /// The demo's table, Markdown.
 pub fn table(steps: &[(String, DemoStep)]) -> String {
-    let mut s = String::from("| step | SSIM | PSNR (dB) | ms |\n| --- | --- | --- | --- |\n");
+    let mut s = String::from(
+        "| step | SSIM | PSNR (dB) | FLIP mean | FLIP p99 | darkest edge | ms |\n\
+         | --- | --- | --- | --- | --- | --- | --- |\n",
+    );
     for (name, step) in steps {
         s.push_str(&format!(
-            "| {name} | {:.4} | {:.2} | {:.1} |\n",
-            step.ssim, step.psnr, step.ms
+            "| {name} | {:.4} | {:.2} | {:.4} | {:.4} | {:.3} | {:.1} |\n",
+            step.ssim,
+            step.psnr,
+            step.flip_mean,
+            step.flip_p99,
+            step.edge_luminance_ratio.worst(),
+            step.ms
         ));
     }
     s

@@ -111,13 +111,56 @@ pub struct ChannelOptions {
     pub motion_y_up: bool,
 }
 
-/// A pinhole G-buffer, all planes row-major from the top-left pixel.
+/// Pixels a G-buffer holds beyond each side of the frame it is rendered for (OpenEXR's data
+/// window larger than its display window): what a renderer's overscan adds so that light from
+/// just outside the frame can blur into it.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct Overscan {
+    /// Columns left of the frame, pixels.
+    pub left: usize,
+    /// Rows above the frame, pixels.
+    pub top: usize,
+    /// Columns right of the frame, pixels.
+    pub right: usize,
+    /// Rows below the frame, pixels.
+    pub bottom: usize,
+}
+
+impl Overscan {
+    /// No pixels beyond the frame.
+    pub const NONE: Overscan = Overscan {
+        left: 0,
+        top: 0,
+        right: 0,
+        bottom: 0,
+    };
+
+    /// The same overscan on every side, pixels.
+    pub fn uniform(px: usize) -> Self {
+        Overscan {
+            left: px,
+            top: px,
+            right: px,
+            bottom: px,
+        }
+    }
+
+    /// Whether there is any.
+    pub fn is_none(&self) -> bool {
+        *self == Overscan::NONE
+    }
+}
+
+/// A pinhole G-buffer, all planes row-major from the top-left pixel of the data window (the
+/// frame plus its [`Overscan`]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct GBuffer {
-    /// Width, pixels.
+    /// Width of the data window, pixels (the frame's width plus the left and right overscan).
     pub width: usize,
-    /// Height, pixels.
+    /// Height of the data window, pixels (the frame's height plus the top and bottom overscan).
     pub height: usize,
+    /// Pixels beyond the frame on each side; the output is the frame alone.
+    pub overscan: Overscan,
     /// Linear premultiplied RGBA.
     pub color: Vec<[f32; 4]>,
     /// Planar depth in scene units, when the file has it.
@@ -162,6 +205,7 @@ impl GBuffer {
         let mut g = GBuffer {
             width,
             height,
+            overscan: Overscan::NONE,
             color,
             depth,
             motion,
@@ -170,6 +214,60 @@ impl GBuffer {
         };
         g.sanitize("<memory>")?;
         Ok(g)
+    }
+
+    /// Declares the outer `overscan` pixels of this G-buffer to lie outside the frame (the
+    /// frame is what remains inside); an error if nothing would remain.
+    pub fn with_overscan(mut self, overscan: Overscan) -> Result<Self, GBufferError> {
+        if overscan.left + overscan.right >= self.width
+            || overscan.top + overscan.bottom >= self.height
+        {
+            return Err(GBufferError::Layout {
+                path: "<memory>".into(),
+                message: format!(
+                    "an overscan of {overscan:?} leaves no frame inside {}x{} pixels",
+                    self.width, self.height
+                ),
+            });
+        }
+        self.overscan = overscan;
+        Ok(self)
+    }
+
+    /// Width of the frame (the display window), pixels.
+    pub fn frame_width(&self) -> usize {
+        self.width - self.overscan.left - self.overscan.right
+    }
+
+    /// Height of the frame (the display window), pixels.
+    pub fn frame_height(&self) -> usize {
+        self.height - self.overscan.top - self.overscan.bottom
+    }
+
+    /// The frame alone: the G-buffer without its overscan (for methods that cannot use it).
+    pub fn frame_only(&self) -> GBuffer {
+        if self.overscan.is_none() {
+            return self.clone();
+        }
+        let (fw, fh) = (self.frame_width(), self.frame_height());
+        let (x0, y0) = (self.overscan.left, self.overscan.top);
+        let pick = |i: usize| (y0 + i / fw) * self.width + x0 + i % fw;
+        GBuffer {
+            width: fw,
+            height: fh,
+            overscan: Overscan::NONE,
+            color: (0..fw * fh).map(|i| self.color[pick(i)]).collect(),
+            depth: self
+                .depth
+                .as_ref()
+                .map(|d| (0..fw * fh).map(|i| d[pick(i)]).collect()),
+            motion: self
+                .motion
+                .as_ref()
+                .map(|m| (0..fw * fh).map(|i| m[pick(i)]).collect()),
+            dropped_pixels: self.dropped_pixels,
+            channels_present: self.channels_present.clone(),
+        }
     }
 
     /// Reads a G-buffer from an OpenEXR file.
@@ -257,6 +355,12 @@ impl GBuffer {
         let layer = image.layer_data;
         let (width, height) = (layer.size.width(), layer.size.height());
         check_size(&name, width, height)?;
+        let overscan = overscan_of(
+            &name,
+            layer.attributes.layer_position,
+            layer.size,
+            image.attributes.display_window,
+        )?;
         let channels: Vec<(String, Vec<f32>)> = layer
             .channel_data
             .list
@@ -374,6 +478,7 @@ impl GBuffer {
         let mut g = GBuffer {
             width,
             height,
+            overscan,
             color,
             depth: depth.cloned(),
             motion,
@@ -438,6 +543,46 @@ impl GBuffer {
         }
         Ok(())
     }
+}
+
+/// The overscan of a data window (origin `data_origin`, `data_size` pixels) around a display
+/// window; an error naming both windows when the data does not cover the whole frame.
+fn overscan_of(
+    name: &str,
+    data_origin: exr::math::Vec2<i32>,
+    data_size: exr::math::Vec2<usize>,
+    display: exr::meta::attribute::IntegerBounds,
+) -> Result<Overscan, GBufferError> {
+    let (dx0, dy0) = (i64::from(data_origin.x()), i64::from(data_origin.y()));
+    let (dx1, dy1) = (
+        dx0 + data_size.width() as i64,
+        dy0 + data_size.height() as i64,
+    );
+    let (fx0, fy0) = (
+        i64::from(display.position.x()),
+        i64::from(display.position.y()),
+    );
+    let (fx1, fy1) = (
+        fx0 + display.size.width() as i64,
+        fy0 + display.size.height() as i64,
+    );
+    let sides = [fx0 - dx0, fy0 - dy0, dx1 - fx1, dy1 - fy1];
+    if sides.iter().any(|&s| s < 0) || display.size.width() == 0 || display.size.height() == 0 {
+        return Err(GBufferError::Layout {
+            path: name.to_string(),
+            message: format!(
+                "the data window ({dx0}, {dy0})..({dx1}, {dy1}) does not cover the display \
+                 window ({fx0}, {fy0})..({fx1}, {fy1}); render the whole frame (a crop or \
+                 border render cannot be blurred correctly)"
+            ),
+        });
+    }
+    Ok(Overscan {
+        left: sides[0] as usize,
+        top: sides[1] as usize,
+        right: sides[2] as usize,
+        bottom: sides[3] as usize,
+    })
 }
 
 fn check_size(name: &str, width: usize, height: usize) -> Result<(), GBufferError> {

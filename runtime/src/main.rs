@@ -14,7 +14,8 @@ use runtime::dbcache;
 use runtime::dbset::DbSet;
 use runtime::gbuffer::{ChannelOptions, GBuffer, Layout};
 use runtime::pipeline::{
-    ClassifyOptions, CompositeOptions, Effects, Integrator, RotationSampling, SplatOptions,
+    ClassifyOptions, CompositeOptions, Effects, FrameEdges, Integrator, RotationSampling,
+    SplatOptions,
 };
 use runtime::rgba::RgbaImage;
 use runtime::synth::{synthesize, SynthOptions};
@@ -125,6 +126,17 @@ struct BenchArgs {
     /// Placement of rotated (motion-aligned) spreadlets.
     #[arg(long, value_enum, default_value_t = RotationSampling::Bspline)]
     rotation: RotationSampling,
+    /// Splat stage of the GPU path.
+    #[arg(long, value_enum, default_value_t = runtime::gpu::SplatMode::Tiled)]
+    splat: runtime::gpu::SplatMode,
+    /// Instead: the device check (micro-benchmarks of the GPU's limits, then thin lens, lens
+    /// and motion, and motion only at 1024x1024, 1920x1080 and 3840x2160 with both splat
+    /// stages), written to device-check.json and device-check.md in this folder.
+    #[arg(long)]
+    device_check: Option<PathBuf>,
+    /// With --device-check: small sizes and few runs (to test the check on a software device).
+    #[arg(long)]
+    quick: bool,
 }
 
 #[derive(Args, Debug)]
@@ -296,6 +308,11 @@ struct SynthArgs {
     /// Do not scale the composite up to the layers' joint coverage.
     #[arg(long)]
     no_coverage_renormalization: bool,
+    /// What lies beyond the input's pixels (its overscan, if the file has any): extend (the
+    /// outermost pixels continue outwards, so a blurred frame keeps its brightness to the
+    /// edge) or black (the frame's border loses light; for comparison).
+    #[arg(long, value_enum, default_value_t = FrameEdges::Extend)]
+    frame_edges: FrameEdges,
     /// Poisson integrator (exact by default: the pyramid's small relative error becomes
     /// visible around HDR highlights).
     #[arg(long, value_enum, default_value_t = Integrator::Exact)]
@@ -345,6 +362,9 @@ struct CompareArgs {
     /// Print JSON instead of text.
     #[arg(long)]
     json: bool,
+    /// Write FLIP's per-pixel error map (magma colour map, as NVIDIA's tool shows it) as PNG.
+    #[arg(long)]
+    flip_map: Option<PathBuf>,
 }
 
 fn main() {
@@ -587,7 +607,8 @@ fn synth_frame(args: &SynthArgs, job: &FrameJob, state: &mut SequenceState) -> R
 
     if !runtime::baseline::METHODS.contains(&args.method.as_str()) {
         let t = Instant::now();
-        let image = runtime::peer::synthesize_peer(&args.method, &gbuffer, &camera)?;
+        // The peer methods know no overscan: they see the frame alone.
+        let image = runtime::peer::synthesize_peer(&args.method, &gbuffer.frame_only(), &camera)?;
         let ms = t.elapsed().as_secs_f64() * 1e3;
         image.write_exr(&job.out)?;
         if let Some(p) = &job.preview {
@@ -695,6 +716,7 @@ fn synth_frame(args: &SynthArgs, job: &FrameJob, state: &mut SequenceState) -> R
             layers: args.layers,
             soft_layers: (args.soft_layers > 0.0).then_some(args.soft_layers),
             edge_split: !args.no_edge_split,
+            frame_edges: args.frame_edges,
             ..ClassifyOptions::default()
         },
         splat: SplatOptions {
@@ -717,7 +739,7 @@ fn synth_frame(args: &SynthArgs, job: &FrameJob, state: &mut SequenceState) -> R
         };
         let (backend, image, fstats) = run_filter(
             args.backend,
-            &gbuffer,
+            &gbuffer.frame_only(),
             &camera,
             &dbs,
             &kernels,
@@ -973,7 +995,7 @@ fn write_json(path: &Path, value: &serde_json::Value) -> Result<()> {
 }
 
 fn read_rgba(path: &Path) -> Result<RgbaImage> {
-    let g = GBuffer::read_exr(path, &ChannelOptions::default())?;
+    let g = GBuffer::read_exr(path, &ChannelOptions::default())?.frame_only();
     Ok(RgbaImage {
         width: g.width,
         height: g.height,
@@ -997,21 +1019,49 @@ fn run_compare(args: CompareArgs) -> Result<()> {
     }
     let fa: &[f32] = bytemuck::cast_slice(&a.pixels);
     let fb: &[f32] = bytemuck::cast_slice(&b.pixels);
-    let ssim = metrics::ssim_rgb(fa, fb, a.width, a.height)?;
-    let psnr = metrics::psnr_rgb(fa, fb, a.width, a.height)?;
+    let (scores, flip) = metrics::score_rgb(fa, fb, a.width, a.height)?;
+    if let Some(path) = &args.flip_map {
+        write_rgb8_png(path, a.width, a.height, flip.magma_rgb8())?;
+    }
+    let e = scores.edge_luminance_ratio;
     if args.json {
-        let psnr_json = if psnr.is_finite() {
-            serde_json::json!(psnr)
-        } else {
-            serde_json::json!(null)
-        };
         println!(
             "{}",
-            serde_json::json!({ "a": args.a, "b": args.b, "ssim": ssim, "psnr_db": psnr_json })
+            serde_json::json!({
+                "a": args.a,
+                "b": args.b,
+                "ssim": scores.ssim,
+                "psnr_db": scores.psnr_db,
+                "flip_mean": scores.flip_mean,
+                "flip_p99": scores.flip_p99,
+                "edge_luminance_ratio": e,
+            })
         );
     } else {
-        println!("SSIM {ssim:.4}  PSNR {psnr:.2} dB");
+        let psnr = scores
+            .psnr_db
+            .map_or("inf".to_string(), |p| format!("{p:.2}"));
+        println!(
+            "SSIM {:.4}  PSNR {psnr} dB  FLIP mean {:.4} p99 {:.4}  edge luminance ratio \
+             (left, top, right, bottom) {:.3} {:.3} {:.3} {:.3}",
+            scores.ssim, scores.flip_mean, scores.flip_p99, e.left, e.top, e.right, e.bottom
+        );
     }
+    Ok(())
+}
+
+/// Writes interleaved 8-bit RGB as a PNG, atomically.
+fn write_rgb8_png(path: &Path, width: usize, height: usize, rgb: Vec<u8>) -> Result<()> {
+    let buffer = image::RgbImage::from_raw(width as u32, height as u32, rgb)
+        .context("an RGB buffer of the wrong size")?;
+    runtime::rgba::write_atomically(path, |file| {
+        buffer
+            .write_to(&mut std::io::BufWriter::new(file), image::ImageFormat::Png)
+            .map_err(|e| runtime::rgba::WriteError::Png {
+                path: path.display().to_string(),
+                message: e.to_string(),
+            })
+    })?;
     Ok(())
 }
 
@@ -1210,6 +1260,12 @@ fn run_demo(args: DemoArgs) -> Result<()> {
 #[cfg(feature = "gpu")]
 fn run_bench(args: BenchArgs) -> Result<()> {
     let profile: precompute::Profile = args.db_profile.parse()?;
+    if let Some(dir) = &args.device_check {
+        let (json, md) =
+            runtime::gpu::check::run_to_folder(dir, args.quick, profile, args.rotation)?;
+        println!("wrote {} and {}", json.display(), md.display());
+        return Ok(());
+    }
     if args.scaling {
         let cfg = dbcache::build_config(psf_db::PsfModel::ThinLens, profile, 0);
         let load = |cfg: &precompute::BuildConfig| -> Result<psf_db::PsfDatabase> {
@@ -1250,6 +1306,7 @@ fn run_bench(args: BenchArgs) -> Result<()> {
         cpu: !args.no_cpu,
         gpu: !args.no_gpu,
         rotation: args.rotation,
+        global_atomic_splat: args.splat == runtime::gpu::SplatMode::GlobalAtomic,
         ..Default::default()
     };
     // As `DbSet` hands it to the pipeline: spreadlets in row order.

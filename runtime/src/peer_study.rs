@@ -184,6 +184,10 @@ pub struct StudyRow {
     pub ssim: f64,
     /// PSNR against the reference, dB (sRGB, peak 1).
     pub psnr: f64,
+    /// Mean FLIP error against the reference (lower is better).
+    pub flip_mean: f64,
+    /// 99th percentile of the FLIP error.
+    pub flip_p99: f64,
     /// Wall-clock time of the method, milliseconds (`None` when not run here); renders,
     /// database loading and input conversion excluded.
     pub ms: Option<f64>,
@@ -330,12 +334,12 @@ fn flat(image: &RgbaImage) -> Vec<f32> {
     image.pixels.iter().flatten().copied().collect()
 }
 
-/// SSIM and PSNR of `image` against `reference`.
-fn score(image: &RgbaImage, reference: &RgbaImage) -> Result<(f64, f64)> {
+/// The scores of `image` against `reference`.
+fn score(image: &RgbaImage, reference: &RgbaImage) -> Result<metrics::Scores> {
     let (a, b) = (flat(image), flat(reference));
-    let ssim = metrics::ssim_rgb(&a, &b, image.width, image.height).context("SSIM")?;
-    let psnr = metrics::psnr_rgb(&a, &b, image.width, image.height).context("PSNR")?;
-    Ok((ssim, psnr))
+    Ok(metrics::score_rgb(&a, &b, image.width, image.height)
+        .context("scoring")?
+        .0)
 }
 
 /// Collects rows and their images for one scene.
@@ -358,14 +362,16 @@ impl SceneRows<'_> {
         ignored: Vec<&'static str>,
         kind: RowKind,
     ) -> Result<()> {
-        let (ssim, psnr) = score(&image, self.reference)?;
+        let scores = score(&image, self.reference)?;
         self.rows.push(StudyRow {
             scene: self.scene.to_string(),
             method: method.to_string(),
             input,
             spp,
-            ssim,
-            psnr,
+            ssim: scores.ssim,
+            psnr: scores.psnr_db.unwrap_or(f64::INFINITY),
+            flip_mean: scores.flip_mean,
+            flip_p99: scores.flip_p99,
             ms,
             ignored,
             kind,
@@ -552,6 +558,7 @@ fn centre_crop(
     let out = GBuffer {
         width: edge,
         height: edge,
+        overscan: crate::gbuffer::Overscan::NONE,
         color: (0..n).map(|i| g.color[pick(i)]).collect(),
         depth: g
             .depth
@@ -808,7 +815,17 @@ fn fmt_psnr(psnr: f64) -> String {
 }
 
 /// Column names of the table (Markdown and CSV; the CSV adds `ignores`).
-pub const COLUMNS: [&str; 7] = ["scene", "method", "input", "spp", "ssim", "psnr", "ms"];
+pub const COLUMNS: [&str; 9] = [
+    "scene",
+    "method",
+    "input",
+    "spp",
+    "ssim",
+    "psnr",
+    "flip_mean",
+    "flip_p99",
+    "ms",
+];
 
 /// The CSV: [`COLUMNS`] plus `ignores` (the effects a method ignored, `;`-separated).
 pub fn csv(rows: &[StudyRow]) -> String {
@@ -816,13 +833,15 @@ pub fn csv(rows: &[StudyRow]) -> String {
     s.push_str(",ignores\n");
     for r in rows {
         s.push_str(&format!(
-            "{},{},{},{},{:.4},{},{},{}\n",
+            "{},{},{},{},{:.4},{},{:.4},{:.4},{},{}\n",
             r.scene,
             r.method,
             r.input,
             fmt_spp(r.spp),
             r.ssim,
             fmt_psnr(r.psnr),
+            r.flip_mean,
+            r.flip_p99,
             fmt_ms(r.ms),
             r.ignored.join(";")
         ));
@@ -848,8 +867,9 @@ pub fn markdown(report: &PeerStudyReport) -> String {
     s.push_str(&format!(
         "Built-in scenes at {0} x {0} px, references {1} spp (Latin hypercube), stochastic \
          frames {2} spp (lower counts are their first samples), seed {3}; shared Blender \
-         examples {4} against their 2048-spp Cycles references. SSIM and PSNR on sRGB values \
-         clamped to [0, 1]; ms: wall-clock time of the method alone on the CPU (renders, \
+         examples {4} against their 2048-spp Cycles references. SSIM, PSNR and FLIP (LDR, 67 \
+         px per degree; mean and 99th percentile, lower is better) on sRGB values clamped to \
+         [0, 1]; ms: wall-clock time of the method alone on the CPU (renders, \
          database loading and input conversion excluded; a shared machine, so rough). \
          † ignores the scene's motion blur, ‡ ignores its depth of field (run anyway).\n\n",
         c.size,
@@ -865,13 +885,15 @@ pub fn markdown(report: &PeerStudyReport) -> String {
     s.push_str(&format!("|{}\n", " --- |".repeat(COLUMNS.len())));
     for r in &report.rows {
         s.push_str(&format!(
-            "| {} | {} | {} | {} | {:.4} | {} | {} |\n",
+            "| {} | {} | {} | {} | {:.4} | {} | {:.4} | {:.4} | {} |\n",
             r.scene,
             method_label(r),
             r.input,
             fmt_spp(r.spp),
             r.ssim,
             fmt_psnr(r.psnr),
+            r.flip_mean,
+            r.flip_p99,
             fmt_ms(r.ms)
         ));
     }

@@ -22,7 +22,9 @@ use scene::StochasticFrames;
 
 use crate::camera::Camera;
 use crate::dbset::DbSet;
-use crate::pipeline::classify::{classify_fragments, resolve_model, ClassifyError, Fragment};
+use crate::pipeline::classify::{
+    classify_fragments, resolve_model, ClassifyError, DataWindow, Fragment,
+};
 use crate::pipeline::{Classified, Effects, PathCounts};
 use crate::rgba::RgbaImage;
 use crate::synth::{record_classified, render_classified, SynthOptions, SynthStats};
@@ -307,6 +309,7 @@ pub fn prepare(
         &fragments,
         frames.width,
         frames.height,
+        DataWindow::frame(frames.width, frames.height),
         camera,
         dbs,
         model,

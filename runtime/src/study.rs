@@ -106,6 +106,10 @@ pub struct StudyRow {
     pub ssim: f64,
     /// PSNR against the reference, dB.
     pub psnr: f64,
+    /// Mean FLIP error against the reference (lower is better).
+    pub flip_mean: f64,
+    /// 99th percentile of the FLIP error.
+    pub flip_p99: f64,
     /// Median total time of synthesis, ms (database loading excluded).
     pub ms: f64,
     /// Median classification time, ms (filter: the per-pixel PSF lookup).
@@ -480,13 +484,10 @@ fn median(mut v: Vec<f64>) -> f64 {
     }
 }
 
-fn score(image: &RgbaImage, reference: &RgbaImage) -> Result<(f64, f64)> {
+fn score(image: &RgbaImage, reference: &RgbaImage) -> Result<metrics::Scores> {
     let a: &[f32] = bytemuck::cast_slice(&image.pixels);
     let b: &[f32] = bytemuck::cast_slice(&reference.pixels);
-    Ok((
-        metrics::ssim_rgb(a, b, image.width, image.height)?,
-        metrics::psnr_rgb(a, b, image.width, image.height)?,
-    ))
+    Ok(metrics::score_rgb(a, b, image.width, image.height)?.0)
 }
 
 /// Per-run times: total, classify, splat, integrate, composite (ms).
@@ -500,7 +501,7 @@ fn time_row(
     counts: crate::pipeline::PathCounts,
     db_spreadlets: usize,
 ) -> Result<StudyRow> {
-    let (ssim, psnr) = score(image, reference)?;
+    let scores = score(image, reference)?;
     let col = |k: usize| median(times.iter().map(|t| t[k]).collect());
     let method = match (cfg.method, cfg.db.sparse_only) {
         (Method::Spreadlet, true) => "spreadlet-sparse",
@@ -511,8 +512,10 @@ fn time_row(
         knob: cfg.knob.clone(),
         value: cfg.value.clone(),
         backend: if cfg.gpu { "gpu" } else { "cpu" }.into(),
-        ssim,
-        psnr,
+        ssim: scores.ssim,
+        psnr: scores.psnr_db.unwrap_or(f64::INFINITY),
+        flip_mean: scores.flip_mean,
+        flip_p99: scores.flip_p99,
         ms: col(0),
         classify_ms: col(1),
         splat_ms: col(2),
@@ -879,19 +882,21 @@ pub fn run(options: &StudyOptions) -> Result<Vec<StudyRow>> {
         height: input.gbuffer.height,
         pixels: input.gbuffer.color.clone(),
     };
-    let (pinhole_ssim, _) = score(&pinhole, &input.reference)?;
+    let pinhole_ssim = score(&pinhole, &input.reference)?.ssim;
     write_outputs(&rows, options, &input.label, runs, elapsed, pinhole_ssim)?;
     Ok(rows)
 }
 
 /// The CSV columns, in order.
-pub const CSV_COLUMNS: [&str; 17] = [
+pub const CSV_COLUMNS: [&str; 19] = [
     "method",
     "knob",
     "value",
     "backend",
     "ssim",
     "psnr",
+    "flip_mean",
+    "flip_p99",
     "ms",
     "classify_ms",
     "splat_ms",
@@ -917,13 +922,15 @@ fn csv_text(rows: &[StudyRow]) -> String {
         };
         let _ = writeln!(
             s,
-            "{},{},{},{},{:.5},{:.3},{:.2},{:.2},{:.2},{:.2},{:.2},{},{},{},{},{},{}",
+            "{},{},{},{},{:.5},{:.3},{:.5},{:.5},{:.2},{:.2},{:.2},{:.2},{:.2},{},{},{},{},{},{}",
             r.method,
             r.knob,
             r.value,
             r.backend,
             r.ssim,
             r.psnr,
+            r.flip_mean,
+            r.flip_p99,
             r.ms,
             r.classify_ms,
             r.splat_ms,
@@ -1027,22 +1034,24 @@ fn markdown_text(
     let _ = writeln!(s, "\n## All configurations\n");
     let _ = writeln!(
         s,
-        "| method | knob | value | backend | SSIM | PSNR dB | ms | classify | splat | integrate | composite | sparse | dense | copied | Pareto |"
+        "| method | knob | value | backend | SSIM | PSNR dB | FLIP mean | FLIP p99 | ms | classify | splat | integrate | composite | sparse | dense | copied | Pareto |"
     );
     let _ = writeln!(
         s,
-        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
     );
     for r in rows {
         let _ = writeln!(
             s,
-            "| {} | {} | {} | {} | {:.4} | {:.2} | {:.0} | {:.0} | {:.0} | {:.0} | {:.0} | {} | {} | {} | {} |",
+            "| {} | {} | {} | {} | {:.4} | {:.2} | {:.4} | {:.4} | {:.0} | {:.0} | {:.0} | {:.0} | {:.0} | {} | {} | {} | {} |",
             r.method,
             r.knob,
             r.value.replace(';', "; "),
             r.backend,
             r.ssim,
             r.psnr,
+            r.flip_mean,
+            r.flip_p99,
             r.ms,
             r.classify_ms,
             r.splat_ms,

@@ -51,10 +51,14 @@ pub struct SynthStats {
     pub motion: bool,
     /// The models of the databases used (empty when nothing was simulated).
     pub models: Vec<&'static str>,
-    /// Image width, pixels.
+    /// Image width, pixels (the frame, without overscan).
     pub width: usize,
-    /// Image height, pixels.
+    /// Image height, pixels (the frame, without overscan).
     pub height: usize,
+    /// Pixels of the input beyond the frame on each side, used as real data.
+    pub overscan: crate::gbuffer::Overscan,
+    /// What was assumed beyond the input's pixels.
+    pub frame_edges: crate::pipeline::FrameEdges,
     /// Records per path (and dropped, clamped, split counts).
     pub counts: PathCounts,
     /// Layers requested.
@@ -96,8 +100,10 @@ pub fn prepare(
     let mut stats = SynthStats {
         defocus: effects.defocus,
         motion: effects.motion,
-        width: gbuffer.width,
-        height: gbuffer.height,
+        width: gbuffer.frame_width(),
+        height: gbuffer.frame_height(),
+        overscan: gbuffer.overscan,
+        frame_edges: options.classify.frame_edges,
         layers: options.classify.layers,
         integrator: options.integrator,
         ..SynthStats::default()
@@ -112,10 +118,11 @@ pub fn prepare(
             ..PathCounts::default()
         };
         stats.layers_used = 1;
+        let frame = gbuffer.frame_only();
         let image = RgbaImage {
-            width: gbuffer.width,
-            height: gbuffer.height,
-            pixels: gbuffer.color.clone(),
+            width: frame.width,
+            height: frame.height,
+            pixels: frame.color,
         };
         stats.times.classify_ms = ms_since(t);
         return Ok((Prepared::PassThrough(image), stats));

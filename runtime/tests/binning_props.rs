@@ -8,7 +8,7 @@ use proptest::prelude::*;
 use psf_db::{DatabaseBuilder, DbHeader, ParamSpace, PsfModel};
 use runtime::camera::Camera;
 use runtime::dbset::DbSet;
-use runtime::pipeline::classify::{classify_fragments, Fragment};
+use runtime::pipeline::classify::{classify_fragments, DataWindow, Fragment};
 use runtime::pipeline::{ClassifyOptions, PathCounts};
 
 fn camera(w: u32) -> Camera {
@@ -45,6 +45,7 @@ fn bin(
         fragments,
         n,
         1,
+        DataWindow::frame(n, 1),
         &camera(n as u32),
         &dbs(),
         Some(PsfModel::ThinLens),
@@ -54,8 +55,14 @@ fn bin(
     .expect("classify");
     let mut per = vec![Vec::new(); n];
     for r in &c.records {
-        let x = (r.center_x - c.frame.pad as i32) as usize;
-        per[x].push((r.layer, r.weight));
+        // Only the frame's own records: the extension beyond its edges repeats them.
+        let (x, y) = (
+            r.center_x - c.frame.pad as i32,
+            r.center_y - c.frame.pad as i32,
+        );
+        if y == 0 && (0..n as i32).contains(&x) {
+            per[x as usize].push((r.layer, r.weight));
+        }
     }
     (per, c)
 }

@@ -49,6 +49,20 @@ pub fn write_channels(
     channels: Vec<(String, Vec<f32>)>,
     text_attribute: Option<(&str, String)>,
 ) -> Result<()> {
+    write_channels_with_overscan(path, width, height, 0, channels, text_attribute)
+}
+
+/// [`write_channels`] for an image whose outer `overscan_px` pixels on every side lie outside
+/// the frame: the data window is `width x height` from `(-overscan_px, -overscan_px)`, the
+/// display window the inner frame from `(0, 0)`.
+pub fn write_channels_with_overscan(
+    path: &Path,
+    width: usize,
+    height: usize,
+    overscan_px: usize,
+    channels: Vec<(String, Vec<f32>)>,
+    text_attribute: Option<(&str, String)>,
+) -> Result<()> {
     let exr_error = |source| Error::Exr {
         path: path.to_path_buf(),
         source,
@@ -67,6 +81,11 @@ pub fn write_channels(
         list.push(AnyChannel::new(text, FlatSamples::F32(samples)));
     }
     let mut attributes = LayerAttributes::default();
+    let overscan = i32::try_from(overscan_px).map_err(|_| Error::Layout {
+        path: path.to_path_buf(),
+        message: format!("an overscan of {overscan_px} px does not fit the file format"),
+    })?;
+    attributes.layer_position = Vec2(-overscan, -overscan);
     if let Some((key, value)) = text_attribute {
         let key = Text::new_or_none(key);
         let value = Text::new_or_none(&value);
@@ -80,7 +99,14 @@ pub fn write_channels(
         Encoding::SMALL_LOSSLESS,
         AnyChannels::sort(list),
     );
-    let image = Image::from_layer(layer);
+    let mut image = Image::from_layer(layer);
+    image.attributes.display_window = IntegerBounds::new(
+        (0, 0),
+        (
+            width.saturating_sub(2 * overscan_px),
+            height.saturating_sub(2 * overscan_px),
+        ),
+    );
     let dir = match path.parent() {
         Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
         _ => std::path::PathBuf::from("."),

@@ -59,13 +59,30 @@ impl GBuffer {
 
     /// Writes the multilayer EXR (f32, ZIP) atomically.
     pub fn write_exr(&self, path: &Path) -> Result<()> {
+        self.write_exr_with_overscan(path, 0)
+    }
+
+    /// Writes the multilayer EXR (f32, ZIP) atomically, declaring the outer `overscan_px`
+    /// pixels on every side as overscan: the display window is the inner frame at (0, 0), the
+    /// data window starts at `(-overscan_px, -overscan_px)`, as renderers write overscan.
+    pub fn write_exr_with_overscan(&self, path: &Path, overscan_px: usize) -> Result<()> {
         let name = |pass: &str, c: &str| format!("{VIEW_LAYER}.{pass}.{c}");
         let color = |c: usize| self.color.iter().map(|p| p[c]).collect::<Vec<f32>>();
         let vector = |c: usize| self.vector.iter().map(|p| p[c]).collect::<Vec<f32>>();
-        exr_io::write_channels(
+        if 2 * overscan_px >= self.width.min(self.height) {
+            return Err(Error::Layout {
+                path: path.to_path_buf(),
+                message: format!(
+                    "an overscan of {overscan_px} px leaves no frame inside {}x{} pixels",
+                    self.width, self.height
+                ),
+            });
+        }
+        exr_io::write_channels_with_overscan(
             path,
             self.width,
             self.height,
+            overscan_px,
             vec![
                 (name("Combined", "R"), color(0)),
                 (name("Combined", "G"), color(1)),

@@ -264,6 +264,18 @@ impl Scene {
         self.with_camera_spec(spec)
     }
 
+    /// The same scene rendered `px` pixels further on every side (overscan): the pixel pitch
+    /// and the lens are kept and the sensor grows with the image, so pixel `(x + px, y + px)`
+    /// of the larger image is pixel `(x, y)` of this one.
+    pub fn with_overscan(&self, px: u32) -> Result<Self> {
+        let mut spec = self.camera.spec.clone();
+        let grown = spec.width + 2 * px;
+        spec.sensor_width_mm *= f64::from(grown) / f64::from(spec.width);
+        spec.width = grown;
+        spec.height += 2 * px;
+        self.with_camera_spec(spec)
+    }
+
     /// `camera.json` for this scene: the camera spec plus `"scene": name`.
     pub fn camera_json(&self) -> String {
         let mut value = serde_json::to_value(&self.camera.spec).unwrap_or(serde_json::Value::Null);

@@ -19,6 +19,7 @@
 
 use psf_db::{PsfDatabase, PsfModel};
 
+use super::splat::psf_reach;
 use super::types::{FrameParams, SplatPath, SplatRecord};
 use crate::camera::Camera;
 use crate::dbset::{DbSet, NO_TWIN};
@@ -87,6 +88,8 @@ pub struct ClassifyOptions {
     /// one exists: the spreadlets' small relative error would be scaled by the highlight.
     /// `f32::INFINITY` never does.
     pub hdr_dense_threshold: f32,
+    /// What lies beyond the input's pixels (see [`FrameEdges`]).
+    pub frame_edges: FrameEdges,
 }
 
 impl Default for ClassifyOptions {
@@ -98,6 +101,7 @@ impl Default for ClassifyOptions {
             copy_threshold_px: 0.5,
             pad_margin: 2,
             hdr_dense_threshold: 2.0,
+            frame_edges: FrameEdges::Extend,
         }
     }
 }
@@ -153,6 +157,9 @@ pub struct PathCounts {
     pub soft_split: usize,
     /// Fragments drawn with a dense twin because they are very bright (also in `dense`).
     pub hdr_dense: usize,
+    /// Records added beyond the input's outermost pixels ([`FrameEdges::Extend`]; also in the
+    /// path counts).
+    pub edge_extended: usize,
 }
 
 impl PathCounts {
@@ -231,14 +238,16 @@ pub struct Fragment {
     pub motion: [f32; 2],
 }
 
-/// Checks that the camera and the G-buffer agree about the image size.
+/// Checks that the camera and the G-buffer's frame (without its overscan) agree about the
+/// image size.
 pub fn classify_sizes(gbuffer: &GBuffer, camera: &Camera) -> Result<(), ClassifyError> {
-    if camera.width as usize != gbuffer.width || camera.height as usize != gbuffer.height {
+    let (fw, fh) = (gbuffer.frame_width(), gbuffer.frame_height());
+    if camera.width as usize != fw || camera.height as usize != fh {
         return Err(ClassifyError::SizeMismatch {
             cam_w: camera.width,
             cam_h: camera.height,
-            img_w: gbuffer.width,
-            img_h: gbuffer.height,
+            img_w: fw,
+            img_h: fh,
         });
     }
     Ok(())
@@ -254,6 +263,7 @@ pub fn classify(
 ) -> Result<Classified, ClassifyError> {
     let (w, h) = (gbuffer.width, gbuffer.height);
     classify_sizes(gbuffer, camera)?;
+    let overscan = gbuffer.overscan;
     if options.layers == 0 {
         return Err(ClassifyError::NoLayers);
     }
@@ -304,8 +314,8 @@ pub fn classify(
             }
             let d = depth_at(i);
             let own = Fragment {
-                x: x as i32,
-                y: y as i32,
+                x: x as i32 - overscan.left as i32,
+                y: y as i32 - overscan.top as i32,
                 color: c,
                 weight: 1.0,
                 parallax: parallax_of(d),
@@ -313,32 +323,104 @@ pub fn classify(
                 motion: motion_at(i),
             };
             let split = if options.edge_split && model.is_some() {
-                edge_split(gbuffer, x, y, &signed_coc, &depth_at)
+                edge_split(
+                    gbuffer,
+                    x,
+                    y,
+                    &signed_coc,
+                    &depth_at,
+                    options.hdr_dense_threshold,
+                )
             } else {
                 None
             };
             match split {
-                Some((alpha, j)) => {
+                Some(split) => {
                     counts.edge_split += 1;
+                    let (j, o) = (split.foreground, split.background);
                     let dj = depth_at(j);
                     fragments.push(Fragment {
-                        weight: alpha,
+                        color: split.foreground_color,
+                        weight: split.alpha,
                         parallax: parallax_of(dj),
                         depth: dj,
                         motion: motion_at(j),
                         ..own
                     });
-                    fragments.push(Fragment {
-                        weight: 1.0 - alpha,
-                        ..own
-                    });
+                    if split.alpha < 1.0 {
+                        // The background part keeps this pixel's depth (the depth pass is not
+                        // anti-aliased) but not its motion, which the vector pass blends.
+                        fragments.push(Fragment {
+                            color: split.background_color,
+                            weight: 1.0 - split.alpha,
+                            motion: motion_at(o),
+                            ..own
+                        });
+                    }
                 }
                 None => fragments.push(own),
             }
         }
     }
 
-    classify_fragments(&fragments, w, h, camera, dbs, model, options, counts)
+    let data = DataWindow {
+        x0: -(overscan.left as i32),
+        y0: -(overscan.top as i32),
+        x1: (w - overscan.left) as i32 - 1,
+        y1: (h - overscan.top) as i32 - 1,
+    };
+    classify_fragments(
+        &fragments,
+        gbuffer.frame_width(),
+        gbuffer.frame_height(),
+        data,
+        camera,
+        dbs,
+        model,
+        options,
+        counts,
+    )
+}
+
+/// The pixels an input holds, in frame coordinates (inclusive bounds): the frame
+/// `[0, w) x [0, h)` itself, or more where the input has overscan.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct DataWindow {
+    /// Leftmost column, pixels (0, or negative with overscan).
+    pub x0: i32,
+    /// Top row, pixels.
+    pub y0: i32,
+    /// Rightmost column, pixels (`w - 1`, or more with overscan).
+    pub x1: i32,
+    /// Bottom row, pixels.
+    pub y1: i32,
+}
+
+impl DataWindow {
+    /// The frame `w x h` and nothing beyond it.
+    pub fn frame(w: usize, h: usize) -> Self {
+        DataWindow {
+            x0: 0,
+            y0: 0,
+            x1: w as i32 - 1,
+            y1: h as i32 - 1,
+        }
+    }
+}
+
+/// What lies beyond the input's pixels, where a blurred frame's border gathers light from.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum FrameEdges {
+    /// The input continues beyond its outermost pixels as they are (clamp to edge, as a
+    /// compositor's gather filter reads it): each outermost pixel is also splatted from the
+    /// positions outside the input that clamp to it, as far as its PSF reaches into the
+    /// frame. A blurred wall keeps its brightness up to the frame's edge.
+    #[default]
+    Extend,
+    /// Nothing beyond the input (black): the border of a blurred frame loses up to half its
+    /// light. Kept for comparison.
+    Black,
 }
 
 /// The model that drives the lookups for `effects`: lens-motion or physical-lens from
@@ -372,13 +454,16 @@ pub fn resolve_model(effects: Effects, dbs: &DbSet) -> Result<Option<PsfModel>, 
 }
 
 /// Layers fragments and turns them into splat records: the nearest PSF of each (O(1) through
-/// the nested grid), its rotation, its drawing path, and its layer(s). `model` comes from
+/// the nested grid), its rotation, its drawing path, and its layer(s). `w x h` is the frame
+/// (the output); fragments are in frame coordinates and may lie outside it, within `data`
+/// (overscan). Beyond `data`, [`ClassifyOptions::frame_edges`] decides. `model` comes from
 /// [`resolve_model`]; `counts` carries what the caller already counted (dropped, edge splits).
 #[allow(clippy::too_many_arguments)]
 pub fn classify_fragments(
     fragments: &[Fragment],
     w: usize,
     h: usize,
+    data: DataWindow,
     camera: &Camera,
     dbs: &DbSet,
     model: Option<PsfModel>,
@@ -414,10 +499,6 @@ pub fn classify_fragments(
             0.0
         }
     };
-
-    let pad = combined.map_or(0, |d| d.max_extent_px()) + options.pad_margin;
-    let padded_width = w as u32 + 2 * pad;
-    let padded_height = h as u32 + 2 * pad;
 
     // Records per layer, then concatenated (deterministic order).
     let mut per_layer: Vec<Vec<SplatRecord>> = vec![Vec::new(); n_layers];
@@ -511,9 +592,10 @@ pub fn classify_fragments(
         }
         for &(layer, lw) in &targets[..n_targets] {
             let weight = frag.weight * lw;
+            // Frame coordinates for now; shifted by the padding once it is known.
             per_layer[layer].push(SplatRecord {
-                center_x: x + pad as i32,
-                center_y: y + pad as i32,
+                center_x: x,
+                center_y: y,
                 psf_index,
                 layer: layer as u32,
                 rot_cos,
@@ -523,6 +605,52 @@ pub fn classify_fragments(
                 color: color.map(|v| v * weight),
             });
         }
+    }
+
+    // Beyond the data: records of the outermost pixels, repeated outwards (or nothing).
+    let reach: Vec<i32> = combined.map_or_else(Vec::new, psf_reach);
+    let reach_of = |r: &SplatRecord| -> i32 {
+        if r.path == SplatPath::Copy as u32 {
+            0
+        } else {
+            reach.get(r.psf_index as usize).copied().unwrap_or(0)
+        }
+    };
+    let frame = DataWindow::frame(w, h);
+    for recs in &mut per_layer {
+        // Overscan pixels whose PSF cannot reach the frame add nothing to the output.
+        recs.retain(|r| distance_to(frame, r.center_x, r.center_y) <= reach_of(r) as f32);
+        if options.frame_edges == FrameEdges::Extend {
+            let extended = extend_beyond(recs, data, frame, &reach_of);
+            if !extended.is_empty() {
+                counts.edge_extended += extended.len();
+                recs.extend(extended);
+                // Row order within the layer (the splat visits bands of rows); stable, so the
+                // records inside the data keep their order.
+                recs.sort_by_key(|r| (r.center_y, r.center_x));
+            }
+        }
+    }
+    // Padding: every PSF, wherever its centre lies, must fit inside the padded layer.
+    let beyond = per_layer
+        .iter()
+        .flatten()
+        .map(|r| {
+            let ox = (-r.center_x).max(r.center_x - (w as i32 - 1)).max(0);
+            let oy = (-r.center_y).max(r.center_y - (h as i32 - 1)).max(0);
+            ox.max(oy) + reach_of(r)
+        })
+        .max()
+        .unwrap_or(0);
+    let pad = combined
+        .map_or(0, |d| d.max_extent_px())
+        .max(beyond.max(0) as u32)
+        + options.pad_margin;
+    let padded_width = w as u32 + 2 * pad;
+    let padded_height = h as u32 + 2 * pad;
+    for r in per_layer.iter_mut().flatten() {
+        r.center_x += pad as i32;
+        r.center_y += pad as i32;
     }
 
     let mut records = Vec::with_capacity(per_layer.iter().map(Vec::len).sum());
@@ -558,6 +686,59 @@ pub fn classify_fragments(
     })
 }
 
+/// Euclidean distance (pixels) from pixel `(x, y)` to the nearest pixel of `window`; 0 inside.
+fn distance_to(window: DataWindow, x: i32, y: i32) -> f32 {
+    let dx = (window.x0 - x).max(x - window.x1).max(0) as f32;
+    let dy = (window.y0 - y).max(y - window.y1).max(0) as f32;
+    (dx * dx + dy * dy).sqrt()
+}
+
+/// Copies of the records on the border of `data` at every position outside it that clamps to
+/// their pixel (to the side, and into the corner's quadrant), as far as each record's PSF
+/// reaches into `frame` (`reach_of`, pixels). `records` are in frame coordinates.
+fn extend_beyond(
+    records: &[SplatRecord],
+    data: DataWindow,
+    frame: DataWindow,
+    reach_of: &dyn Fn(&SplatRecord) -> i32,
+) -> Vec<SplatRecord> {
+    let mut out = Vec::new();
+    for r in records {
+        let (x, y) = (r.center_x, r.center_y);
+        let on_x = x == data.x0 || x == data.x1;
+        let on_y = y == data.y0 || y == data.y1;
+        if !(on_x || on_y) {
+            continue;
+        }
+        let reach = reach_of(r);
+        if reach <= 0 {
+            continue;
+        }
+        let xs = (
+            if x == data.x0 { x - reach } else { x },
+            if x == data.x1 { x + reach } else { x },
+        );
+        let ys = (
+            if y == data.y0 { y - reach } else { y },
+            if y == data.y1 { y + reach } else { y },
+        );
+        for cy in ys.0..=ys.1 {
+            for cx in xs.0..=xs.1 {
+                let inside_data = cx >= data.x0 && cx <= data.x1 && cy >= data.y0 && cy <= data.y1;
+                if inside_data || distance_to(frame, cx, cy) > reach as f32 {
+                    continue;
+                }
+                out.push(SplatRecord {
+                    center_x: cx,
+                    center_y: cy,
+                    ..*r
+                });
+            }
+        }
+    }
+    out
+}
+
 fn path_of(db: &PsfDatabase, idx: u32) -> SplatPath {
     if db.dense(idx as usize).is_some() {
         SplatPath::Dense
@@ -566,28 +747,60 @@ fn path_of(db: &PsfDatabase, idx: u32) -> SplatPath {
     }
 }
 
-/// The foreground fraction of an edge pixel and the index of its foreground neighbour, when
-/// the pixel at `(x, y)` has a neighbour whose CoC differs by more than a pixel towards the
-/// viewer (nearer) and whose colour explains part of this pixel's colour.
+/// How an anti-aliased edge pixel divides between a nearer foreground and its background.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct EdgeSplit {
+    /// Foreground coverage of the pixel, in (0, 1].
+    alpha: f32,
+    /// The foreground neighbour whose depth and motion the foreground part takes.
+    foreground: usize,
+    /// The background neighbour whose depth and motion the background part takes.
+    background: usize,
+    /// The foreground part's colour (premultiplied, before `alpha`).
+    foreground_color: [f32; 4],
+    /// The background part's colour (before `1 - alpha`).
+    background_color: [f32; 4],
+}
+
+/// Splits the pixel at `(x, y)` when a neighbour whose CoC differs by more than a pixel lies
+/// nearer the viewer and its colour explains part of this pixel's: the pixel's colour `c` is
+/// taken as `alpha f + (1 - alpha) b`, with `b` the background seen on the far side of the
+/// pixel and `alpha` the projection of `c` onto the segment from `b` to the foreground's
+/// colour. The foreground part carries `c - (1 - alpha) b` and the background part `b`, so the
+/// two add up to `c` and none of the foreground's light is blurred as background (a bright
+/// emitter's anti-aliased rim would otherwise glow with the background's blur). Neighbours two
+/// pixels away count too when they are brighter than `hdr_threshold`: a renderer's pixel
+/// filter spreads an HDR highlight's light that far.
 fn edge_split(
     g: &GBuffer,
     x: usize,
     y: usize,
     signed_coc: &dyn Fn(f32) -> f32,
     depth_at: &dyn Fn(usize) -> f32,
-) -> Option<(f32, usize)> {
-    let (w, h) = (g.width, g.height);
-    let i = y * w + x;
+    hdr_threshold: f32,
+) -> Option<EdgeSplit> {
+    let (w, h) = (g.width as i32, g.height as i32);
+    let (xi, yi) = (x as i32, y as i32);
+    let index = |px: i32, py: i32| -> Option<usize> {
+        (px >= 0 && py >= 0 && px < w && py < h).then(|| py as usize * w as usize + px as usize)
+    };
+    let i = index(xi, yi)?;
     let d = depth_at(i);
-    // The nearest neighbour in the 3x3 window.
+    let bright = |c: [f32; 4]| c[..3].iter().any(|&v| v > hdr_threshold);
+    // The nearest neighbour in the 3x3 window, or a bright one in the 5x5 window.
     let mut best: Option<(usize, i32, i32, f32)> = None;
-    for dy in -1i32..=1 {
-        for dx in -1i32..=1 {
-            let (nx, ny) = (x as i32 + dx, y as i32 + dy);
-            if (dx == 0 && dy == 0) || nx < 0 || ny < 0 || nx >= w as i32 || ny >= h as i32 {
+    for dy in -2i32..=2 {
+        for dx in -2i32..=2 {
+            if dx == 0 && dy == 0 {
                 continue;
             }
-            let j = ny as usize * w + nx as usize;
+            let Some(j) = index(xi + dx, yi + dy) else {
+                continue;
+            };
+            let outer = dx.abs() == 2 || dy.abs() == 2;
+            if outer && !bright(g.color[j]) {
+                continue;
+            }
             let dj = depth_at(j);
             if dj < best.map_or(d, |b| b.3) {
                 best = Some((j, dx, dy, dj));
@@ -601,18 +814,29 @@ fn edge_split(
     if coc_gap < 1.0 && !(signed_coc(d) == 0.0 && dj < 0.8 * d) {
         return None;
     }
-    // Background colour: the pixel opposite the foreground neighbour, if it is background-like
-    // (depth close to this pixel's), else none (no split).
-    let (ox, oy) = (x as i32 - dx, y as i32 - dy);
-    if ox < 0 || oy < 0 || ox >= w as i32 || oy >= h as i32 {
-        return None;
+    // Background: on the far side of the pixel from the foreground, one or two pixels away,
+    // whichever lies farther from the foreground's colour (the nearer one may still carry
+    // some of a bright foreground's light); only background-like depths count.
+    let (sx, sy) = (dx.signum(), dy.signum());
+    let cf = g.color[j];
+    let distance_to_foreground =
+        |c: [f32; 4]| -> f32 { (0..3).map(|k| (c[k] - cf[k]) * (c[k] - cf[k])).sum() };
+    let mut background: Option<usize> = None;
+    for step in 1..=2 {
+        let Some(o) = index(xi - sx * step, yi - sy * step) else {
+            break;
+        };
+        if (signed_coc(depth_at(o)) - signed_coc(d)).abs() > 0.5 * coc_gap.max(1.0) {
+            break;
+        }
+        if background
+            .is_none_or(|b| distance_to_foreground(g.color[o]) > distance_to_foreground(g.color[b]))
+        {
+            background = Some(o);
+        }
     }
-    let o = oy as usize * w + ox as usize;
-    let dob = depth_at(o);
-    if (signed_coc(dob) - signed_coc(d)).abs() > 0.5 * coc_gap.max(1.0) {
-        return None;
-    }
-    let (cp, cf, cb) = (g.color[i], g.color[j], g.color[o]);
+    let o = background?;
+    let (cp, cb) = (g.color[i], g.color[o]);
     let mut num = 0.0f32;
     let mut den = 0.0f32;
     for c in 0..3 {
@@ -629,10 +853,22 @@ fn edge_split(
         return None;
     }
     let alpha = (num / den).clamp(0.0, 1.0);
-    if alpha < 0.02 {
+    // Too little foreground light to matter: 2 % of the brighter of display white and the
+    // background.
+    let foreground_peak = cf[..3].iter().fold(0.0f32, |m, &v| m.max(v));
+    let background_peak = cb[..3].iter().fold(1.0f32, |m, &v| m.max(v));
+    if alpha <= 0.0 || alpha * foreground_peak < 0.02 * background_peak {
         return None;
     }
-    Some((alpha, j))
+    let foreground_color =
+        std::array::from_fn(|k| ((cp[k] - (1.0 - alpha) * cb[k]) / alpha).max(0.0));
+    Some(EdgeSplit {
+        alpha,
+        foreground: j,
+        background: o,
+        foreground_color,
+        background_color: cb,
+    })
 }
 
 #[cfg(test)]
@@ -728,7 +964,12 @@ mod tests {
         let c = classify(&g, &camera(n as u32, 1, true, 0.0), &dbs, &opts).expect("c");
         let mut sums = vec![0.0f32; n];
         for r in &c.records {
-            sums[(r.center_x as u32 - c.frame.pad) as usize] += r.weight;
+            // Records beyond the frame repeat its outermost pixels (frame edges extended).
+            let x = r.center_x - c.frame.pad as i32;
+            let y = r.center_y - c.frame.pad as i32;
+            if (0..n as i32).contains(&x) && y == 0 {
+                sums[x as usize] += r.weight;
+            }
         }
         for s in sums {
             assert!((s - 1.0).abs() < 1e-6, "{s}");

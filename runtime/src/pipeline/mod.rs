@@ -14,7 +14,9 @@ pub mod integrate;
 pub mod splat;
 pub mod types;
 
-pub use classify::{classify, Classified, ClassifyOptions, Effects, LayerInfo, PathCounts};
+pub use classify::{
+    classify, Classified, ClassifyOptions, DataWindow, Effects, FrameEdges, LayerInfo, PathCounts,
+};
 pub use composite::{composite, CompositeOptions};
 pub use integrate::{integrate, IntegratedLayers, Integrator};
 pub use splat::{splat, LayerStack, RotationSampling, SplatOptions};

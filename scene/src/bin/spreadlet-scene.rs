@@ -61,6 +61,10 @@ struct RenderArgs {
     /// Anti-aliasing samples per pixel of the G-buffer's colour.
     #[arg(long, default_value_t = 16)]
     aa: usize,
+    /// Render the G-buffer this many pixels further on every side and declare them overscan
+    /// (data window larger than the display window); the other outputs keep the frame.
+    #[arg(long, default_value_t = 0)]
+    overscan: u32,
     /// Stochastic frames EXR (docs/STOCHASTIC.md).
     #[arg(long)]
     stochastic: Option<PathBuf>,
@@ -153,8 +157,8 @@ fn render(args: RenderArgs) -> Result<()> {
     }
     if let Some(path) = &args.gbuffer {
         let start = Instant::now();
-        let gbuffer = render_gbuffer(&scene, args.aa, &options)?;
-        gbuffer.write_exr(path)?;
+        let gbuffer = render_gbuffer(&scene.with_overscan(args.overscan)?, args.aa, &options)?;
+        gbuffer.write_exr_with_overscan(path, args.overscan as usize)?;
         if args.png {
             gbuffer.color_image().write_png(&png_beside(path))?;
         }
