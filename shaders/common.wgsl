@@ -140,3 +140,41 @@ struct KernelEntry {
     origin_y: i32,
     _pad: u32,
 }
+
+// The screen tiles of the tiled splat stage (twin of runtime::gpu::layout::TileGrid, 16 bytes):
+// tile (tx, ty) of chunk layer l is index (l * tiles_y + ty) * tiles_x + tx and covers padded-
+// layer pixels [16 tx, 16 tx + 16) x [16 ty, 16 ty + 16).
+struct TileGrid {
+    tiles_x: u32,
+    tiles_y: u32,
+    tile_count: u32,
+    entry_capacity: u32,
+}
+
+// Where one PSF part's samples can land and how large they are (twin of
+// runtime::gpu::layout::PsfFootprint, 32 bytes); index 2 psf (sparse) and 2 psf + 1 (dense).
+struct PsfFootprint {
+    min_x: i32,
+    min_y: i32,
+    max_x: i32,
+    max_y: i32,
+    radius: i32,
+    stack: u32,
+    max_abs: f32,
+    l1: f32,
+}
+
+// Edge of a splat tile, px (runtime::gpu::tiles::SPLAT_TILE).
+const SPLAT_TILE: u32 = 16u;
+
+// Parameters of a micro-benchmark pass (twin of runtime::gpu::layout::MicroParams, 16 bytes).
+struct MicroParams {
+    // Elements of the buffers (vec4 for the copy, f32 for the atomics).
+    elements: u32,
+    // Operations per invocation.
+    iterations: u32,
+    // Address mask of the atomic targets (a power of two minus one).
+    mask: u32,
+    // Invocations per row of workgroups (the grid is 2D beyond 65535 workgroups).
+    row: u32,
+}

@@ -1,11 +1,10 @@
-// Splatting (mirror of runtime::pipeline::splat): each workgroup of 64 invocations takes
-// 64 / LANES records, LANES invocations per record striding over the record's spreadlets
-// (sparse path, into the Laplacian planes) or dense PSF pixels / copied colour (`dense.wgsl`, into the direct planes). Accumulation is atomic
-// (`atomic_f32.wgsl` or `atomic_cas.wgsl`, prepended), so the sum order, unlike the CPU's, is
-// not fixed: results agree to float rounding.
+// Splatting (mirror of runtime::pipeline::splat): where a record's spreadlets (sparse path,
+// into the Laplacian planes) and dense PSF pixels (`dense.wgsl`, into the direct planes) land.
+// Shared by both accumulation schemes, which supply `add_rgba(to_laplacian, layer, x, y, v)`:
+// global atomics (`splat_global.wgsl`) or per-tile sums in workgroup memory
+// (`splat_tiled.wgsl`). LANES invocations share one record, striding over its samples.
 
-const GROUP: u32 = 64u;
-// Invocations per record (a power of two dividing GROUP; set from Rust).
+// Invocations per record (a power of two dividing the workgroup; set from Rust).
 override LANES: u32 = 8u;
 
 @group(0) @binding(0) var<uniform> frame: FrameParams;
@@ -44,25 +43,6 @@ fn weighted(color: vec4<f32>, data_index: u32, from_dense: bool) -> vec4<f32> {
         v = values[data_index];
     }
     return color * v;
-}
-
-// Adds `v` at padded-layer pixel (x, y) of `layer` (dropped outside the padded layer).
-fn add_rgba(to_laplacian: bool, layer: u32, x: i32, y: i32, v: vec4<f32>) {
-    if x < 0 || y < 0 || x >= i32(frame.padded_width) || y >= i32(frame.padded_height) {
-        return;
-    }
-    for (var c = 0u; c < 4u; c++) {
-        if v[c] == 0.0 {
-            continue;
-        }
-        if to_laplacian {
-            let s = targets.laplacian;
-            let b = targets.border;
-            add_laplacian(plane_index(s, layer * 4u + c, u32(x) + b, u32(y) + b), v[c]);
-        } else {
-            add_direct(plane_index(targets.direct, layer * 4u + c, u32(x), u32(y)), v[c]);
-        }
-    }
 }
 
 // runtime::pipeline::splat::quadratic_bspline_weights: pixels n - 1, n, n + 1 for a point at
@@ -135,39 +115,5 @@ fn draw_sparse(r: SplatRecord, lane: u32) {
         let p = positions[k];
         let v = weighted(r.color, k * targets.channels, false);
         place(true, r, unpack_i16_lo(p), unpack_i16_hi(p), v);
-    }
-}
-
-@compute @workgroup_size(64, 1, 1)
-fn splat_records(
-    @builtin(workgroup_id) wid: vec3<u32>,
-    @builtin(num_workgroups) groups: vec3<u32>,
-    @builtin(local_invocation_index) local: u32,
-) {
-    let i = (wid.y * groups.x + wid.x) * (GROUP / LANES) + local / LANES;
-    let lane = local % LANES;
-    if i >= frame.record_count {
-        return;
-    }
-    var r = records[i];
-    if r.layer >= frame.layers || r.layer < targets.layer_base
-        || r.layer - targets.layer_base >= targets.layer_count {
-        return;
-    }
-    // From here on, the layer within this chunk.
-    r.layer -= targets.layer_base;
-    if r.path == PATH_COPY {
-        if lane == 0u {
-            add_rgba(false, r.layer, r.center_x, r.center_y, r.color);
-        }
-        return;
-    }
-    if r.psf_index >= targets.psf_count {
-        return;
-    }
-    if r.path == PATH_SPARSE {
-        draw_sparse(r, lane);
-    } else if r.path == PATH_DENSE {
-        draw_dense(r, lane);
     }
 }

@@ -34,6 +34,8 @@ pub struct BenchConfig {
     pub gpu: bool,
     /// Placement of rotated spreadlets.
     pub rotation: RotationSampling,
+    /// The GPU path splats with global atomics instead of the tiled stage.
+    pub global_atomic_splat: bool,
 }
 
 impl Default for BenchConfig {
@@ -46,6 +48,7 @@ impl Default for BenchConfig {
             cpu: true,
             rotation: RotationSampling::default(),
             gpu: true,
+            global_atomic_splat: false,
         }
     }
 }
@@ -102,6 +105,29 @@ pub enum BenchError {
 /// A synthetic `size x size` frame for `db` (see the module doc), as `pipeline::classify`
 /// would give it: records sorted by layer, then row, then column.
 pub fn synthetic_frame(db: &PsfDatabase, size: u32, layers: u32) -> Classified {
+    scene_frame(db, Scene::Defocus, size, size, layers)
+}
+
+/// What a synthetic frame blurs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+pub enum Scene {
+    /// Defocus over the database's whole first dimension (CoC), and its second (motion) where
+    /// it has one: a thin-lens database gives thin lens, a lens-motion one lens and motion.
+    Defocus,
+    /// Motion only: every pixel in focus (the smallest CoC), motion over the database's
+    /// whole second dimension (a lens-motion database).
+    MotionOnly,
+}
+
+/// A synthetic `width x height` frame for `db` (see the module doc), as `pipeline::classify`
+/// would give it: records sorted by layer, then row, then column.
+pub fn scene_frame(
+    db: &PsfDatabase,
+    scene: Scene,
+    width: u32,
+    height: u32,
+    layers: u32,
+) -> Classified {
     let layers = layers.max(1);
     let dims = db.space().dims();
     let range = |i: usize| {
@@ -111,19 +137,23 @@ pub fn synthetic_frame(db: &PsfDatabase, size: u32, layers: u32) -> Classified {
     let (s0_min, s0_max) = range(0);
     let (s1_min, s1_max) = range(1);
     let pad = db.max_extent_px() + 2;
-    let n = size as usize;
+    let (nx, ny) = (width as usize, height as usize);
     let mut per_layer: Vec<Vec<SplatRecord>> = vec![Vec::new(); layers as usize];
-    for y in 0..n {
-        for x in 0..n {
-            let (u, v) = (x as f32 / n as f32, y as f32 / n as f32);
+    for y in 0..ny {
+        for x in 0..nx {
+            let (u, v) = (x as f32 / nx as f32, y as f32 / ny as f32);
             // Depth ramp top to bottom; the focus band is in the middle third.
             let depth = v;
-            let defocus = ((depth - 0.5).abs() * 2.0 - 0.15).max(0.0) / 0.85;
+            let defocus = match scene {
+                Scene::Defocus => ((depth - 0.5).abs() * 2.0 - 0.15).max(0.0) / 0.85,
+                Scene::MotionOnly => 0.0,
+            };
             let wobble = 0.5 + 0.5 * (9.0 * u).sin() * (7.0 * v).cos();
             let s0 = s0_min + (s0_max - s0_min) * defocus * (0.6 + 0.4 * wobble);
             let s1 = s1_min + (s1_max - s1_min) * wobble * u;
             let (psf, _) = db.lookup([s0, s1]);
-            let in_focus = defocus == 0.0 && (s1_max <= s1_min || wobble * u < 0.02);
+            let still = s1_max <= s1_min || wobble * u < 0.02;
+            let in_focus = defocus == 0.0 && still;
             let path = if in_focus {
                 SplatPath::Copy
             } else if db.dense(psf as usize).is_some() {
@@ -151,7 +181,7 @@ pub fn synthetic_frame(db: &PsfDatabase, size: u32, layers: u32) -> Classified {
             });
         }
     }
-    let mut records = Vec::with_capacity(n * n);
+    let mut records = Vec::with_capacity(nx * ny);
     let mut infos = Vec::with_capacity(layers as usize);
     let mut counts = PathCounts::default();
     for recs in per_layer {
@@ -167,12 +197,12 @@ pub fn synthetic_frame(db: &PsfDatabase, size: u32, layers: u32) -> Classified {
     }
     Classified {
         frame: FrameParams {
-            width: size,
-            height: size,
+            width,
+            height,
             pad,
             layers,
-            padded_width: size + 2 * pad,
-            padded_height: size + 2 * pad,
+            padded_width: width + 2 * pad,
+            padded_height: height + 2 * pad,
             record_count: records.len() as u32,
             db_channels: db.channels() as u32,
         },
@@ -279,6 +309,11 @@ pub fn run_bench(db: &PsfDatabase, config: &BenchConfig) -> Result<BenchReport, 
                 db,
                 crate::gpu::GpuSynthOptions {
                     rotation: config.rotation,
+                    splat: if config.global_atomic_splat {
+                        crate::gpu::SplatMode::GlobalAtomic
+                    } else {
+                        crate::gpu::SplatMode::Tiled
+                    },
                     ..Default::default()
                 },
             )?),

@@ -6,7 +6,8 @@ use std::mem::{offset_of, size_of};
 
 use psf_db::DenseEntry;
 use runtime::gpu::layout::{
-    FilterParams, FilterPixel, KernelEntry, PassParams, PlaneSet, SplatTargets,
+    FilterParams, FilterPixel, KernelEntry, MicroParams, PassParams, PlaneSet, PsfFootprint,
+    SplatTargets, TileGrid,
 };
 use runtime::pipeline::types::{FrameParams, SplatRecord};
 
@@ -37,6 +38,9 @@ fn module() -> naga::Module {
         "@group(0) @binding(5) var<uniform> f: FilterParams;\n",
         "@group(0) @binding(6) var<storage> g: array<FilterPixel>;\n",
         "@group(0) @binding(7) var<storage> h: array<KernelEntry>;\n",
+        "@group(0) @binding(8) var<uniform> i: TileGrid;\n",
+        "@group(0) @binding(9) var<storage> j: array<PsfFootprint>;\n",
+        "@group(0) @binding(10) var<uniform> k: MicroParams;\n",
     );
     naga::front::wgsl::parse_str(src).expect("common.wgsl parses")
 }
@@ -90,6 +94,32 @@ fn wgsl_structs_match_rust() {
         offset => "offset", width => "width", height => "height", origin_x => "origin_x",
         origin_y => "origin_y", _pad => "_pad",
     ]);
+    check!(m, TileGrid, "TileGrid", [
+        tiles_x => "tiles_x", tiles_y => "tiles_y", tile_count => "tile_count",
+        entry_capacity => "entry_capacity",
+    ]);
+    check!(m, PsfFootprint, "PsfFootprint", [
+        min_x => "min_x", min_y => "min_y", max_x => "max_x", max_y => "max_y",
+        radius => "radius", stack => "stack", max_abs => "max_abs", l1 => "l1",
+    ]);
+    check!(m, MicroParams, "MicroParams", [
+        elements => "elements", iterations => "iterations", mask => "mask", row => "row",
+    ]);
+}
+
+/// The tile edge and the tile state's width agree between Rust and WGSL.
+#[test]
+fn tile_constants_match_the_shaders() {
+    let common = include_str!("../../shaders/common.wgsl");
+    assert!(common.contains(&format!(
+        "const SPLAT_TILE: u32 = {}u;",
+        runtime::gpu::tiles::SPLAT_TILE
+    )));
+    let bin = include_str!("../../shaders/bin.wgsl");
+    assert!(bin.contains(&format!(
+        "const TILE_META: u32 = {}u;",
+        runtime::gpu::tiles::TILE_META_WORDS
+    )));
 }
 
 #[test]

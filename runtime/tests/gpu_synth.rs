@@ -1,6 +1,7 @@
 //! The GPU pipeline matches the CPU path (`runtime::pipeline`) stage by stage on synthetic
 //! record lists: single pixels, every PSF model, image borders, many overlapping splats,
-//! rotations, both atomic paths and both integrators.
+//! rotations, both splat stages (tiled, global atomics), both atomic paths and both
+//! integrators; the tiled stage's fixed point against a near worst case of its bound.
 #![cfg(feature = "gpu")]
 
 mod gpu_support;
@@ -12,7 +13,8 @@ use poisson::Plane;
 use psf_db::{DatabaseBuilder, DbHeader, ParamSpace, PsfDatabase, PsfModel};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use runtime::gpu::{AtomicMode, GpuSynthOptions, GpuSynthesizer};
+use runtime::gpu::tiles::{self, BinSetup};
+use runtime::gpu::{AtomicMode, GpuSynthOptions, GpuSynthesizer, SplatMode};
 use runtime::pipeline::types::{FrameParams, SplatPath, SplatRecord};
 use runtime::pipeline::{
     composite, integrate, splat, Classified, CompositeOptions, Integrator, LayerInfo, PathCounts,
@@ -338,13 +340,25 @@ fn check_case(
     (ssim, d)
 }
 
-fn options(atomics: AtomicMode, rotation: RotationSampling) -> GpuSynthOptions {
+fn options(
+    (splat, atomics): (SplatMode, AtomicMode),
+    rotation: RotationSampling,
+) -> GpuSynthOptions {
     GpuSynthOptions {
         atomics,
         rotation,
+        splat,
         ..GpuSynthOptions::default()
     }
 }
+
+/// The splat variants: tiled, and global atomics with float atomics (where the device has
+/// them) and with compare-exchange.
+const SPLATS: [(SplatMode, AtomicMode); 3] = [
+    (SplatMode::Tiled, AtomicMode::Auto),
+    (SplatMode::GlobalAtomic, AtomicMode::Auto),
+    (SplatMode::GlobalAtomic, AtomicMode::CompareExchange),
+];
 
 #[test]
 fn single_pixels_every_hand_model_both_atomic_paths() {
@@ -365,14 +379,14 @@ fn single_pixels_every_hand_model_both_atomic_paths() {
             };
             let recs = vec![record(20, 18, psf, 0, 0.0, path, [0.9, 0.5, 0.2, 1.0])];
             let c = classified(24, 20, 8, 1, recs);
-            for atomics in [AtomicMode::Auto, AtomicMode::CompareExchange] {
-                let name = format!("{model:?} psf {psf} {atomics:?}");
+            for splat in SPLATS {
+                let name = format!("{model:?} psf {psf} {splat:?}");
                 check_case(
                     &name,
                     Some(&db),
                     &c,
                     Integrator::Pyramid,
-                    options(atomics, RotationSampling::Bilinear),
+                    options(splat, RotationSampling::Bilinear),
                 );
             }
         }
@@ -414,22 +428,27 @@ fn borders_rotations_and_overlaps_hand_databases() {
             ));
         }
         let c = classified(geometry.0, geometry.1, geometry.2, geometry.3, recs);
-        for rotation in [RotationSampling::Bilinear, RotationSampling::Nearest] {
-            for atomics in [AtomicMode::Auto, AtomicMode::CompareExchange] {
-                let name = format!("{model:?} overlaps {rotation:?} {atomics:?}");
+        for rotation in [
+            RotationSampling::Bilinear,
+            RotationSampling::Nearest,
+            RotationSampling::Bspline,
+        ] {
+            for splat in SPLATS {
+                let name = format!("{model:?} overlaps {rotation:?} {splat:?}");
                 check_case(
                     &name,
                     Some(&db),
                     &c,
                     Integrator::Pyramid,
-                    options(atomics, rotation),
+                    options(splat, rotation),
                 );
             }
         }
-        for max_layers_per_chunk in [1, 2] {
+        for (max_layers_per_chunk, splat) in [(1, SplatMode::Tiled), (2, SplatMode::GlobalAtomic)] {
             let name = format!("{model:?} overlaps, chunks of {max_layers_per_chunk} layers");
             let o = GpuSynthOptions {
                 max_layers_per_chunk,
+                splat,
                 ..GpuSynthOptions::default()
             };
             check_case(&name, Some(&db), &c, Integrator::Pyramid, o);
@@ -440,6 +459,15 @@ fn borders_rotations_and_overlaps_hand_databases() {
                 Integrator::Exact,
                 o,
             );
+        }
+        // Every record drawn by tiles, and almost none (the rest by global atomics).
+        for max_tiles_per_record in [1, 1000] {
+            let name = format!("{model:?} overlaps, at most {max_tiles_per_record} tiles");
+            let o = GpuSynthOptions {
+                max_tiles_per_record,
+                ..GpuSynthOptions::default()
+            };
+            check_case(&name, Some(&db), &c, Integrator::Pyramid, o);
         }
         for lanes in [1, 64] {
             let name = format!("{model:?} overlaps, {lanes} lanes per record");
@@ -455,7 +483,7 @@ fn borders_rotations_and_overlaps_hand_databases() {
             Some(&db),
             &c,
             Integrator::Exact,
-            options(AtomicMode::Auto, RotationSampling::Bilinear),
+            options(SPLATS[0], RotationSampling::Bilinear),
         );
     }
 }
@@ -525,13 +553,18 @@ fn test_profile_databases_every_model() {
             21,
         ));
         let c = classified(geometry.0, geometry.1, geometry.2, geometry.3, recs);
-        check_case(
-            &format!("{model:?} test profile"),
-            Some(db),
-            &c,
-            Integrator::Pyramid,
-            GpuSynthOptions::default(),
-        );
+        for splat in [SplatMode::Tiled, SplatMode::GlobalAtomic] {
+            check_case(
+                &format!("{model:?} test profile {splat:?}"),
+                Some(db),
+                &c,
+                Integrator::Pyramid,
+                GpuSynthOptions {
+                    splat,
+                    ..GpuSynthOptions::default()
+                },
+            );
+        }
     }
 }
 
@@ -624,4 +657,193 @@ fn bad_frames_are_errors_not_panics() {
         .run(&c.frame, &c.records, Integrator::Pyramid)
         .expect("run");
     assert_eq!(img, good);
+}
+
+/// A database of sparse PSFs, PSF `i` a single spreadlet of value `values[i]` at offset
+/// `offsets[i]` (the last one repeated to fill the space).
+fn single_spreadlet_database(values: &[f32], offsets: &[[i16; 2]]) -> PsfDatabase {
+    let space = ParamSpace::for_model(PsfModel::ThinLens, &[[0.0, 8.0]], 2).expect("space");
+    let n = space.psf_count() as usize;
+    let mut b = DatabaseBuilder::new(DbHeader::new(PsfModel::ThinLens, space, 8));
+    for i in 0..n {
+        let k = i.min(values.len() - 1);
+        b.push_sparse(&[offsets[k]], &[values[k]]).expect("sparse");
+    }
+    b.finish().expect("database")
+}
+
+/// The tiled splat's fixed point at its bound: thousands of records pile the same sign onto
+/// one pixel, so the tile's bound is the pixel's actual sum and the scale puts that sum just
+/// under the i32 limit. A scale one bit too large would wrap the sum negative. Also HDR and
+/// tiny magnitudes, and rotated records (whose bound is looser).
+#[test]
+fn tiled_fixed_point_does_not_overflow_at_its_bound() {
+    let Some(ctx) = context() else { return };
+    for (value, colour, rotate) in [
+        (1.0f32, 1.0f32, false),
+        (-0.75, 1.0, false),
+        (1.0e6, 3.0e3, false),
+        (1.0e-12, 1.0e-8, false),
+        (0.5, 1.0, true),
+    ] {
+        let db = single_spreadlet_database(&[value], &[[0, 0]]);
+        let n = 6000;
+        let recs: Vec<SplatRecord> = (0..n)
+            .map(|_| {
+                record(
+                    20,
+                    17,
+                    0,
+                    0,
+                    if rotate { 0.3 } else { 0.0 },
+                    SplatPath::Sparse,
+                    [colour, colour, colour, colour],
+                )
+            })
+            .collect();
+        let c = classified(32, 24, 4, 1, recs);
+        // The bound really is tight: the sum reaches at least half the fixed-point range.
+        let fp = tiles::footprints(&db);
+        let setup = BinSetup {
+            frame: &c.frame,
+            layer_base: 0,
+            layer_count: 1,
+            psf_count: db.psf_count() as u32,
+            rotation: RotationSampling::Nearest,
+            footprints: &fp,
+            max_tiles: 4,
+        };
+        let bins = tiles::bin_tiles(&setup, &c.records);
+        let bin = bins
+            .iter()
+            .find(|b| b.count > 0)
+            .expect("a tile with records");
+        let bits = 29 + tiles::low_bits(bin.adds);
+        let scale = tiles::tile_scale(bin.laplacian_bound, bits);
+        let units = (value.abs() as f64 * colour as f64) * n as f64 * scale as f64;
+        if !rotate {
+            assert!(
+                units >= 2f64.powi(bits - 1) && units < 2f64.powi(bits),
+                "{value}: {units} units of 2^{bits}"
+            );
+        }
+        let mut gpu = GpuSynthesizer::new(
+            ctx,
+            &db,
+            GpuSynthOptions {
+                rotation: RotationSampling::Nearest,
+                ..GpuSynthOptions::default()
+            },
+        )
+        .expect("synth");
+        assert_eq!(gpu.splat_mode(), SplatMode::Tiled);
+        let planes = gpu.splat_planes(&c.frame, &c.records).expect("splat");
+        let cpu = splat(
+            &c,
+            Some(&db),
+            &SplatOptions {
+                rotation: RotationSampling::Nearest,
+            },
+        );
+        let expected = value as f64 * colour as f64 * n as f64;
+        for ch in 0..4 {
+            let cpu_plane = or_zeros(&cpu.laplacian[ch], 40, 32);
+            let (x, y) = cpu_plane
+                .data
+                .iter()
+                .enumerate()
+                .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))
+                .map(|(i, _)| (i % 40, i / 40))
+                .expect("pixels");
+            // The spreadlet sits at the centre, so rotation leaves it there too.
+            assert_eq!((x, y), (20, 17));
+            let g = planes.laplacian[ch].get(x, y) as f64;
+            assert!(
+                (g - expected).abs() <= 1e-6 * expected.abs(),
+                "{value} x {colour} x {n}, rotated {rotate}: GPU {g}, expected {expected}"
+            );
+            // The CPU's f32 running sum of 6000 equal terms is itself off by up to ~1e-4.
+            let (d, m) = max_diff(&planes.laplacian[ch].data, &cpu_plane.data);
+            assert!(
+                d <= 2e-4 * m,
+                "{value} rotated {rotate}: GPU and CPU differ by {d} (max {m})"
+            );
+        }
+    }
+}
+
+/// Integer sums do not depend on the order of the adds: the tiled splat of a shuffled record
+/// list is bit-identical (the float atomics are not, in general).
+#[test]
+fn tiled_splat_is_deterministic_under_record_order() {
+    let Some(ctx) = context() else { return };
+    let db = hand_database(PsfModel::LensMotion, 8);
+    let geometry = (40, 32, 9, 2);
+    let recs = random_records(&db, geometry, 2000, true, 17);
+    let c = classified(geometry.0, geometry.1, geometry.2, geometry.3, recs);
+    let mut gpu = GpuSynthesizer::new(ctx, &db, GpuSynthOptions::default()).expect("synth");
+    let a = gpu.splat_planes(&c.frame, &c.records).expect("splat");
+    let mut shuffled = c.records.clone();
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
+    for i in (1..shuffled.len()).rev() {
+        shuffled.swap(i, rng.random_range(0..=i));
+    }
+    let b = gpu.splat_planes(&c.frame, &shuffled).expect("splat");
+    for (p, q) in a
+        .laplacian
+        .iter()
+        .zip(&b.laplacian)
+        .chain(a.direct.iter().zip(&b.direct))
+    {
+        assert!(
+            p.data
+                .iter()
+                .zip(&q.data)
+                .all(|(x, y)| x.to_bits() == y.to_bits()),
+            "tiled splat depends on the record order"
+        );
+    }
+    assert!(a.laplacian.iter().any(|p| p.data.iter().any(|&v| v != 0.0)));
+}
+
+/// The CPU mirror of the scale: the largest power of two under the range, for bounds over
+/// f32's normal range.
+#[test]
+fn tile_scale_is_the_largest_power_of_two_under_the_range() {
+    let mut rng = ChaCha8Rng::seed_from_u64(1);
+    for _ in 0..10_000 {
+        let bound = 2f32.powf(rng.random_range(-60.0..60.0f32));
+        for bits in [29, 37, 45] {
+            let s = tiles::tile_scale(bound, bits) as f64;
+            let units = s * bound as f64;
+            assert!(units < 2f64.powi(bits), "{bound} {bits}: {units}");
+            assert!(units >= 2f64.powi(bits - 1), "{bound} {bits}: {units}");
+            assert_eq!(s.log2().fract(), 0.0);
+        }
+    }
+    for bound in [1.0f32, 2.0, 0.5, 1024.0] {
+        assert!(tiles::tile_scale(bound, 29) as f64 * bound as f64 == 2f64.powi(28));
+    }
+    assert_eq!(tiles::tile_scale(0.0, 29), 1.0);
+    assert_eq!(tiles::tile_scale(f32::NAN, 29), 1.0);
+    for adds in [
+        0u32,
+        1,
+        2,
+        3,
+        1000,
+        1 << 14,
+        (1 << 14) + 1,
+        1 << 20,
+        u32::MAX,
+    ] {
+        let b = tiles::low_bits(adds);
+        assert!((0..=16).contains(&b));
+        if adds < 1 << 14 {
+            assert_eq!(b, 16, "{adds}");
+        }
+        if adds <= 1 << 30 {
+            assert!((adds as u64) << b <= 1 << 30, "{adds} adds, {b} bits");
+        }
+    }
 }

@@ -133,3 +133,58 @@ pub struct KernelEntry {
     /// Padding to 24 bytes.
     pub _pad: u32,
 }
+
+/// The screen tiles of the tiled splat stage for one chunk of layers: tile `(tx, ty)` of chunk
+/// layer `l` is tile index `(l * tiles_y + ty) * tiles_x + tx` and covers padded-layer pixels
+/// `[16 tx, 16 tx + 16) x [16 ty, 16 ty + 16)`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
+pub struct TileGrid {
+    /// Tiles per row (padded width / 16, rounded up).
+    pub tiles_x: u32,
+    /// Tiles per column (padded height / 16, rounded up).
+    pub tiles_y: u32,
+    /// Tiles of the chunk: `tiles_x * tiles_y * layers in the chunk`.
+    pub tile_count: u32,
+    /// Capacity of the entry list (record indices binned into tiles), entries.
+    pub entry_capacity: u32,
+}
+
+/// Where one PSF's samples (its spreadlets, or its dense image's non-zero pixels) can land and
+/// how large they are: what the binning pass needs to place a record in tiles and to bound
+/// each tile's sums. Two per PSF: index `2 psf` for the sparse part, `2 psf + 1` for the dense.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct PsfFootprint {
+    /// Bounding box of the sample offsets from the PSF centre, px (x right); `min_x > max_x`
+    /// when the part is empty.
+    pub min_x: i32,
+    /// Bounding box, px (y down).
+    pub min_y: i32,
+    /// Bounding box, px.
+    pub max_x: i32,
+    /// Bounding box, px.
+    pub max_y: i32,
+    /// Largest distance of a sample from the centre, rounded up, px (rotated records).
+    pub radius: i32,
+    /// The most samples at one offset (1 for a well-formed PSF; 0 when the part is empty).
+    pub stack: u32,
+    /// Largest |value| of a sample, over its channels.
+    pub max_abs: f32,
+    /// Sum over the samples of their largest |value| over channels.
+    pub l1: f32,
+}
+
+/// Parameters of a micro-benchmark pass (`shaders/microbench.wgsl`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
+pub struct MicroParams {
+    /// Elements of the buffers (vec4 for the copy, f32 for the atomics).
+    pub elements: u32,
+    /// Operations per invocation.
+    pub iterations: u32,
+    /// Address mask of the atomic targets (a power of two minus one).
+    pub mask: u32,
+    /// Invocations per row of workgroups.
+    pub row: u32,
+}

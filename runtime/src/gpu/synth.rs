@@ -12,8 +12,9 @@ use poisson::{ExactIntegrator, Plane};
 use psf_db::{DenseEntry, PsfDatabase, SPARSE_SLOT};
 use rayon::prelude::*;
 
-use super::layout::{PassParams, PlaneSet, SplatTargets};
+use super::layout::{PassParams, PlaneSet, SplatTargets, TileGrid};
 use super::pyramid::{PyramidFrame, PyramidPipelines, TILE};
+use super::tiles::{self, BinSetup, TILE_META_WORDS};
 use super::util::{
     bind_group, compute_pipelines, map_read, map_read_bytes, storage_entry, storage_init,
     storage_zeroed, uniform_entry, uniform_init,
@@ -35,6 +36,30 @@ pub enum AtomicMode {
     CompareExchange,
 }
 
+/// How the splat stage accumulates.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, clap::ValueEnum)]
+pub enum SplatMode {
+    /// Records binned into 16 x 16 px screen tiles; each tile sums its pixels in workgroup
+    /// memory (fixed point, scaled from the tile's bound so that nothing overflows) and writes
+    /// each pixel once. Deterministic. Falls back to [`SplatMode::GlobalAtomic`] on a device
+    /// without the workgroup memory or storage bindings it needs
+    /// ([`GpuSynthesizer::splat_mode`] says which runs).
+    #[default]
+    Tiled,
+    /// Every sample an atomic add into the planes in device memory ([`AtomicMode`]).
+    GlobalAtomic,
+}
+
+impl SplatMode {
+    /// `tiled` or `global-atomic`.
+    pub fn name(self) -> &'static str {
+        match self {
+            SplatMode::Tiled => "tiled",
+            SplatMode::GlobalAtomic => "global-atomic",
+        }
+    }
+}
+
 /// Knobs of the GPU pipeline (the same meaning as the CPU path's).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct GpuSynthOptions {
@@ -42,11 +67,16 @@ pub struct GpuSynthOptions {
     pub rotation: RotationSampling,
     /// Compositing options (as `pipeline::composite`).
     pub composite: CompositeOptions,
-    /// Float atomics or compare-exchange.
+    /// Float atomics or compare-exchange (the global-atomic splat).
     pub atomics: AtomicMode,
+    /// Tiled or global-atomic splatting.
+    pub splat: SplatMode,
     /// Invocations that share one record's spreadlets (a power of two, 1 to 64; default 8:
     /// many records of small PSFs keep the device busy, 64 suits few large PSFs).
     pub lanes_per_record: u32,
+    /// Tiled splat: records whose samples can touch more tiles than this are drawn with
+    /// global atomics instead (each tile walks all of a record's samples; default 4).
+    pub max_tiles_per_record: u32,
     /// At most this many layers are drawn together (default: all that fit the device's
     /// largest storage binding; lower only to test the chunked path).
     pub max_layers_per_chunk: u32,
@@ -58,7 +88,9 @@ impl Default for GpuSynthOptions {
             rotation: RotationSampling::default(),
             composite: CompositeOptions::default(),
             atomics: AtomicMode::default(),
+            splat: SplatMode::default(),
             lanes_per_record: 8,
+            max_tiles_per_record: 4,
             max_layers_per_chunk: u32::MAX,
         }
     }
@@ -69,8 +101,10 @@ impl Default for GpuSynthOptions {
 pub struct StageTimes {
     /// Writing the records and frame constants (CPU wall time of the queue writes).
     pub upload_ms: f64,
-    /// Splatting (sparse, dense and copied records), ms.
+    /// Splatting (sparse, dense and copied records; binning included), ms.
     pub splat_ms: f64,
+    /// The tiled splat's binning (part of `splat_ms`), ms; 0 for the global-atomic splat.
+    pub bin_ms: f64,
     /// Integration (pyramid, or exact on the CPU with the transfers around it), ms.
     pub integrate_ms: f64,
     /// Compositing, ms.
@@ -95,6 +129,8 @@ pub struct SynthCounters {
     pub frame_allocations: u32,
     /// Record buffer allocations (grows when a frame has more records than any before).
     pub record_allocations: u32,
+    /// Tile entry buffer allocations (tiled splat; grows like the record buffer).
+    pub entry_allocations: u32,
     /// Frames run.
     pub frames: u32,
 }
@@ -116,6 +152,9 @@ struct DbBuffers {
     values: wgpu::Buffer,
     dense_table: wgpu::Buffer,
     dense_data: wgpu::Buffer,
+    /// [`tiles::footprints`], on the GPU and here (entry counts are computed on the CPU).
+    footprints: wgpu::Buffer,
+    footprint_table: Vec<super::layout::PsfFootprint>,
     psf_count: u32,
     channels: u32,
     /// (PSFs, spreadlets, dense values): to tell a different database apart.
@@ -132,6 +171,9 @@ impl DbBuffers {
                 values: empty("values"),
                 dense_table: empty("dense table"),
                 dense_data: empty("dense data"),
+                // At least one element: the binding holds 32-byte structs.
+                footprints: storage_init(ctx, "footprints", &[0; 32]),
+                footprint_table: Vec::new(),
                 psf_count: 0,
                 channels: 1,
                 fingerprint: (0, 0, 0),
@@ -165,7 +207,19 @@ impl DbBuffers {
                 }
             })
             .collect();
+        let footprint_table = tiles::footprints(db);
+        check("footprints", 32 * footprint_table.len())?;
         Ok(Self {
+            footprints: storage_init(
+                ctx,
+                "footprints",
+                if footprint_table.is_empty() {
+                    &[0; 32]
+                } else {
+                    bytemuck::cast_slice(&footprint_table)
+                },
+            ),
+            footprint_table,
             cumulative: storage_init(ctx, "cumulative", bytemuck::cast_slice(db.cumulative())),
             positions: storage_init(ctx, "positions", bytemuck::cast_slice(db.positions())),
             values: storage_init(ctx, "values", bytemuck::cast_slice(db.values())),
@@ -196,12 +250,20 @@ struct FrameBuffers {
     output_staging: wgpu::Buffer,
     output_bytes: u64,
     queries: Option<Queries>,
+    /// Tiled splat: per-tile state of one chunk and the entry list (grown on demand).
+    tile_meta: wgpu::Buffer,
+    entries: wgpu::Buffer,
+    entry_capacity: u64,
 }
 
 /// A run of layers drawn, integrated and composited together in the frame buffers.
 struct Chunk {
     layer_count: u32,
     splat_group: wgpu::BindGroup,
+    /// Tiled splat: bind group, tile grid (its entry capacity rewritten when the list grows).
+    tiled_group: Option<wgpu::BindGroup>,
+    grid: TileGrid,
+    grid_uniform: wgpu::Buffer,
     composite_group: wgpu::BindGroup,
     // Kept alive with the bind groups.
     _targets: wgpu::Buffer,
@@ -215,8 +277,8 @@ struct Queries {
     count: u32,
 }
 
-/// Timestamp slots per chunk: begin/end of splat, integrate, composite.
-const QUERIES_PER_CHUNK: u32 = 6;
+/// Timestamp slots per chunk: begin/end of splat, integrate, composite, binning.
+const QUERIES_PER_CHUNK: u32 = 8;
 
 /// Composite flags (`shaders/composite.wgsl`).
 const RENORMALIZE: u32 = 1;
@@ -232,11 +294,95 @@ pub struct GpuSynthesizer {
     db: DbBuffers,
     splat_layout: wgpu::BindGroupLayout,
     splat: wgpu::ComputePipeline,
+    /// The tiled splat's pipelines, when the device can run them.
+    tiled: Option<TiledPipelines>,
     pyramid: PyramidPipelines,
     composite_layout: wgpu::BindGroupLayout,
     composite: wgpu::ComputePipeline,
     frame: Option<FrameBuffers>,
     counters: SynthCounters,
+}
+
+/// The tiled splat: binning (count, scan, scatter) and the per-tile sums.
+struct TiledPipelines {
+    layout: wgpu::BindGroupLayout,
+    count: wgpu::ComputePipeline,
+    scan: wgpu::ComputePipeline,
+    scatter: wgpu::ComputePipeline,
+    splat: wgpu::ComputePipeline,
+    /// The records that span too many tiles, with global atomics.
+    rest: wgpu::ComputePipeline,
+}
+
+impl TiledPipelines {
+    /// `None` when the device lacks the workgroup memory, invocations or storage bindings.
+    fn new(
+        ctx: &GpuContext,
+        lanes: u32,
+        max_tiles: u32,
+        float_atomics: bool,
+    ) -> Result<Option<Self>, GpuError> {
+        let l = ctx.limits();
+        if l.max_compute_workgroup_storage_size < tiles::TILED_WORKGROUP_BYTES
+            || l.max_compute_invocations_per_workgroup < 256
+            || l.max_compute_workgroup_size_x < 256
+            || l.max_storage_buffers_per_shader_stage < tiles::TILED_STORAGE_BUFFERS
+        {
+            return Ok(None);
+        }
+        let mut entries: Vec<wgpu::BindGroupLayoutEntry> = vec![uniform_entry(0), uniform_entry(1)];
+        entries.extend((2..=9).map(|b| storage_entry(b, b < 8)));
+        entries.push(uniform_entry(10));
+        entries.push(storage_entry(11, true));
+        entries.push(storage_entry(12, false));
+        entries.push(storage_entry(13, false));
+        let layout = ctx
+            .device
+            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some("tiled splat"),
+                entries: &entries,
+            });
+        let mut p = compute_pipelines(
+            ctx,
+            "tiled splat",
+            &shaders::splat_tiled(),
+            &layout,
+            &["bin_count", "bin_scan", "bin_scatter", "splat_tiles"],
+            &[("LANES", lanes as f64), ("MAX_TILES", max_tiles as f64)],
+        )?
+        .into_iter();
+        let rest = compute_pipelines(
+            ctx,
+            "tiled splat (rest)",
+            &shaders::splat_rest(float_atomics),
+            &layout,
+            &["splat_records"],
+            &[
+                ("LANES", lanes as f64),
+                ("MAX_TILES", max_tiles as f64),
+                ("SKIP_TILED", 1.0),
+            ],
+        )?
+        .pop()
+        .ok_or_else(|| GpuError::Wgpu {
+            stage: "tiled splat (rest)",
+            message: "missing pipeline".into(),
+        })?;
+        let mut next = || {
+            p.next().ok_or_else(|| GpuError::Wgpu {
+                stage: "tiled splat",
+                message: "missing pipeline".into(),
+            })
+        };
+        Ok(Some(Self {
+            count: next()?,
+            scan: next()?,
+            scatter: next()?,
+            splat: next()?,
+            rest,
+            layout,
+        }))
+    }
 }
 
 /// How far [`GpuSynthesizer::execute`] goes.
@@ -329,6 +475,7 @@ impl GpuSynthesizer {
             stage: "composite",
             message: "no pipeline".into(),
         })?;
+        let tiled = TiledPipelines::new(ctx, lanes, options.max_tiles_per_record, float_atomics)?;
         let pyramid = PyramidPipelines::new(ctx)?;
         let db = DbBuffers::upload(ctx, db)?;
         ctx.take_error("database upload")?;
@@ -339,6 +486,7 @@ impl GpuSynthesizer {
             db,
             splat_layout,
             splat,
+            tiled,
             pyramid,
             composite_layout,
             composite,
@@ -374,6 +522,25 @@ impl GpuSynthesizer {
     /// The options.
     pub fn options(&self) -> &GpuSynthOptions {
         &self.options
+    }
+
+    /// The splat stage that runs: the option's, or global atomics where the device cannot
+    /// run the tiled one.
+    pub fn splat_mode(&self) -> SplatMode {
+        self.effective_splat_mode(self.options.splat)
+    }
+
+    /// The splat stage that would run with `mode` set.
+    pub fn effective_splat_mode(&self, mode: SplatMode) -> SplatMode {
+        match mode {
+            SplatMode::Tiled if self.tiled.is_some() => SplatMode::Tiled,
+            _ => SplatMode::GlobalAtomic,
+        }
+    }
+
+    /// Switches the splat stage for the next frames (both are compiled; for comparisons).
+    pub fn set_splat_mode(&mut self, mode: SplatMode) {
+        self.options.splat = mode;
     }
 
     /// Set-up counters (pipelines, database uploads, frame allocations, frames).
@@ -534,53 +701,141 @@ impl GpuSynthesizer {
     }
 
     /// (Re)creates the frame buffers when the size or layer count changed, and the record
-    /// buffer when it is too small.
-    fn prepare(&mut self, frame: &FrameParams, records: usize) -> Result<(), GpuError> {
+    /// buffer (and the tiled splat's entry list) when it is too small.
+    fn prepare(&mut self, frame: &FrameParams, records: &[SplatRecord]) -> Result<(), GpuError> {
         let key = (frame.width, frame.height, frame.pad, frame.layers);
+        let mut rebuild = false;
         if self.frame.as_ref().is_none_or(|f| f.key != key) {
             self.frame = None;
             let fb = self.frame_buffers_for(frame, key)?;
             self.counters.frame_allocations += 1;
             self.frame = Some(fb);
+            rebuild = true;
         }
-        let needs_records = self
+        let tiled = self.splat_mode() == SplatMode::Tiled;
+        let entries_needed = if tiled {
+            self.entries_needed(frame, records)
+        } else {
+            0
+        };
+        let fb = self
             .frame
-            .as_ref()
-            .is_some_and(|f| f.record_capacity < records);
-        if needs_records {
-            let capacity = records.next_power_of_two();
-            let buf = storage_zeroed(
+            .as_mut()
+            .ok_or_else(|| GpuError::Input("no frame".into()))?;
+        if fb.record_capacity < records.len() {
+            let capacity = records.len().next_power_of_two();
+            fb.records = storage_zeroed(
                 &self.ctx,
                 "records",
                 (capacity * size_of::<SplatRecord>()) as u64,
             )?;
-            let fb = self
-                .frame
-                .as_ref()
-                .ok_or_else(|| GpuError::Input("no frame".into()))?;
-            let groups: Vec<wgpu::BindGroup> = fb
-                .chunks
-                .iter()
-                .map(|c| {
-                    self.splat_group(
-                        &fb.frame_uniform,
-                        &c._targets,
-                        &buf,
-                        &fb.pyramid.analysis,
-                        &fb.layer_images,
-                    )
-                })
-                .collect();
+            fb.record_capacity = capacity;
             self.counters.record_allocations += 1;
-            if let Some(fb) = self.frame.as_mut() {
-                fb.records = buf;
-                fb.record_capacity = capacity;
-                for (c, g) in fb.chunks.iter_mut().zip(groups) {
-                    c.splat_group = g;
+            rebuild = true;
+        }
+        if entries_needed > fb.entry_capacity {
+            let capacity = entries_needed.next_power_of_two();
+            let too_large = |bytes: u64| GpuError::TooLarge {
+                what: "tile entries",
+                bytes,
+                limit: 4 * u32::MAX as u64,
+            };
+            let capacity = if capacity > u32::MAX as u64 {
+                if entries_needed > u32::MAX as u64 {
+                    return Err(too_large(4 * entries_needed));
                 }
+                u32::MAX as u64
+            } else {
+                capacity
+            };
+            fb.entries = storage_zeroed(&self.ctx, "tile entries", 4 * capacity)?;
+            fb.entry_capacity = capacity;
+            self.counters.entry_allocations += 1;
+            for c in &mut fb.chunks {
+                c.grid.entry_capacity = capacity as u32;
+                self.ctx
+                    .queue
+                    .write_buffer(&c.grid_uniform, 0, bytemuck::bytes_of(&c.grid));
             }
+            rebuild = true;
+        }
+        if rebuild {
+            self.rebuild_groups();
         }
         Ok(())
+    }
+
+    /// Entries the tiled splat's binning writes for the largest chunk of layers (computed on
+    /// the CPU with the same spans as the GPU: the entry list is sized before the frame runs).
+    fn entries_needed(&self, frame: &FrameParams, records: &[SplatRecord]) -> u64 {
+        let chunk_layers = self.frame.as_ref().map_or(frame.layers, |f| f.chunk_layers);
+        (0..frame.layers.div_ceil(chunk_layers.max(1)))
+            .map(|k| {
+                let layer_base = k * chunk_layers;
+                let setup = BinSetup {
+                    frame,
+                    layer_base,
+                    layer_count: chunk_layers.min(frame.layers - layer_base),
+                    psf_count: self.db.psf_count,
+                    rotation: self.options.rotation,
+                    footprints: &self.db.footprint_table,
+                    max_tiles: self.options.max_tiles_per_record,
+                };
+                tiles::entry_count(&setup, records)
+            })
+            .max()
+            .unwrap_or(0)
+    }
+
+    /// Rebinds the splat stages to the current record and entry buffers.
+    fn rebuild_groups(&mut self) {
+        let Some(fb) = self.frame.as_ref() else {
+            return;
+        };
+        let groups: Vec<(wgpu::BindGroup, Option<wgpu::BindGroup>)> = fb
+            .chunks
+            .iter()
+            .map(|c| {
+                let global = self.splat_group(
+                    &fb.frame_uniform,
+                    &c._targets,
+                    &fb.records,
+                    &fb.pyramid.analysis,
+                    &fb.layer_images,
+                );
+                let tiled = self.tiled.as_ref().map(|t| {
+                    let db = &self.db;
+                    bind_group(
+                        &self.ctx,
+                        "tiled splat",
+                        &t.layout,
+                        &[
+                            &fb.frame_uniform,
+                            &c._targets,
+                            &fb.records,
+                            &db.cumulative,
+                            &db.positions,
+                            &db.values,
+                            &db.dense_table,
+                            &db.dense_data,
+                            &fb.pyramid.analysis,
+                            &fb.layer_images,
+                            &c.grid_uniform,
+                            &db.footprints,
+                            &fb.tile_meta,
+                            &fb.entries,
+                        ],
+                    )
+                });
+                (global, tiled)
+            })
+            .collect();
+        if let Some(fb) = self.frame.as_mut() {
+            for (c, (g, t)) in fb.chunks.iter_mut().zip(groups) {
+                c.splat_group = g;
+                c.tiled_group = t;
+            }
+        }
     }
 
     fn frame_buffers_for(
@@ -637,6 +892,12 @@ impl GpuSynthesizer {
         });
         let frame_uniform = uniform_init(ctx, "frame", bytemuck::bytes_of(frame));
         let records = storage_zeroed(ctx, "records", 16)?;
+        let tile_meta = storage_zeroed(
+            ctx,
+            "tile state",
+            4 * TILE_META_WORDS as u64 * tiles::tile_grid(frame, chunk_layers).tile_count as u64,
+        )?;
+        let entries = storage_zeroed(ctx, "tile entries", 16)?;
         let n_chunks = frame.layers.div_ceil(chunk_layers);
         let renormalize = if self.options.composite.renormalize_coverage {
             RENORMALIZE
@@ -670,6 +931,8 @@ impl GpuSynthesizer {
                     &pyramid.analysis,
                     &layer_images,
                 );
+                let grid = tiles::tile_grid(frame, layer_count);
+                let grid_uniform = uniform_init(ctx, "tile grid", bytemuck::bytes_of(&grid));
                 let first = if k == 0 { FIRST_CHUNK } else { 0 };
                 let last = if k + 1 == n_chunks { LAST_CHUNK } else { 0 };
                 let params = uniform_init(
@@ -693,6 +956,9 @@ impl GpuSynthesizer {
                 Chunk {
                     layer_count,
                     splat_group,
+                    tiled_group: None,
+                    grid,
+                    grid_uniform,
                     composite_group,
                     _targets: targets,
                     _composite_params: params,
@@ -736,6 +1002,9 @@ impl GpuSynthesizer {
             output_staging,
             output_bytes,
             queries,
+            tile_meta,
+            entries,
+            entry_capacity: 0,
         })
     }
 
@@ -781,7 +1050,11 @@ impl GpuSynthesizer {
     ) -> Result<StageTimes, GpuError> {
         Self::validate(frame, records)?;
         let t_upload = Instant::now();
-        self.prepare(frame, records.len())?;
+        self.prepare(frame, records)?;
+        let tiled = match (self.splat_mode(), self.tiled.as_ref()) {
+            (SplatMode::Tiled, Some(t)) => Some(t),
+            _ => None,
+        };
         let ctx = &self.ctx;
         let fb = self
             .frame
@@ -838,16 +1111,58 @@ impl GpuSynthesizer {
                 Some(4 * lap.stride as u64 * fb.pyramid.planes as u64),
             );
             enc.clear_buffer(&fb.layer_images, 0, None);
+            if tiled.is_some() {
+                enc.clear_buffer(&fb.tile_meta, 0, None);
+            }
+            {
+                // Binning (tiled splat only; an empty pass otherwise, so that every
+                // timestamp slot is written).
+                let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some("bin"),
+                    timestamp_writes: ts(3),
+                });
+                let n64 = (records.len() as u32).div_ceil(64);
+                if let (Some(t), Some(group), true) = (tiled, chunk.tiled_group.as_ref(), n64 > 0) {
+                    let x = n64.min(max);
+                    pass.set_bind_group(0, group, &[]);
+                    pass.set_pipeline(&t.count);
+                    pass.dispatch_workgroups(x, n64.div_ceil(x), 1);
+                    pass.set_pipeline(&t.scan);
+                    pass.dispatch_workgroups(1, 1, 1);
+                    pass.set_pipeline(&t.scatter);
+                    pass.dispatch_workgroups(x, n64.div_ceil(x), 1);
+                }
+            }
             {
                 let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
                     label: Some("splat"),
                     timestamp_writes: ts(0),
                 });
-                if n > 0 {
-                    let x = n.min(max);
-                    pass.set_pipeline(&self.splat);
-                    pass.set_bind_group(0, &chunk.splat_group, &[]);
-                    pass.dispatch_workgroups(x, n.div_ceil(x), 1);
+                match (tiled, chunk.tiled_group.as_ref()) {
+                    (Some(t), Some(group)) => {
+                        if n > 0 {
+                            pass.set_bind_group(0, group, &[]);
+                            // The tiles store their sums; the records they leave out are
+                            // added on top afterwards.
+                            pass.set_pipeline(&t.splat);
+                            pass.dispatch_workgroups(
+                                chunk.grid.tiles_x,
+                                chunk.grid.tiles_y,
+                                chunk.layer_count,
+                            );
+                            let x = n.min(max);
+                            pass.set_pipeline(&t.rest);
+                            pass.dispatch_workgroups(x, n.div_ceil(x), 1);
+                        }
+                    }
+                    _ => {
+                        if n > 0 {
+                            let x = n.min(max);
+                            pass.set_pipeline(&self.splat);
+                            pass.set_bind_group(0, &chunk.splat_group, &[]);
+                            pass.dispatch_workgroups(x, n.div_ceil(x), 1);
+                        }
+                    }
                 }
             }
             if wall {
@@ -950,7 +1265,8 @@ impl GpuSynthesizer {
                 .map(|c| c[2 * stage + 1].saturating_sub(c[2 * stage]) as f64 * period_ns * 1e-6)
                 .sum()
         };
-        times.splat_ms = span(0);
+        times.bin_ms = span(3);
+        times.splat_ms = span(0) + times.bin_ms;
         times.integrate_ms = span(1);
         times.composite_ms = span(2);
         Ok(())
