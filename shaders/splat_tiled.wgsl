@@ -8,7 +8,7 @@
 // (runtime::gpu::tiles::tile_scale). The Laplacian planes are integrated afterwards, which
 // sums rounding errors over the whole plane, so they get two words per value: a high part and
 // up to 16 more bits of fraction in a low part. Integer sums do not depend on the order of the
-// adds: the stage is deterministic.
+// adds: the tiles' part of the splat is deterministic.
 
 const TILE_PX: u32 = SPLAT_TILE * SPLAT_TILE;
 
@@ -31,7 +31,8 @@ var<private> direct_scale: f32;
 // 2^(bits - e) where bound = m 2^e, m in [0.5, 1): the largest power of two s with
 // s * bound < 2^bits (runtime::gpu::tiles::tile_scale).
 fn tile_scale(bound: f32, bits: i32) -> f32 {
-    if !(bound > 0.0) || bound > 3.0e38 {
+    // Zero, subnormal (GPUs may flush them), huge or NaN: scale 1.
+    if !(bound >= 1.17549435e-38) || bound > 3.0e38 {
         return 1.0;
     }
     let e = frexp(bound).exp;

@@ -41,7 +41,9 @@ pub enum AtomicMode {
 pub enum SplatMode {
     /// Records binned into 16 x 16 px screen tiles; each tile sums its pixels in workgroup
     /// memory (fixed point, scaled from the tile's bound so that nothing overflows) and writes
-    /// each pixel once. Deterministic. Falls back to [`SplatMode::GlobalAtomic`] on a device
+    /// each pixel once, deterministically; records touching more than
+    /// [`GpuSynthOptions::max_tiles_per_record`] tiles are added by global atomics after the
+    /// tiles. Falls back to [`SplatMode::GlobalAtomic`] on a device
     /// without the workgroup memory or storage bindings it needs
     /// ([`GpuSynthesizer::splat_mode`] says which runs).
     #[default]

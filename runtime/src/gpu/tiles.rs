@@ -295,10 +295,11 @@ pub fn bin_tiles(setup: &BinSetup<'_>, records: &[SplatRecord]) -> Vec<TileBin> 
     bins
 }
 
-/// The largest power of two `s` with `s * bound < 2^bits` (1 for a bound that is zero or not
-/// finite), exponent clamped to f32's normal range: `tile_scale` in `shaders/splat_tiled.wgsl`.
+/// The largest power of two `s` with `s * bound < 2^bits` (1 for a bound that is zero,
+/// subnormal, above 3e38 or NaN), exponent clamped to f32's normal range: `tile_scale` in `shaders/splat_tiled.wgsl`.
 pub fn tile_scale(bound: f32, bits: i32) -> f32 {
-    if !(bound > 0.0) || bound > 3.0e38 {
+    // NaN fails the range test too (subnormals are out: GPUs may flush them).
+    if !(f32::MIN_POSITIVE..=3.0e38).contains(&bound) {
         return 1.0;
     }
     // bound = m 2^e with m in [0.5, 1), so bound < 2^e.
