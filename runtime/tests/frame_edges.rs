@@ -282,3 +282,24 @@ fn an_hdr_emitters_rim_does_not_glow_with_the_background_blur() {
         "energy {sum_out} out of {sum_in} in"
     );
 }
+
+#[test]
+fn a_data_window_that_does_not_cover_the_frame_is_a_clear_error() {
+    use exr::prelude::*;
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("border-render.exr");
+    // A border render: 10x10 pixels of data at (2, 2) inside a 16x16 frame.
+    let channels = SpecificChannels::rgba(|_: Vec2<usize>| (0.5f32, 0.5f32, 0.5f32, 1.0f32));
+    let mut attributes = LayerAttributes::default();
+    attributes.layer_position = Vec2(2, 2);
+    let layer = Layer::new((10, 10), attributes, Encoding::FAST_LOSSLESS, channels);
+    let mut image = Image::from_layer(layer);
+    image.attributes.display_window = IntegerBounds::new((0, 0), (16, 16));
+    image.write().to_file(&path).expect("write");
+    let err = GBuffer::read_exr(&path, &ChannelOptions::default()).expect_err("border render");
+    let message = err.to_string();
+    assert!(
+        message.contains("does not cover the display window"),
+        "{message}"
+    );
+}
