@@ -5,9 +5,10 @@
 //
 // Workgroup memory has no float atomics in WGSL, so the sums are fixed point in i32, scaled per
 // tile by a power of two chosen from the tile's bound on any accumulator's sum of |values|
-// (runtime::gpu::tiles::tile_scale). The Laplacian planes are integrated afterwards, which
-// sums rounding errors over the whole plane, so they get two words per value: a high part and
-// up to 16 more bits of fraction in a low part. Integer sums do not depend on the order of the
+// (runtime::gpu::tiles::tile_scale). Each value gets two words, a high part and up to 16 more
+// bits of fraction in a low part: the Laplacian planes are integrated afterwards, which sums
+// rounding errors over the whole plane, and a bound over many records is far above most
+// pixels' sums. Integer sums do not depend on the order of the
 // adds: the tiles' part of the splat is deterministic.
 
 const TILE_PX: u32 = SPLAT_TILE * SPLAT_TILE;
@@ -15,7 +16,8 @@ const TILE_PX: u32 = SPLAT_TILE * SPLAT_TILE;
 // Pixel p of channel c is element c * TILE_PX + p.
 var<workgroup> lap_hi: array<atomic<i32>, 1024>;
 var<workgroup> lap_lo: array<atomic<i32>, 1024>;
-var<workgroup> direct_acc: array<atomic<i32>, 1024>;
+var<workgroup> direct_hi: array<atomic<i32>, 1024>;
+var<workgroup> direct_lo: array<atomic<i32>, 1024>;
 var<workgroup> tile_entries: u32;
 
 @group(0) @binding(8) var<storage, read_write> laplacian: array<f32>;
@@ -23,9 +25,9 @@ var<workgroup> tile_entries: u32;
 
 var<private> tile_origin: vec2<i32>;
 // Fixed-point scales (powers of two): a Laplacian value v is v * lap_scale units, split into
-// lap_hi (multiples of lap_unit) and lap_lo; a direct value is v * direct_scale units.
+// lap_hi (multiples of unit) and lap_lo; a direct value likewise with direct_scale.
 var<private> lap_scale: f32;
-var<private> lap_unit: f32;
+var<private> unit: f32;
 var<private> direct_scale: f32;
 
 // 2^(bits - e) where bound = m 2^e, m in [0.5, 1): the largest power of two s with
@@ -61,10 +63,10 @@ fn add_rgba(to_laplacian: bool, layer: u32, x: i32, y: i32, v: vec4<f32>) {
             continue;
         }
         let i = c * TILE_PX + p;
+        let s = v[c] * (select(direct_scale, lap_scale, to_laplacian) / unit);
+        let hi = floor(s);
+        let lo = round((s - hi) * unit);
         if to_laplacian {
-            let s = v[c] * (lap_scale / lap_unit);
-            let hi = floor(s);
-            let lo = round((s - hi) * lap_unit);
             if hi != 0.0 {
                 atomicAdd(&lap_hi[i], i32(hi));
             }
@@ -72,9 +74,11 @@ fn add_rgba(to_laplacian: bool, layer: u32, x: i32, y: i32, v: vec4<f32>) {
                 atomicAdd(&lap_lo[i], i32(lo));
             }
         } else {
-            let q = round(v[c] * direct_scale);
-            if q != 0.0 {
-                atomicAdd(&direct_acc[i], i32(q));
+            if hi != 0.0 {
+                atomicAdd(&direct_hi[i], i32(hi));
+            }
+            if lo != 0.0 {
+                atomicAdd(&direct_lo[i], i32(lo));
             }
         }
     }
@@ -95,13 +99,14 @@ fn splat_tiles(
     }
     tile_origin = vec2<i32>(wid.xy * SPLAT_TILE);
     let bits = low_bits(atomicLoad(&tile_meta[m + META_ADDS]));
-    lap_unit = ldexp(1.0, bits);
+    unit = ldexp(1.0, bits);
     lap_scale = tile_scale(bitcast<f32>(atomicLoad(&tile_meta[m + META_LAP_BOUND])), 29 + bits);
-    direct_scale = tile_scale(bitcast<f32>(atomicLoad(&tile_meta[m + META_DIRECT_BOUND])), 29);
+    direct_scale = tile_scale(bitcast<f32>(atomicLoad(&tile_meta[m + META_DIRECT_BOUND])), 29 + bits);
     for (var c = 0u; c < 4u; c++) {
         atomicStore(&lap_hi[c * TILE_PX + local], 0);
         atomicStore(&lap_lo[c * TILE_PX + local], 0);
-        atomicStore(&direct_acc[c * TILE_PX + local], 0);
+        atomicStore(&direct_hi[c * TILE_PX + local], 0);
+        atomicStore(&direct_lo[c * TILE_PX + local], 0);
     }
     workgroupBarrier();
     let start = atomicLoad(&tile_meta[m + META_START]);
@@ -132,10 +137,10 @@ fn splat_tiles(
     let b = targets.border;
     for (var c = 0u; c < 4u; c++) {
         let i = c * TILE_PX + local;
-        let hi = f32(atomicLoad(&lap_hi[i]));
-        let lo = f32(atomicLoad(&lap_lo[i]));
         let plane = wid.z * 4u + c;
-        laplacian[plane_index(targets.laplacian, plane, x + b, y + b)] = (hi * lap_unit + lo) / lap_scale;
-        direct[plane_index(targets.direct, plane, x, y)] = f32(atomicLoad(&direct_acc[i])) / direct_scale;
+        let lap = f32(atomicLoad(&lap_hi[i])) * unit + f32(atomicLoad(&lap_lo[i]));
+        laplacian[plane_index(targets.laplacian, plane, x + b, y + b)] = lap / lap_scale;
+        let dir = f32(atomicLoad(&direct_hi[i])) * unit + f32(atomicLoad(&direct_lo[i]));
+        direct[plane_index(targets.direct, plane, x, y)] = dir / direct_scale;
     }
 }

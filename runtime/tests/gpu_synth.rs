@@ -852,3 +852,58 @@ fn tile_scale_is_the_largest_power_of_two_under_the_range() {
         }
     }
 }
+
+/// The GPU's binning is the CPU mirror's: the same records in the same tiles, the same adds
+/// bounds, the same value bounds to float rounding (sums in another order).
+#[test]
+fn gpu_binning_matches_the_cpu_mirror() {
+    let Some(ctx) = context() else { return };
+    for (model, rotation, max_tiles) in [
+        (PsfModel::LensMotion, RotationSampling::Bspline, 4),
+        (PsfModel::PhysicalLens, RotationSampling::Bilinear, 9),
+        (PsfModel::ThinLens, RotationSampling::Nearest, 1),
+    ] {
+        let db = hand_database(model, 21);
+        let geometry = (56, 40, 9, 3);
+        let recs = random_records(&db, geometry, 2500, true, 23);
+        let c = classified(geometry.0, geometry.1, geometry.2, geometry.3, recs);
+        let o = GpuSynthOptions {
+            rotation,
+            max_tiles_per_record: max_tiles,
+            ..GpuSynthOptions::default()
+        };
+        let mut gpu = GpuSynthesizer::new(ctx, &db, o).expect("synth");
+        gpu.splat_planes(&c.frame, &c.records).expect("splat");
+        let got = gpu.tile_bins().expect("tile state");
+        let fp = tiles::footprints(&db);
+        let setup = BinSetup {
+            frame: &c.frame,
+            layer_base: 0,
+            layer_count: geometry.3,
+            psf_count: db.psf_count() as u32,
+            rotation,
+            footprints: &fp,
+            max_tiles,
+        };
+        let want = tiles::bin_tiles(&setup, &c.records);
+        assert_eq!(got.len(), want.len(), "{model:?}: tiles");
+        assert!(
+            want.iter().any(|b| b.count > 1),
+            "{model:?}: nothing binned"
+        );
+        for (t, (g, w)) in got.iter().zip(&want).enumerate() {
+            assert_eq!((g.count, g.adds), (w.count, w.adds), "{model:?} tile {t}");
+            for (a, b) in [
+                (g.laplacian_bound, w.laplacian_bound),
+                (g.direct_bound, w.direct_bound),
+            ] {
+                assert!(
+                    (a - b).abs() <= 1e-5 * b.abs(),
+                    "{model:?} tile {t}: bound {a} against {b}"
+                );
+            }
+        }
+        let entries: u64 = want.iter().map(|b| b.count as u64).sum();
+        assert_eq!(entries, tiles::entry_count(&setup, &c.records));
+    }
+}

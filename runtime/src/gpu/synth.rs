@@ -656,6 +656,30 @@ impl GpuSynthesizer {
         Ok(out)
     }
 
+    /// The tiled splat's per-tile state after the last frame's binning (its last chunk of
+    /// layers), to compare with [`tiles::bin_tiles`]; empty after a global-atomic frame.
+    pub fn tile_bins(&self) -> Result<Vec<tiles::TileBin>, GpuError> {
+        let fb = self.frame_buffers()?;
+        let Some(chunk) = fb.chunks.last() else {
+            return Ok(Vec::new());
+        };
+        if self.splat_mode() != SplatMode::Tiled {
+            return Ok(Vec::new());
+        }
+        let words = TILE_META_WORDS as usize;
+        let bytes = 4 * (words * chunk.grid.tile_count as usize) as u64;
+        let data = super::util::read_f32(&self.ctx, "tile state", &fb.tile_meta, 0, bytes)?;
+        Ok(data
+            .chunks_exact(words)
+            .map(|w| tiles::TileBin {
+                count: w[0].to_bits(),
+                laplacian_bound: w[1],
+                direct_bound: w[2],
+                adds: w[3].to_bits(),
+            })
+            .collect())
+    }
+
     /// Layers drawn together in the last frame (fewer than the frame's when its buffers would
     /// exceed the device's binding size: the frame then runs in chunks of layers).
     pub fn layers_per_chunk(&self) -> Option<u32> {

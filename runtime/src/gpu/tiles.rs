@@ -4,8 +4,8 @@
 //!
 //! A tile sums its pixels in i32 workgroup memory at a power-of-two scale `s` chosen from `B`,
 //! a bound on the sum of |added values| of any one accumulator (pixel and channel) of the tile:
-//! `s B < 2^29` (and for the Laplacian's two-word sums `s B < 2^(29 + b)`, with `b` fraction
-//! bits in the low word). Every add rounds by at most half a unit, so with `n` adds into one
+//! `s B < 2^(29 + b)`, with the sums in two words: a high part in units of `2^b` and `b` (up to
+//! 16) fraction bits in a low word. Every add rounds by at most half a unit, so with `n` adds into one
 //! accumulator its integer sum stays under `2^29 + n`, which is below `2^31` while
 //! `n < 2^30` ([`low_bits`] keeps the low words under `2^30` as well).
 //!
@@ -27,9 +27,9 @@ pub const SPLAT_TILE: u32 = 16;
 /// Words of per-tile state in the tile buffer (`TILE_META` in `shaders/bin.wgsl`).
 pub const TILE_META_WORDS: u32 = 8;
 
-/// Workgroup memory the tiled splat needs, bytes (three accumulators of 4 channels per pixel,
-/// plus the scan's partial sums).
-pub const TILED_WORKGROUP_BYTES: u32 = 3 * 4 * 4 * SPLAT_TILE * SPLAT_TILE + 4;
+/// Workgroup memory the tiled splat needs, bytes (two words for each of 4 channels of the
+/// Laplacian and of the direct planes per pixel, and the entry count).
+pub const TILED_WORKGROUP_BYTES: u32 = 4 * 4 * 4 * SPLAT_TILE * SPLAT_TILE + 4;
 
 /// Storage buffers the tiled splat binds in one stage.
 pub const TILED_STORAGE_BUFFERS: u32 = 11;
