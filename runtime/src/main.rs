@@ -313,6 +313,10 @@ struct SynthArgs {
     /// edge) or black (the frame's border loses light; for comparison).
     #[arg(long, value_enum, default_value_t = FrameEdges::Extend)]
     frame_edges: FrameEdges,
+    /// Do not continue a blurred background behind the silhouettes of sharper occluders (the
+    /// background then darkens along them).
+    #[arg(long)]
+    no_hidden_fill: bool,
     /// Poisson integrator (exact by default: the pyramid's small relative error becomes
     /// visible around HDR highlights).
     #[arg(long, value_enum, default_value_t = Integrator::Exact)]
@@ -717,6 +721,7 @@ fn synth_frame(args: &SynthArgs, job: &FrameJob, state: &mut SequenceState) -> R
             soft_layers: (args.soft_layers > 0.0).then_some(args.soft_layers),
             edge_split: !args.no_edge_split,
             frame_edges: args.frame_edges,
+            fill_hidden: !args.no_hidden_fill,
             ..ClassifyOptions::default()
         },
         splat: SplatOptions {

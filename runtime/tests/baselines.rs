@@ -14,7 +14,7 @@ use runtime::baseline::{
 use runtime::camera::Camera;
 use runtime::dbset::DbSet;
 use runtime::gbuffer::GBuffer;
-use runtime::pipeline::{ClassifyOptions, Integrator};
+use runtime::pipeline::{ClassifyOptions, FrameEdges, Integrator};
 use runtime::rgba::RgbaImage;
 use runtime::synth::{synthesize, SynthOptions};
 use support::{camera, depth_for_coc, one_pixel, test_db};
@@ -50,6 +50,9 @@ fn single_layer() -> SynthOptions {
             layers: 1,
             soft_layers: None,
             edge_split: false,
+            // The filter gathers nothing from beyond the frame; compare like with like.
+            frame_edges: FrameEdges::Black,
+            fill_hidden: false,
             ..ClassifyOptions::default()
         },
         integrator: Integrator::Exact,

@@ -109,6 +109,8 @@ proptest! {
             layers,
             soft_layers: soft,
             edge_split: false,
+            // Soft layering of every fragment, however sharp (the binning under test).
+            soft_layers_min_blur_px: 0.0,
             ..ClassifyOptions::default()
         };
         let (per, c) = bin(&frags, &options);

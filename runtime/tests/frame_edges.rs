@@ -290,8 +290,10 @@ fn a_data_window_that_does_not_cover_the_frame_is_a_clear_error() {
     let path = dir.path().join("border-render.exr");
     // A border render: 10x10 pixels of data at (2, 2) inside a 16x16 frame.
     let channels = SpecificChannels::rgba(|_: Vec2<usize>| (0.5f32, 0.5f32, 0.5f32, 1.0f32));
-    let mut attributes = LayerAttributes::default();
-    attributes.layer_position = Vec2(2, 2);
+    let attributes = LayerAttributes {
+        layer_position: Vec2(2, 2),
+        ..LayerAttributes::default()
+    };
     let layer = Layer::new((10, 10), attributes, Encoding::FAST_LOSSLESS, channels);
     let mut image = Image::from_layer(layer);
     image.attributes.display_window = IntegerBounds::new((0, 0), (16, 16));
@@ -302,4 +304,94 @@ fn a_data_window_that_does_not_cover_the_frame_is_a_clear_error() {
         message.contains("does not cover the display window"),
         "{message}"
     );
+}
+
+#[test]
+fn a_blurred_wall_does_not_darken_beside_a_sharp_box_and_the_box_stays_opaque() {
+    // A box in focus in front of a uniform wall far out of focus (CoC radius 10 px): the lens
+    // sees the wall past the box's edge, so the wall next to the box keeps its brightness.
+    let n = 64usize;
+    let cam = close_focus_camera(n as u32);
+    let wall_depth = depth_behind_focus(&cam, 10.0);
+    let focus = cam.focus_distance.expect("lens") as f32;
+    let (wall, box_colour) = (0.4f32, 0.8f32);
+    let inside = |x: usize, y: usize| (24..40).contains(&x) && (16..48).contains(&y);
+    let mut color = vec![[wall, wall, wall, 1.0]; n * n];
+    let mut depth = vec![wall_depth; n * n];
+    for y in 0..n {
+        for x in 0..n {
+            if inside(x, y) {
+                color[y * n + x] = [box_colour, box_colour * 0.5, 0.1, 1.0];
+                depth[y * n + x] = focus;
+            }
+        }
+    }
+    // Something nearer in a far corner, so that the box lies between layer centres and soft
+    // layering would split it.
+    color[2 * n + 2] = [0.3, 0.3, 0.3, 1.0];
+    depth[2 * n + 2] = focus * 0.8;
+    let g = GBuffer::from_planes(n, n, color, Some(depth), None).expect("g-buffer");
+    let dbs = thin_lens();
+    let run_with = |fill_hidden: bool, edges: FrameEdges| {
+        let mut options = with_edges(edges);
+        options.classify.fill_hidden = fill_hidden;
+        synthesize(&g, &cam, &dbs, &options).expect("synthesis")
+    };
+    let run = |fill_hidden: bool| run_with(fill_hidden, FrameEdges::Extend);
+    let (out, stats) = run(true);
+    assert!(stats.counts.hidden_filled > 0);
+    // The wall from 1 to 4 px left and right of the box, rows in the box's middle.
+    let band = |img: &RgbaImage| -> f64 {
+        let mut sum = 0.0;
+        let mut count = 0;
+        for y in 24..40 {
+            for x in (20..23).chain(41..44) {
+                sum += f64::from(img.get(x, y)[2]);
+                count += 1;
+            }
+        }
+        sum / f64::from(count) / f64::from(wall)
+    };
+    let with_fill = band(&out);
+    let (without, _) = run(false);
+    let without_fill = band(&without);
+    assert!(
+        (with_fill - 1.0).abs() < 0.03,
+        "the wall beside the box keeps {with_fill} of its brightness (without the fill {without_fill})"
+    );
+    assert!(
+        without_fill < 0.9,
+        "without the fill the wall should darken: {without_fill}"
+    );
+    // The same without the frame-edge extension: the hidden background's records are drawn
+    // wherever they come in the record list.
+    let (black_edges, _) = run_with(true, FrameEdges::Black);
+    let with_fill_black_edges = band(&black_edges);
+    assert!(
+        (with_fill_black_edges - 1.0).abs() < 0.03,
+        "black frame edges: the wall beside the box keeps {with_fill_black_edges}"
+    );
+    // The splat visits each layer's records by bands of rows: they come out in row order,
+    // the hidden background's among them.
+    let mut options = with_edges(FrameEdges::Black);
+    options.classify.fill_hidden = true;
+    let classified =
+        runtime::pipeline::classify(&g, &cam, &dbs, &options.classify).expect("classify");
+    for info in &classified.layers {
+        let recs = &classified.records[info.first_record..info.first_record + info.record_count];
+        assert!(
+            recs.windows(2).all(|p| p[0].center_y <= p[1].center_y),
+            "a layer's records are not in row order"
+        );
+    }
+    // The box is opaque: the wall continued behind it does not show through.
+    for y in 18..46 {
+        for x in 26..38 {
+            let p = out.get(x, y);
+            assert!(
+                (p[0] / box_colour - 1.0).abs() < 0.02 && (p[2] - 0.1).abs() < 0.01,
+                "box pixel ({x}, {y}) is {p:?}"
+            );
+        }
+    }
 }

@@ -90,6 +90,12 @@ pub struct ClassifyOptions {
     pub hdr_dense_threshold: f32,
     /// What lies beyond the input's pixels (see [`FrameEdges`]).
     pub frame_edges: FrameEdges,
+    /// Fragments whose CoC radius and motion length are both below this (pixels) are not split
+    /// by soft layering.
+    pub soft_layers_min_blur_px: f32,
+    /// Continue a blurred background behind the silhouette of a sharper occluder, so that
+    /// the background does not darken along it (the lens sees past the occluder's edge).
+    pub fill_hidden: bool,
 }
 
 impl Default for ClassifyOptions {
@@ -102,6 +108,8 @@ impl Default for ClassifyOptions {
             pad_margin: 2,
             hdr_dense_threshold: 2.0,
             frame_edges: FrameEdges::Extend,
+            fill_hidden: true,
+            soft_layers_min_blur_px: 2.0,
         }
     }
 }
@@ -160,6 +168,9 @@ pub struct PathCounts {
     /// Records added beyond the input's outermost pixels ([`FrameEdges::Extend`]; also in the
     /// path counts).
     pub edge_extended: usize,
+    /// Fragments of background continued behind sharper occluders
+    /// ([`ClassifyOptions::fill_hidden`]).
+    pub hidden_filled: usize,
 }
 
 impl PathCounts {
@@ -305,6 +316,7 @@ pub fn classify(
 
     // Fragments per pixel (up to two: edge split).
     let mut fragments: Vec<Fragment> = Vec::with_capacity(w * h);
+    let mut was_split = vec![false; w * h];
     for y in 0..h {
         for x in 0..w {
             let i = y * w + x;
@@ -337,6 +349,7 @@ pub fn classify(
             match split {
                 Some(split) => {
                     counts.edge_split += 1;
+                    was_split[i] = true;
                     let (j, o) = (split.foreground, split.background);
                     let dj = depth_at(j);
                     fragments.push(Fragment {
@@ -361,6 +374,21 @@ pub fn classify(
                 None => fragments.push(own),
             }
         }
+    }
+
+    if options.fill_hidden && model.is_some() {
+        let filled =
+            hidden_background(gbuffer, &was_split, &signed_coc, &depth_at, &|i| Fragment {
+                x: (i % w) as i32 - overscan.left as i32,
+                y: (i / w) as i32 - overscan.top as i32,
+                color: gbuffer.color[i],
+                weight: 1.0,
+                parallax: parallax_of(depth_at(i)),
+                depth: depth_at(i),
+                motion: motion_at(i),
+            });
+        counts.hidden_filled += filled.len();
+        fragments.extend(filled);
     }
 
     let data = DataWindow {
@@ -567,8 +595,12 @@ pub fn classify_fragments(
         let u = layer_coord(frag.parallax);
         let mut targets = [(0usize, 0.0f32); 2];
         let n_targets;
+        // A sharp fragment is not split: its PSF barely differs between the two layers, and
+        // a surface split across two layers lets what lies behind it show through (up to a
+        // quarter where the weights are even).
+        let sharp = coc.max(motion_len) < options.soft_layers_min_blur_px;
         match options.soft_layers {
-            Some(band) if band > 0.0 && n_layers > 1 => {
+            Some(band) if band > 0.0 && n_layers > 1 && !sharp => {
                 let t = (u - 0.5).clamp(0.0, (n_layers - 1) as f32);
                 let a = (t.floor() as usize).min(n_layers - 2);
                 let f = t - a as f32;
@@ -622,13 +654,14 @@ pub fn classify_fragments(
         recs.retain(|r| distance_to(frame, r.center_x, r.center_y) <= reach_of(r) as f32);
         if options.frame_edges == FrameEdges::Extend {
             let extended = extend_beyond(recs, data, frame, &reach_of);
-            if !extended.is_empty() {
-                counts.edge_extended += extended.len();
-                recs.extend(extended);
-                // Row order within the layer (the splat visits bands of rows); stable, so the
-                // records inside the data keep their order.
-                recs.sort_by_key(|r| (r.center_y, r.center_x));
-            }
+            counts.edge_extended += extended.len();
+            recs.extend(extended);
+        }
+        // Row order within the layer (the splat visits bands of rows; the extension and the
+        // hidden background come after the pixels); stable, so the pixels' records keep their
+        // order.
+        if !recs.is_sorted_by_key(|r| (r.center_y, r.center_x)) {
+            recs.sort_by_key(|r| (r.center_y, r.center_x));
         }
     }
     // Padding: every PSF, wherever its centre lies, must fit inside the padded layer.
@@ -745,6 +778,99 @@ fn path_of(db: &PsfDatabase, idx: u32) -> SplatPath {
     } else {
         SplatPath::Sparse
     }
+}
+
+/// The background hidden behind the silhouette of a sharper, nearer occluder, continued from
+/// the visible background next to it.
+///
+/// A pinhole image holds no pixels of what an occluder hides, but a lens sees past the
+/// occluder's edge: where the background is blurred more than the occluder, its layer would
+/// otherwise lose the light of its hidden pixels and darken in a band along the silhouette.
+/// As at the frame's edges, the background is taken to continue as it is: each background
+/// pixel next to a nearer, sharper pixel is repeated into the occluder along that direction
+/// (left, right, up, down), as far as its own blur reaches, under the occluder (which hides the
+/// copies wherever it is opaque). A hidden pixel filled from several sides gets the mean of
+/// them. `own(i)` is pixel `i`'s own fragment.
+fn hidden_background(
+    g: &GBuffer,
+    was_split: &[bool],
+    signed_coc: &dyn Fn(f32) -> f32,
+    depth_at: &dyn Fn(usize) -> f32,
+    own: &dyn Fn(usize) -> Fragment,
+) -> Vec<Fragment> {
+    let (w, h) = (g.width as i32, g.height as i32);
+    const DIRECTIONS: [(i32, i32); 4] = [(1, 0), (-1, 0), (0, 1), (0, -1)];
+    // The walks: (background pixel, direction, steps), and how many walks reach each pixel.
+    let mut walks: Vec<(usize, (i32, i32), i32)> = Vec::new();
+    let mut fills = vec![0u16; (w * h) as usize];
+    for y in 0..h {
+        for x in 0..w {
+            let b = (y * w + x) as usize;
+            if was_split[b] || g.color[b] == [0.0; 4] {
+                continue;
+            }
+            let (db, coc_b) = (depth_at(b), signed_coc(depth_at(b)));
+            let reach = coc_b.abs().ceil() as i32;
+            if reach < 2 {
+                continue;
+            }
+            for d in DIRECTIONS {
+                // Hidden: nearer than the background and sharper by more than a pixel. The
+                // first step may be the silhouette's anti-aliased pixel, which carries the
+                // background's depth.
+                let hidden = |k: i32| -> bool {
+                    let (qx, qy) = (x + d.0 * k, y + d.1 * k);
+                    if qx < 0 || qy < 0 || qx >= w || qy >= h {
+                        return false;
+                    }
+                    let q = (qy * w + qx) as usize;
+                    let dq = depth_at(q);
+                    dq < db && signed_coc(dq).abs() + 1.0 < coc_b.abs()
+                };
+                let first = if hidden(1) {
+                    1
+                } else if was_split
+                    [((y + d.1).clamp(0, h - 1) * w + (x + d.0).clamp(0, w - 1)) as usize]
+                    && hidden(2)
+                {
+                    2
+                } else {
+                    continue;
+                };
+                let mut steps = 0;
+                for k in first..=reach {
+                    if !hidden(k) {
+                        break;
+                    }
+                    let q = ((y + d.1 * k) * w + x + d.0 * k) as usize;
+                    fills[q] = fills[q].saturating_add(1);
+                    steps = k;
+                }
+                if steps >= first {
+                    walks.push((b, d, steps));
+                }
+            }
+        }
+    }
+    let mut out = Vec::new();
+    for (b, d, steps) in walks {
+        let base = own(b);
+        let (bx, by) = ((b as i32) % w, (b as i32) / w);
+        for k in 1..=steps {
+            let (qx, qy) = (bx + d.0 * k, by + d.1 * k);
+            let q = (qy * w + qx) as usize;
+            if fills[q] == 0 {
+                continue;
+            }
+            out.push(Fragment {
+                x: base.x + d.0 * k,
+                y: base.y + d.1 * k,
+                weight: 1.0 / f32::from(fills[q]),
+                ..base
+            });
+        }
+    }
+    out
 }
 
 /// How an anti-aliased edge pixel divides between a nearer foreground and its background.
@@ -958,6 +1084,8 @@ mod tests {
             layers: 4,
             soft_layers: Some(1.0),
             edge_split: false,
+            // Every fragment here is nearly sharp: split them all.
+            soft_layers_min_blur_px: 0.0,
             ..ClassifyOptions::default()
         };
         let dbs = DbSet::single(db).expect("set");
