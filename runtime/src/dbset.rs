@@ -19,13 +19,48 @@ pub struct DbSet {
     pub combined: Option<PsfDatabase>,
     /// Index of `main`'s first PSF in `combined`.
     pub main_offset: u32,
-    /// For each PSF of `combined` stored sparse: the index (in `combined`) of its dense twin,
-    /// or [`NO_TWIN`]. Twins are the analytic PSF pre-filtered over the same cell
-    /// ([`crate::condition::analytic_cell_psf`]), made for the thin-lens and lens-motion models
-    /// with a circular aperture. Very bright (HDR) pixels are drawn with them: a sparse PSF's
-    /// small relative error, multiplied by a highlight of 100, shows as dark holes and haze
-    /// beside it (the comets example: SSIM 0.9710 without, see docs/BENCHMARKS.md).
+    /// For each PSF of `combined`: the index (in `combined`) of its first dense twin, or
+    /// [`NO_TWIN`]. Twins are the analytic PSF pre-filtered over the same cell
+    /// ([`crate::condition::analytic_cell_psf`]), or for small PSFs over each of its sub-cells
+    /// ([`DbSet::hdr_twin_cells`]), made for the thin-lens and lens-motion models with a
+    /// circular aperture. Very bright (HDR) pixels are drawn with them: a sparse PSF's small
+    /// relative error, multiplied by a highlight of 100, shows as dark holes and haze beside
+    /// it (the comets example: SSIM 0.9710 without, see docs/BENCHMARKS.md), and a PSF
+    /// pre-filtered over a whole cell as a soft blob larger than the highlight's own bokeh.
     pub hdr_twins: Vec<u32>,
+    /// For each PSF of `combined` with twins: its cell in the source database's parameters
+    /// (CoC radius px, motion length px) and how many sub-cells per axis its twins cover. The
+    /// twin of the sub-cell holding a fragment's own parameters is
+    /// [`DbSet::hdr_twin_for`]; a twin pre-filtered over the whole cell would draw a small
+    /// highlight's bokeh as a soft blob up to the cell's largest PSF.
+    pub hdr_twin_cells: Vec<Option<TwinCell>>,
+}
+
+/// The cell a PSF's HDR twins divide (see [`DbSet::hdr_twin_cells`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TwinCell {
+    /// Lower corner: CoC radius px, motion length px.
+    pub min: [f64; 2],
+    /// Upper corner.
+    pub max: [f64; 2],
+    /// Sub-cells per axis (1 where the axis is unused or the PSF is large).
+    pub splits: [u32; 2],
+}
+
+impl TwinCell {
+    /// The sub-cell holding `params` (CoC radius px, motion length px), row-major; clamped.
+    pub fn sub_index(&self, params: [f32; 2]) -> u32 {
+        let along = |k: usize| -> u32 {
+            let n = self.splits[k];
+            let span = self.max[k] - self.min[k];
+            if n <= 1 || span <= 0.0 {
+                return 0;
+            }
+            let t = (f64::from(params[k]) - self.min[k]) / span;
+            ((t * f64::from(n)).floor().max(0.0) as u32).min(n - 1)
+        };
+        along(1) * self.splits[0] + along(0)
+    }
 }
 
 /// [`DbSet::hdr_twins`] entry of a PSF without a twin.
@@ -54,6 +89,7 @@ impl DbSet {
         };
         let base: usize = sources.iter().map(|d| d.psf_count()).sum();
         let mut hdr_twins = vec![NO_TWIN; base];
+        let mut hdr_twin_cells = vec![None; base];
         let mut twins = Vec::new();
         let mut first = 0usize;
         // The combined database keeps the last one's header, so its PSF bound.
@@ -62,9 +98,10 @@ impl DbSet {
             .map_or(0, |d| d.header().psf_resolution as i32);
         for db in &sources {
             for (i, twin) in dense_twins(db, bound).into_iter().enumerate() {
-                if let Some(t) = twin {
+                if let Some((cell, images)) = twin {
                     hdr_twins[first + i] = (base + twins.len()) as u32;
-                    twins.push(t);
+                    hdr_twin_cells[first + i] = Some(cell);
+                    twins.extend(images);
                 }
             }
             first += db.psf_count();
@@ -82,7 +119,19 @@ impl DbSet {
             combined,
             main_offset,
             hdr_twins,
+            hdr_twin_cells,
         })
+    }
+
+    /// The HDR twin (index in `combined`) of PSF `psf_index` for a fragment of parameters
+    /// `params` (CoC radius px, motion length px), or [`NO_TWIN`].
+    pub fn hdr_twin_for(&self, psf_index: u32, params: [f32; 2]) -> u32 {
+        let i = psf_index as usize;
+        match (self.hdr_twins.get(i), self.hdr_twin_cells.get(i)) {
+            (Some(&first), Some(Some(cell))) if first != NO_TWIN => first + cell.sub_index(params),
+            (Some(&first), _) => first,
+            _ => NO_TWIN,
+        }
     }
 
     /// A set of one database, of any model.
@@ -108,32 +157,78 @@ impl DbSet {
 /// one value per pixel (single channel, broadcast to the database's channels).
 type DenseImage = ([i16; 2], u16, u16, Vec<f32>);
 
-/// The dense twins of `db`'s sparse PSFs (see [`DbSet::hdr_twins`]); `None` where a PSF is
-/// dense already, empty, of a model or aperture the analytic PSF does not describe, or where
-/// the twin would reach beyond `bound` px from the centre (the database's PSF resolution).
-fn dense_twins(db: &PsfDatabase, bound: i32) -> Vec<Option<DenseImage>> {
+/// Largest twin image (pixels) whose cell is divided into sub-cells: the blob a whole-cell
+/// twin draws shows most on small highlights, and large twins would multiply memory and load
+/// time.
+const SUBDIVIDED_TWIN_MAX_PIXELS: usize = 64 * 64;
+
+/// Sub-cells per axis of a divided twin cell.
+const TWIN_SPLITS: u32 = 3;
+
+/// The dense twins of `db`'s sparse PSFs (see [`DbSet::hdr_twins`]): per PSF its cell and the
+/// twins of its sub-cells in row-major order; `None` where a PSF is empty, of a model or
+/// aperture the analytic PSF does not describe, or where a twin would reach beyond
+/// `bound` px from the centre (the database's PSF resolution).
+fn dense_twins(db: &PsfDatabase, bound: i32) -> Vec<Option<(TwinCell, Vec<DenseImage>)>> {
     use rayon::prelude::*;
     let analytic = matches!(db.model(), PsfModel::ThinLens | PsfModel::LensMotion)
         && db.header().aperture.blades == 0;
+    let motion = db.model() == PsfModel::LensMotion;
     (0..db.psf_count())
         .into_par_iter()
         .map(|i| {
-            if !analytic || db.dense(i).is_some() || db.spreadlets(i).0.is_empty() {
+            if !analytic || (db.dense(i).is_none() && db.spreadlets(i).0.is_empty()) {
                 return None;
             }
             let cell = db.space().cell_box(i as u32)?;
-            let len = if db.model() == PsfModel::LensMotion {
+            let len = if motion {
                 (cell.min[1], cell.max[1])
             } else {
                 (0.0, 0.0)
             };
-            let twin = crate::condition::analytic_cell_psf((cell.min[0], cell.max[0]), len);
-            let (origin, w, h) = (twin.0, i32::from(twin.1), i32::from(twin.2));
-            let fits = i32::from(origin[0]) >= -bound
-                && i32::from(origin[1]) >= -bound
-                && i32::from(origin[0]) + w - 1 <= bound
-                && i32::from(origin[1]) + h - 1 <= bound;
-            fits.then_some(twin)
+            let coc = (cell.min[0], cell.max[0]);
+            let fits = |twin: &DenseImage| {
+                let (origin, w, h) = (twin.0, i32::from(twin.1), i32::from(twin.2));
+                i32::from(origin[0]) >= -bound
+                    && i32::from(origin[1]) >= -bound
+                    && i32::from(origin[0]) + w - 1 <= bound
+                    && i32::from(origin[1]) + h - 1 <= bound
+            };
+            let whole = crate::condition::analytic_cell_psf(coc, len);
+            if !fits(&whole) {
+                return None;
+            }
+            let small = usize::from(whole.1) * usize::from(whole.2) <= SUBDIVIDED_TWIN_MAX_PIXELS;
+            let splits = match (small, motion) {
+                (false, _) => [1, 1],
+                (true, true) => [TWIN_SPLITS, TWIN_SPLITS],
+                (true, false) => [TWIN_SPLITS, 1],
+            };
+            let twin_cell = TwinCell {
+                min: [coc.0, len.0],
+                max: [coc.1, len.1],
+                splits,
+            };
+            if splits == [1, 1] {
+                return Some((twin_cell, vec![whole]));
+            }
+            let part = |lo: f64, hi: f64, k: u32, n: u32| {
+                let step = (hi - lo) / f64::from(n);
+                (lo + step * f64::from(k), lo + step * f64::from(k + 1))
+            };
+            let mut images = Vec::with_capacity((splits[0] * splits[1]) as usize);
+            for j in 0..splits[1] {
+                for k in 0..splits[0] {
+                    let sub_coc = part(coc.0, coc.1, k, splits[0]);
+                    let sub_len = part(len.0, len.1, j, splits[1]);
+                    let twin = crate::condition::analytic_cell_psf(sub_coc, sub_len);
+                    if !fits(&twin) {
+                        return None;
+                    }
+                    images.push(twin);
+                }
+            }
+            Some((twin_cell, images))
         })
         .collect()
 }
@@ -221,11 +316,12 @@ mod tests {
         .0
     }
 
-    /// Every sparse PSF of a circular thin-lens or lens-motion database gets a dense twin that
-    /// sums to one in every channel and is centred like its cell's PSF (centroid within a
-    /// pixel, since the analytic PSF is symmetric); dense PSFs get none.
+    /// Every non-empty PSF of a circular thin-lens or lens-motion database gets dense twins (one
+    /// per sub-cell of its cell) that each sum to one in every channel and are centred like
+    /// its cell's PSF (centroid within a pixel, since the analytic PSF is symmetric); a
+    /// fragment picks the sub-cell holding its parameters.
     #[test]
-    fn sparse_psfs_get_unit_dense_twins() {
+    fn psfs_get_unit_dense_twins_per_sub_cell() {
         let set = DbSet::new(
             Some(test_db(PsfModel::ThinLens)),
             Some(test_db(PsfModel::LensMotion)),
@@ -234,30 +330,46 @@ mod tests {
         let all = set.combined.as_ref().expect("combined");
         let base = set.hdr_twins.len();
         let mut twins = 0;
+        let mut divided = 0;
         for (i, &t) in set.hdr_twins.iter().enumerate() {
-            let sparse = all.dense(i).is_none() && !all.spreadlets(i).0.is_empty();
-            assert_eq!(t != NO_TWIN, sparse, "PSF {i}: twin {t}, sparse {sparse}");
+            let non_empty = all.dense(i).is_some() || !all.spreadlets(i).0.is_empty();
+            assert_eq!(t != NO_TWIN, non_empty, "PSF {i}: twin {t}");
             if t == NO_TWIN {
                 continue;
             }
-            twins += 1;
-            assert!(t as usize >= base, "twins follow the original PSFs");
-            let d = all.dense(t as usize).expect("twin is dense");
-            for c in 0..d.channels {
-                let (mut sum, mut mx, mut my) = (0.0f64, 0.0f64, 0.0f64);
-                for y in 0..d.height {
-                    for x in 0..d.width {
-                        let v = f64::from(d.data[(y * d.width + x) * d.channels + c]);
-                        sum += v;
-                        mx += v * (x as f64 + f64::from(d.origin[0]));
-                        my += v * (y as f64 + f64::from(d.origin[1]));
+            let cell = set.hdr_twin_cells[i].expect("a twin's cell");
+            let count = cell.splits[0] * cell.splits[1];
+            divided += usize::from(count > 1);
+            // The corners of the cell pick the first and the last sub-cell.
+            assert_eq!(
+                set.hdr_twin_for(i as u32, [cell.min[0] as f32, cell.min[1] as f32]),
+                t
+            );
+            let last = [cell.max[0] as f32 - 1e-3, cell.max[1] as f32 - 1e-3];
+            assert_eq!(set.hdr_twin_for(i as u32, last), t + count - 1, "PSF {i}");
+            for sub in t..t + count {
+                twins += 1;
+                assert!(sub as usize >= base, "twins follow the original PSFs");
+                let d = all.dense(sub as usize).expect("twin is dense");
+                for c in 0..d.channels {
+                    let (mut sum, mut mx, mut my) = (0.0f64, 0.0f64, 0.0f64);
+                    for y in 0..d.height {
+                        for x in 0..d.width {
+                            let v = f64::from(d.data[(y * d.width + x) * d.channels + c]);
+                            sum += v;
+                            mx += v * (x as f64 + f64::from(d.origin[0]));
+                            my += v * (y as f64 + f64::from(d.origin[1]));
+                        }
                     }
+                    assert!((sum - 1.0).abs() < 1e-4, "PSF {i} twin {sub} sums to {sum}");
+                    assert!((mx / sum).abs() < 1.0 && (my / sum).abs() < 1.0);
                 }
-                assert!((sum - 1.0).abs() < 1e-4, "PSF {i} twin sums to {sum}");
-                assert!((mx / sum).abs() < 1.0 && (my / sum).abs() < 1.0);
             }
         }
-        assert!(twins > 0, "the test databases have sparse PSFs");
+        assert!(
+            twins > 0 && divided > 0,
+            "{twins} twins, {divided} cells divided"
+        );
     }
 
     /// More PSFs than a 1-D nested grid holds (361): the paper profile's 404 lens-motion PSFs

@@ -395,3 +395,37 @@ fn a_blurred_wall_does_not_darken_beside_a_sharp_box_and_the_box_stays_opaque() 
         }
     }
 }
+
+#[test]
+fn a_small_highlights_bokeh_keeps_its_own_size() {
+    // One pixel 100x brighter than display white at CoC 4 px, on black. The test database's
+    // coarse cell around it (centred on 3 px) mixes much smaller disks: drawn with a twin
+    // pre-filtered over the whole cell, its second moment comes out at 0.69 of its own disk's;
+    // the twin of its sub-cell is within 15 % of it (1.10).
+    let n = 64usize;
+    let cam = close_focus_camera(n as u32);
+    let coc = 4.0;
+    let depth = depth_behind_focus(&cam, coc);
+    let mut color = vec![[0.0f32; 4]; n * n];
+    color[32 * n + 32] = [100.0, 100.0, 100.0, 1.0];
+    let g = GBuffer::from_planes(n, n, color, Some(vec![depth; n * n]), None).expect("g-buffer");
+    let dbs = thin_lens();
+    let (out, stats) =
+        synthesize(&g, &cam, &dbs, &with_edges(FrameEdges::Extend)).expect("synthesis");
+    assert_eq!(stats.counts.hdr_dense, 1, "{:?}", stats.counts);
+    let (mut sum, mut moment) = (0.0f64, 0.0f64);
+    for y in 0..n {
+        for x in 0..n {
+            let v = f64::from(out.get(x, y)[0].max(0.0));
+            let (dx, dy) = (x as f64 - 32.0, y as f64 - 32.0);
+            sum += v;
+            moment += v * (dx * dx + dy * dy);
+        }
+    }
+    // A uniform disk of radius r has E[x^2 + y^2] = r^2 / 2.
+    let ratio = moment / sum / (coc * coc / 2.0);
+    assert!(
+        (0.85..1.25).contains(&ratio),
+        "the highlight's second moment is {ratio} times its disk's"
+    );
+}

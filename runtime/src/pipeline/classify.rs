@@ -84,8 +84,9 @@ pub struct ClassifyOptions {
     /// Extra padding beyond the database's largest PSF extent, pixels.
     pub pad_margin: u32,
     /// A fragment whose weighted colour exceeds this in any of R, G, B (linear, premultiplied)
-    /// is drawn with its PSF's dense twin ([`DbSet::hdr_twins`]) instead of spreadlets, where
-    /// one exists: the spreadlets' small relative error would be scaled by the highlight.
+    /// is drawn with the dense twin of its sub-cell ([`DbSet::hdr_twin_for`]) instead of its
+    /// PSF, where one exists: the spreadlets' small relative error would be scaled by the
+    /// highlight, and a PSF pre-filtered over its whole cell would draw it as a soft blob.
     /// `f32::INFINITY` never does.
     pub hdr_dense_threshold: f32,
     /// What lies beyond the input's pixels (see [`FrameEdges`]).
@@ -579,12 +580,17 @@ pub fn classify_fragments(
         let bright = color[..3]
             .iter()
             .any(|&c| c * frag.weight > options.hdr_dense_threshold);
-        let twin = dbs
-            .hdr_twins
-            .get(psf_index as usize)
-            .copied()
-            .unwrap_or(NO_TWIN);
-        let (path, psf_index) = if path == SplatPath::Sparse && bright && twin != NO_TWIN {
+        // The twin of the sub-cell holding the fragment's own CoC and motion (a still pixel's
+        // PSF comes from the thin-lens database, whose cells are in CoC alone).
+        let from_main =
+            main.is_some() && psf_index >= dbs.main_offset && thin.is_some() || thin.is_none();
+        let twin_params = if from_main && model == Some(PsfModel::LensMotion) {
+            [coc, motion_len]
+        } else {
+            [coc, 0.0]
+        };
+        let twin = dbs.hdr_twin_for(psf_index, twin_params);
+        let (path, psf_index) = if path != SplatPath::Copy && bright && twin != NO_TWIN {
             counts.hdr_dense += 1;
             (SplatPath::Dense, twin)
         } else {
