@@ -1,8 +1,12 @@
-//! The splat records of one pixel (`cargo run --release -p runtime --example records_at G.exr
-//! camera.json X Y`), to see how classification treats it.
-use anyhow::Context;
+//! The splat records of one pixel and its two horizontal neighbours, and the dense PSFs 20-23
+//! of the combined database (`cargo run --release -p runtime --example records_at G.exr
+//! camera.json X Y`), to see how classification treats them.
+use anyhow::{bail, Context};
 fn main() -> anyhow::Result<()> {
     let a: Vec<String> = std::env::args().collect();
+    if a.len() != 5 {
+        bail!("usage: records_at G.exr camera.json X Y");
+    }
     let g = runtime::gbuffer::GBuffer::read_exr(std::path::Path::new(&a[1]), &Default::default())?;
     let cam = runtime::camera::Camera::from_json_str(&std::fs::read_to_string(&a[2])?)?;
     let (x, y): (i32, i32) = (a[3].parse().context("x")?, a[4].parse().context("y")?);
