@@ -19,9 +19,11 @@
 pub mod flip;
 pub mod score;
 pub mod ssim;
+pub mod stats;
 
 pub use flip::{flip_rgb, FlipError, FLIP_PIXELS_PER_DEGREE};
 pub use score::{edge_luminance_ratios, score_rgb, EdgeRatios, Scores, EDGE_BAND_PX};
+pub use stats::median;
 
 pub use ssim::{
     psnr_rgb, srgb_encode, ssim_plane, ssim_plane_f64, ssim_rgb, MetricsError, SSIM_K1, SSIM_K2,

@@ -113,13 +113,7 @@ pub fn edge_luminance_ratios(
         if ratios.is_empty() {
             return 1.0;
         }
-        ratios.sort_by(f64::total_cmp);
-        let n = ratios.len();
-        if n % 2 == 1 {
-            ratios[n / 2]
-        } else {
-            0.5 * (ratios[n / 2 - 1] + ratios[n / 2])
-        }
+        crate::stats::median(&mut ratios)
     };
     Ok(EdgeRatios {
         left: median_over(&|x, _| x < band_x),

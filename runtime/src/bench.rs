@@ -213,16 +213,7 @@ pub fn scene_frame(
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    v.sort_by(f64::total_cmp);
-    let m = v.len() / 2;
-    if v.len() % 2 == 1 {
-        v[m]
-    } else {
-        0.5 * (v[m - 1] + v[m])
-    }
+    metrics::median(&mut v)
 }
 
 fn ms(t: Instant) -> f64 {

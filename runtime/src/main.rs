@@ -465,13 +465,12 @@ fn run_synth(args: SynthArgs) -> Result<()> {
     if jobs.len() > 1 && !args.quiet {
         let first = frame_ms.first().copied().unwrap_or(0.0);
         let mut rest = frame_ms[1..].to_vec();
-        rest.sort_by(f64::total_cmp);
         eprintln!(
             "{} frames in {:.1} s: first {:.0} ms, median of the others {:.0} ms",
             jobs.len(),
             started.elapsed().as_secs_f64(),
             first,
-            rest.get(rest.len() / 2).copied().unwrap_or(0.0)
+            metrics::median(&mut rest)
         );
     }
     Ok(())

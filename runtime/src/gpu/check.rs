@@ -12,6 +12,7 @@ use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+use metrics::median;
 use poisson::pyramid::level_sizes;
 use psf_db::PsfDatabase;
 
@@ -256,19 +257,6 @@ pub fn frame_work(db: &PsfDatabase, frame: &Classified, rotation: RotationSampli
     w.integrate_bytes = 4 * planes * bytes;
     w.composite_bytes = 4 * planes * layer_px + 16 * (f.width as u64 * f.height as u64);
     w
-}
-
-fn median(v: &mut [f64]) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    v.sort_by(f64::total_cmp);
-    let m = v.len() / 2;
-    if v.len() % 2 == 1 {
-        v[m]
-    } else {
-        0.5 * (v[m - 1] + v[m])
-    }
 }
 
 fn median_times(runs: &[StageTimes]) -> StageTimes {

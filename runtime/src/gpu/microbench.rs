@@ -298,8 +298,7 @@ pub fn run_microbenchmarks(
         .into_iter()
         .map(|b| {
             let mut t = b.times.clone();
-            t.sort_by(f64::total_cmp);
-            let median = t[t.len() / 2];
+            let median = metrics::median(&mut t);
             let timing = if b.pipeline.is_some() && timer.queries.is_some() {
                 "timestamps"
             } else {
