@@ -999,7 +999,10 @@ fn write_json(path: &Path, value: &serde_json::Value) -> Result<()> {
 }
 
 fn read_rgba(path: &Path) -> Result<RgbaImage> {
-    let g = GBuffer::read_exr(path, &ChannelOptions::default())?.frame_only();
+    let mut g = GBuffer::read_exr(path, &ChannelOptions::default())?;
+    if !g.overscan.is_none() {
+        g = g.frame_only();
+    }
     Ok(RgbaImage {
         width: g.width,
         height: g.height,

@@ -580,16 +580,9 @@ pub fn classify_fragments(
         let bright = color[..3]
             .iter()
             .any(|&c| c * frag.weight > options.hdr_dense_threshold);
-        // The twin of the sub-cell holding the fragment's own CoC and motion (a still pixel's
-        // PSF comes from the thin-lens database, whose cells are in CoC alone).
-        let from_main =
-            main.is_some() && psf_index >= dbs.main_offset && thin.is_some() || thin.is_none();
-        let twin_params = if from_main && model == Some(PsfModel::LensMotion) {
-            [coc, motion_len]
-        } else {
-            [coc, 0.0]
-        };
-        let twin = dbs.hdr_twin_for(psf_index, twin_params);
+        // The twin of the sub-cell holding the fragment's own CoC and motion (a thin-lens
+        // cell is divided in CoC alone and ignores the motion).
+        let twin = dbs.hdr_twin_for(psf_index, [coc, motion_len]);
         let (path, psf_index) = if path != SplatPath::Copy && bright && twin != NO_TWIN {
             counts.hdr_dense += 1;
             (SplatPath::Dense, twin)
