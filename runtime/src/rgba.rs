@@ -71,7 +71,9 @@ impl RgbaImage {
     }
 
     /// Writes an OpenEXR file with channels R, G, B, A (f32), atomically: a temporary file in
-    /// the destination folder renamed into place, so a failure leaves no partial file.
+    /// the destination folder renamed into place, so a failure leaves no partial file. The
+    /// blocks are compressed in parallel but stored in increasing order, so the same image
+    /// always gives the same bytes.
     pub fn write_exr(&self, path: &Path) -> Result<(), WriteError> {
         use exr::prelude::*;
         let io = |source| WriteError::Io {
@@ -83,7 +85,12 @@ impl RgbaImage {
             let p = self.pixels[pos.y() * w + pos.x()];
             (p[0], p[1], p[2], p[3])
         });
-        let image = Image::from_channels((self.width, self.height), channels);
+        // Unspecified line order would store the blocks in whichever order the threads finish.
+        let encoding = Encoding {
+            line_order: LineOrder::Increasing,
+            ..Encoding::FAST_LOSSLESS
+        };
+        let image = Image::from_encoded_channels((self.width, self.height), encoding, channels);
         write_atomically(path, |file| {
             let mut buffered = BufWriter::new(file);
             image
@@ -161,4 +168,37 @@ where
     tmp.as_file().sync_all().map_err(io)?;
     tmp.persist(path).map_err(|e| io(e.error))?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_same_image_is_written_as_the_same_bytes() {
+        let (w, h) = (320, 256);
+        let pixels = (0..w * h)
+            .map(|i| {
+                let v = ((i * 7919) % 1013) as f32 / 1013.0;
+                [v, 1.0 - v, (i % w) as f32 / w as f32, 1.0]
+            })
+            .collect();
+        let image = RgbaImage {
+            width: w,
+            height: h,
+            pixels,
+        };
+        let dir = tempfile::tempdir().expect("temp dir");
+        let files: Vec<Vec<u8>> = (0..4)
+            .map(|k| {
+                let path = dir.path().join(format!("{k}.exr"));
+                image.write_exr(&path).expect("write");
+                std::fs::read(&path).expect("read")
+            })
+            .collect();
+        assert!(
+            files.windows(2).all(|p| p[0] == p[1]),
+            "the same image gave different files"
+        );
+    }
 }
