@@ -5,8 +5,8 @@
 
 use std::path::Path;
 
-use runtime::camera::Camera;
-use runtime::gbuffer::{ChannelOptions, GBuffer};
+use spreadlet::camera::Camera;
+use spreadlet::gbuffer::{ChannelOptions, GBuffer};
 use spreadlet_e2e::{assert_clean_failure, assert_success, cache_dir, run};
 
 fn read_rgba(path: &Path) -> Vec<f32> {
@@ -76,7 +76,7 @@ fn shirley_through_the_binary_equals_the_library_and_beats_the_plain_average() {
     let frames = scene::StochasticFrames::read_exr(&p("frames.exr")).expect("frames");
     let camera = Camera::from_json_file(&p("camera.json")).expect("camera");
     let direct =
-        runtime::peer::reconstruct_peer("shirley", &frames, &camera, false).expect("library run");
+        spreadlet::peer::reconstruct_peer("shirley", &frames, &camera, false).expect("library run");
     let from_binary = read_rgba(&p("shirley.exr"));
     let from_library: Vec<f32> = direct.image.pixels.iter().flatten().copied().collect();
     assert_eq!(from_binary, from_library);

@@ -3,7 +3,7 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use runtime::gbuffer::{ChannelOptions, GBuffer, Layout};
+use spreadlet::gbuffer::{ChannelOptions, GBuffer, Layout};
 
 fuzz_target!(|data: &[u8]| {
     for layout in [Layout::Auto, Layout::Plain] {
@@ -13,7 +13,7 @@ fuzz_target!(|data: &[u8]| {
         };
         if let Ok(g) = GBuffer::read_exr_bytes(data, "<fuzz>", &options) {
             let n = g.width * g.height;
-            assert!(n > 0 && n <= runtime::gbuffer::MAX_PIXELS);
+            assert!(n > 0 && n <= spreadlet::gbuffer::MAX_PIXELS);
             assert_eq!(g.color.len(), n);
             assert!(g.color.iter().all(|c| c.iter().all(|v| v.is_finite())));
             if let Some(d) = &g.depth {

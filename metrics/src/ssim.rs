@@ -39,15 +39,7 @@ pub enum MetricsError {
     DynamicRange(f64),
 }
 
-/// sRGB transfer function (IEC 61966-2-1) of a linear value, clamped to [0, 1] first.
-pub fn srgb_encode(linear: f32) -> f32 {
-    let v = if linear > 0.0 { linear.min(1.0) } else { 0.0 }; // NaN -> 0
-    if v <= 0.003_130_8 {
-        12.92 * v
-    } else {
-        1.055 * v.powf(1.0 / 2.4) - 0.055
-    }
-}
+pub use formats::srgb_encode;
 
 fn gaussian_window() -> [f64; 2 * SSIM_RADIUS + 1] {
     let mut w = [0.0; 2 * SSIM_RADIUS + 1];

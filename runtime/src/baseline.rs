@@ -22,8 +22,8 @@
 use std::time::Instant;
 
 use poisson::{ExactIntegrator, Plane};
-use precompute::{BuildConfig, Profile};
-use psf_db::{DatabaseBuilder, DbError, PsfDatabase, PsfModel};
+use precompute::BuildConfig;
+use psf_db::{DatabaseBuilder, DbError, PsfDatabase};
 use rayon::prelude::*;
 
 use crate::camera::Camera;
@@ -32,7 +32,7 @@ use crate::dbset::DbSet;
 use crate::gbuffer::GBuffer;
 use crate::pipeline::classify::{classify, ClassifyError};
 use crate::pipeline::{ClassifyOptions, Effects, RotationSampling, SplatPath};
-use crate::rgba::RgbaImage;
+use formats::RgbaImage;
 
 /// The methods `spreadlet synth --method` and `spreadlet study` know besides the peers.
 pub const METHODS: [&str; 3] = ["spreadlet", "dense", "filter"];
@@ -64,51 +64,6 @@ pub fn dense_build_config(cfg: &BuildConfig) -> BuildConfig {
     dense
 }
 
-/// The databases `effects` call for (like `demo::cached_dbs`: thin-lens, plus lens-motion when
-/// something moves), built with `build` applied to the runtime's configuration for `profile`,
-/// from the cache (built when missing) and conditioned as the pipeline uses them. With
-/// `keep_sparse`, the recorded errors are dropped before conditioning (see
-/// [`without_recorded_error`]), so no sparse PSF is swapped for a dense analytic one.
-pub fn cached_dbs_with(
-    effects: Effects,
-    profile: Profile,
-    blades: u32,
-    progress: bool,
-    keep_sparse: bool,
-    build: &dyn Fn(BuildConfig) -> BuildConfig,
-) -> Result<DbSet, BaselineError> {
-    let Some(needed) = effects.cheapest_model() else {
-        return Ok(DbSet::none());
-    };
-    let load = |model| -> Result<PsfDatabase, BaselineError> {
-        let cfg = build(dbcache::build_config(model, profile, blades));
-        let (db, _) = dbcache::cached_database(&cfg, &dbcache::cache_dir(), progress)?;
-        let db = if keep_sparse {
-            without_recorded_error(&db)?
-        } else {
-            db
-        };
-        Ok(crate::condition::condition(&db)?.0)
-    };
-    let thin = load(PsfModel::ThinLens)?;
-    let main = match needed {
-        PsfModel::LensMotion => Some(load(PsfModel::LensMotion)?),
-        _ => None,
-    };
-    Ok(DbSet::new(Some(thin), main)?)
-}
-
-/// The dense-splat baseline's databases: [`cached_dbs_with`] and [`dense_build_config`].
-pub fn cached_dense_dbs(
-    effects: Effects,
-    profile: Profile,
-    blades: u32,
-    progress: bool,
-) -> Result<DbSet, BaselineError> {
-    cached_dbs_with(effects, profile, blades, progress, false, &|c| {
-        dense_build_config(&c)
-    })
-}
 
 /// `cfg` with every PSF stored sparse: no fast track (the spreadlet ratio, similarity and L1
 /// rules of the precompute all disabled).

@@ -1,6 +1,6 @@
 //! The database cache: a user with only a G-buffer and a camera gets a result from one command.
-//! A missing database is built with `precompute` (the `quick` profile by default, progress on
-//! stderr) into the cache folder (`$SPREADLET_CACHE`, else `./.spreadlet-cache`), named by
+//! A missing database is built with `precompute` (the `quick` profile by default) into the
+//! cache folder ([`cache_dir`]: `$SPREADLET_CACHE`, else the platform's cache folder), named by
 //! model, profile and a hash of the build settings, and reused on later runs.
 
 use std::path::{Path, PathBuf};
@@ -53,11 +53,65 @@ pub enum CacheError {
     },
 }
 
-/// The cache folder: `$SPREADLET_CACHE` when set and non-empty, else `./.spreadlet-cache`.
+/// The cache folder, whatever the working directory: `$SPREADLET_CACHE` when set and
+/// non-empty, else the platform's cache folder (`$XDG_CACHE_HOME/spreadlet`, else
+/// `~/.cache/spreadlet`; `~/Library/Caches/spreadlet` on macOS; `%LOCALAPPDATA%\spreadlet` on
+/// Windows), else `.spreadlet-cache` in the working directory when no home is known.
 pub fn cache_dir() -> PathBuf {
-    match std::env::var_os(CACHE_ENV) {
-        Some(v) if !v.is_empty() => PathBuf::from(v),
-        _ => PathBuf::from(".spreadlet-cache"),
+    let var = |name: &str| std::env::var_os(name).filter(|v| !v.is_empty()).map(PathBuf::from);
+    if let Some(dir) = var(CACHE_ENV) {
+        return dir;
+    }
+    let platform = if cfg!(target_os = "windows") {
+        var("LOCALAPPDATA")
+    } else if cfg!(target_os = "macos") {
+        var("HOME").map(|h| h.join("Library/Caches"))
+    } else {
+        var("XDG_CACHE_HOME")
+            .filter(|p| p.is_absolute())
+            .or_else(|| var("HOME").map(|h| h.join(".cache")))
+    };
+    match platform {
+        Some(dir) => dir.join("spreadlet"),
+        None => PathBuf::from(".spreadlet-cache"),
+    }
+}
+
+/// What the cache tells its caller while it works.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum CacheEvent {
+    /// A cached file was unreadable or of another model; it is rebuilt.
+    Unusable {
+        /// The file.
+        path: PathBuf,
+    },
+    /// A database is being built (minutes with the paper profile).
+    Building {
+        /// The model's name.
+        model: &'static str,
+        /// The profile's name.
+        profile: &'static str,
+        /// The file it goes to.
+        path: PathBuf,
+    },
+}
+
+impl std::fmt::Display for CacheEvent {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            CacheEvent::Unusable { path } => {
+                write!(f, "cached database {} is unusable; rebuilding", path.display())
+            }
+            CacheEvent::Building {
+                model,
+                profile,
+                path,
+            } => write!(
+                f,
+                "building the {model} database ({profile} profile) into {}",
+                path.display()
+            ),
+        }
     }
 }
 
@@ -109,11 +163,13 @@ pub struct DbSource {
 }
 
 /// The database for `cfg` from the cache folder `dir`, built (and stored) when missing or
-/// unreadable (a corrupt cache file is rebuilt, not trusted).
+/// unreadable (a corrupt cache file is rebuilt, not trusted). `progress` shows the builder's
+/// progress bars; `on_event` hears of rebuilds and builds.
 pub fn cached_database(
     cfg: &BuildConfig,
     dir: &Path,
     progress: bool,
+    on_event: &mut dyn FnMut(CacheEvent),
 ) -> Result<(PsfDatabase, DbSource), CacheError> {
     let path = dir.join(cache_file_name(cfg));
     if path.exists() {
@@ -121,25 +177,18 @@ pub fn cached_database(
             Ok(db) if db.model() == cfg.model => {
                 return Ok((db, DbSource { path, built: false }));
             }
-            Ok(_) | Err(_) => {
-                if progress {
-                    eprintln!("cached database {} is unusable; rebuilding", path.display());
-                }
-            }
+            Ok(_) | Err(_) => on_event(CacheEvent::Unusable { path: path.clone() }),
         }
     }
     std::fs::create_dir_all(dir).map_err(|source| CacheError::Folder {
         path: dir.display().to_string(),
         source,
     })?;
-    if progress {
-        eprintln!(
-            "building the {} database ({} profile) into {}",
-            cfg.model.name(),
-            cfg.profile.name(),
-            path.display()
-        );
-    }
+    on_event(CacheEvent::Building {
+        model: cfg.model.name(),
+        profile: cfg.profile.name(),
+        path: path.clone(),
+    });
     let (db, _report) = build_database(cfg, progress).map_err(|source| CacheError::Build {
         model: cfg.model.name(),
         source,

@@ -84,7 +84,8 @@ pub enum GBufferError {
 }
 
 /// Which channel layout to read.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum Layout {
     /// Blender multilayer when `*.Combined.R` exists, else plain.
     #[default]
@@ -174,25 +175,6 @@ pub struct GBuffer {
 }
 
 impl GBuffer {
-    /// The G-buffer the scene renderer made (colour, planar depth, forward motion in pixels per
-    /// frame), validated like any other input.
-    pub fn from_scene(g: &scene::GBuffer) -> Result<Self, GBufferError> {
-        let (w, h) = (g.width, g.height);
-        let motion: Vec<[f32; 2]> = (0..w * h)
-            .map(|i| {
-                let m = g.forward_motion(i % w, i / w);
-                [m.x as f32, m.y as f32]
-            })
-            .collect();
-        Self::from_planes(
-            w,
-            h,
-            g.color_image().pixels,
-            Some(g.depth.clone()),
-            Some(motion),
-        )
-    }
-
     /// A G-buffer from planes already in memory; validates depth and motion and drops
     /// non-finite colours (counted), as the reader does.
     pub fn from_planes(
@@ -337,7 +319,7 @@ impl GBuffer {
                 ),
             });
         }
-        scene::exr_io::check_expansion(&meta, file_len).map_err(|message| {
+        formats::exr_io::check_expansion(&meta, file_len).map_err(|message| {
             GBufferError::Layout {
                 path: name.clone(),
                 message,

@@ -18,7 +18,7 @@
 
 use std::time::Instant;
 
-use scene::StochasticFrames;
+use formats::StochasticFrames;
 
 use crate::camera::Camera;
 use crate::dbset::DbSet;
@@ -26,7 +26,7 @@ use crate::pipeline::classify::{
     classify_fragments, resolve_model, ClassifyError, DataWindow, Fragment,
 };
 use crate::pipeline::{Classified, Effects, PathCounts};
-use crate::rgba::RgbaImage;
+use formats::RgbaImage;
 use crate::synth::{record_classified, render_classified, SynthOptions, SynthStats};
 
 /// The effects a camera and stochastic frames call for.
@@ -346,7 +346,7 @@ fn ms_since(t: Instant) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use scene::Sample;
+    use formats::Sample;
 
     fn camera() -> Camera {
         Camera::from_json_str(

@@ -12,9 +12,9 @@ use crate::pipeline::{
     classify, composite, integrate, splat, ClassifyOptions, CompositeOptions, Effects, Integrator,
     PathCounts, SplatOptions,
 };
-use crate::rgba::RgbaImage;
+use formats::RgbaImage;
 
-/// All knobs of synthesis.
+/// All knobs of synthesis. The default is exactly what `spreadlet synth` does with no flags.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct SynthOptions {
     /// Classification (layers, soft layering, edge fix, copy threshold).
@@ -25,6 +25,28 @@ pub struct SynthOptions {
     pub integrator: Integrator,
     /// Compositing.
     pub composite: CompositeOptions,
+}
+
+impl SynthOptions {
+    /// Refuses options out of range, naming the option as the command line does.
+    pub fn validate(&self) -> Result<(), crate::Error> {
+        let layers = self.classify.layers;
+        if layers == 0 || layers > 64 {
+            return Err(crate::Error::InvalidOption {
+                option: "--layers",
+                message: format!("must be between 1 and 64, got {layers}"),
+            });
+        }
+        if let Some(soft) = self.classify.soft_layers {
+            if !(soft.is_finite() && soft >= 0.0) {
+                return Err(crate::Error::InvalidOption {
+                    option: "--soft-layers",
+                    message: format!("must be zero or positive, got {soft}"),
+                });
+            }
+        }
+        Ok(())
+    }
 }
 
 /// Wall-clock time of each stage, milliseconds.

@@ -8,15 +8,15 @@ use std::sync::OnceLock;
 
 use precompute::{build_database, BuildConfig, Profile};
 use psf_db::{PsfDatabase, PsfModel};
-use runtime::baseline::{
+use spreadlet::baseline::{
     dense_build_config, filter, integrate_spreadlets, sparse_psf_count, DenseKernels, FilterOptions,
 };
-use runtime::camera::Camera;
-use runtime::dbset::DbSet;
-use runtime::gbuffer::GBuffer;
-use runtime::pipeline::{ClassifyOptions, FrameEdges, Integrator};
-use runtime::rgba::RgbaImage;
-use runtime::synth::{synthesize, SynthOptions};
+use spreadlet::camera::Camera;
+use spreadlet::dbset::DbSet;
+use spreadlet::gbuffer::GBuffer;
+use spreadlet::pipeline::{ClassifyOptions, FrameEdges, Integrator};
+use formats::image::RgbaImage;
+use spreadlet::synth::{synthesize, SynthOptions};
 use support::{camera, depth_for_coc, one_pixel, test_db};
 
 /// The Test-profile thin-lens database with every PSF stored dense, conditioned.
@@ -25,7 +25,7 @@ fn dense_test_db() -> &'static PsfDatabase {
     DB.get_or_init(|| {
         let cfg = dense_build_config(&BuildConfig::new(PsfModel::ThinLens, Profile::Test));
         let (db, _) = build_database(&cfg, false).expect("dense test database");
-        runtime::condition::condition(&db).expect("condition").0
+        spreadlet::condition::condition(&db).expect("condition").0
     })
 }
 

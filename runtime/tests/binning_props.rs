@@ -1,4 +1,4 @@
-//! Property tests of the layer binning in `runtime::pipeline::classify` (issue 7): every
+//! Property tests of the layer binning in `spreadlet::pipeline::classify` (issue 7): every
 //! fragment lands in exactly one layer with its whole weight, or (soft layering) in two
 //! neighbouring layers whose weights sum to its weight; the layer is monotone in parallax
 //! (so in signed CoC: nearer, more negative CoC, is a higher layer); hard layers hold the
@@ -6,10 +6,10 @@
 
 use proptest::prelude::*;
 use psf_db::{DatabaseBuilder, DbHeader, ParamSpace, PsfModel};
-use runtime::camera::Camera;
-use runtime::dbset::DbSet;
-use runtime::pipeline::classify::{classify_fragments, DataWindow, Fragment};
-use runtime::pipeline::{ClassifyOptions, PathCounts};
+use spreadlet::camera::Camera;
+use spreadlet::dbset::DbSet;
+use spreadlet::pipeline::classify::{classify_fragments, DataWindow, Fragment};
+use spreadlet::pipeline::{ClassifyOptions, PathCounts};
 
 fn camera(w: u32) -> Camera {
     Camera {
@@ -39,7 +39,7 @@ fn dbs() -> DbSet {
 fn bin(
     fragments: &[Fragment],
     options: &ClassifyOptions,
-) -> (Vec<Vec<(u32, f32)>>, runtime::pipeline::Classified) {
+) -> (Vec<Vec<(u32, f32)>>, spreadlet::pipeline::Classified) {
     let n = fragments.len();
     let c = classify_fragments(
         fragments,

@@ -5,12 +5,12 @@
 use std::path::Path;
 
 use psf_db::PsfModel;
-use runtime::camera::Camera;
-use runtime::dbcache::{build_config, cache_dir, cached_database};
-use runtime::dbset::DbSet;
-use runtime::gbuffer::{ChannelOptions, GBuffer};
-use runtime::pipeline::{Effects, Integrator};
-use runtime::synth::{synthesize, SynthOptions};
+use spreadlet::camera::Camera;
+use spreadlet::dbcache::{build_config, cache_dir, cached_database};
+use spreadlet::dbset::DbSet;
+use spreadlet::gbuffer::{ChannelOptions, GBuffer};
+use spreadlet::pipeline::{Effects, Integrator};
+use spreadlet::synth::{synthesize, SynthOptions};
 
 fn ssim_against(image: &[[f32; 4]], reference: &Path, w: usize, h: usize) -> f64 {
     let r = GBuffer::read_exr(reference, &ChannelOptions::default()).expect("reference");
@@ -38,13 +38,13 @@ fn run(scene: &str, min_ssim: f64) {
     let load = |m| {
         let cfg = build_config(m, precompute::Profile::Quick, cam.aperture_blades);
         // Tests run in runtime/: share the workspace root's cache unless one is set.
-        let dir = if std::env::var_os(runtime::dbcache::CACHE_ENV).is_some() {
+        let dir = if std::env::var_os(spreadlet::dbcache::CACHE_ENV).is_some() {
             cache_dir()
         } else {
             Path::new(env!("CARGO_MANIFEST_DIR")).join("../.spreadlet-cache")
         };
         let db = cached_database(&cfg, &dir, true).expect("db").0;
-        runtime::condition::condition(&db).expect("condition").0
+        spreadlet::condition::condition(&db).expect("condition").0
     };
     let main = (effects.cheapest_model() == Some(PsfModel::LensMotion))
         .then(|| load(PsfModel::LensMotion));

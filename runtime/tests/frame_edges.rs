@@ -5,12 +5,12 @@
 mod support;
 
 use psf_db::PsfModel;
-use runtime::camera::Camera;
-use runtime::dbset::DbSet;
-use runtime::gbuffer::{ChannelOptions, GBuffer, Overscan};
-use runtime::pipeline::{ClassifyOptions, FrameEdges, Integrator};
-use runtime::rgba::RgbaImage;
-use runtime::synth::{synthesize, SynthOptions};
+use spreadlet::camera::Camera;
+use spreadlet::dbset::DbSet;
+use spreadlet::gbuffer::{ChannelOptions, GBuffer, Overscan};
+use spreadlet::pipeline::{ClassifyOptions, FrameEdges, Integrator};
+use formats::image::RgbaImage;
+use spreadlet::synth::{synthesize, SynthOptions};
 use support::{camera, depth_for_coc, test_db};
 
 fn thin_lens() -> DbSet {
@@ -52,7 +52,7 @@ fn depth_behind_focus(camera: &Camera, coc_px: f64) -> f32 {
 }
 
 /// A uniform grey wall far out of focus (CoC radius 10 px) filling a 64x64 frame.
-fn grey_wall(n: usize, grey: f32, coc_px: f64) -> (GBuffer, runtime::camera::Camera) {
+fn grey_wall(n: usize, grey: f32, coc_px: f64) -> (GBuffer, spreadlet::camera::Camera) {
     let cam = camera(n as u32, n as u32, true, 0.0);
     let depth = depth_for_coc(&cam, coc_px) as f32;
     let g = GBuffer::from_planes(
@@ -187,7 +187,7 @@ fn an_overscan_file_reads_its_windows_and_writes_the_frame() {
     assert_eq!((read.frame_width(), read.frame_height()), (32, 32));
     // The frame of the larger render is the plain render's frame: the same surfaces at the
     // same pixels (depth at the pixel centres), the colour up to anti-aliasing noise.
-    let plain = GBuffer::from_scene(&scene::render_gbuffer(&scene, 16, &options).expect("render"))
+    let plain = support::gbuffer_of(&scene::render_gbuffer(&scene, 16, &options).expect("render"))
         .expect("plain");
     let frame = read.frame_only();
     let depths = frame
@@ -376,7 +376,7 @@ fn a_blurred_wall_does_not_darken_beside_a_sharp_box_and_the_box_stays_opaque() 
     let mut options = with_edges(FrameEdges::Black);
     options.classify.fill_hidden = true;
     let classified =
-        runtime::pipeline::classify(&g, &cam, &dbs, &options.classify).expect("classify");
+        spreadlet::pipeline::classify(&g, &cam, &dbs, &options.classify).expect("classify");
     for info in &classified.layers {
         let recs = &classified.records[info.first_record..info.first_record + info.record_count];
         assert!(

@@ -1,7 +1,7 @@
 //! The GPU context: an adapter is found where one exists, and its features are reported.
 #![cfg(feature = "gpu")]
 
-use runtime::gpu::GpuContext;
+use spreadlet::gpu::GpuContext;
 
 #[test]
 fn context_reports_adapter_and_features() {

@@ -9,11 +9,11 @@ use std::path::{Path, PathBuf};
 
 use gpu_support::{context, max_diff};
 use psf_db::{PsfDatabase, PsfModel};
-use runtime::camera::Camera;
-use runtime::dbset::DbSet;
-use runtime::gbuffer::{ChannelOptions, GBuffer};
-use runtime::gpu::{synthesize_gpu, GpuSynthOptions, GpuSynthesizer};
-use runtime::synth::{synthesize, SynthOptions};
+use spreadlet::camera::Camera;
+use spreadlet::dbset::DbSet;
+use spreadlet::gbuffer::{ChannelOptions, GBuffer};
+use spreadlet::gpu::{synthesize_gpu, GpuSynthOptions, GpuSynthesizer};
+use spreadlet::synth::{synthesize, SynthOptions};
 
 /// Centre crop edge, px (the examples are 512 x 512; lavapipe in CI stays fast at this size).
 const CROP: usize = 256;

@@ -1,5 +1,5 @@
 //! The filter baseline on the GPU (`shaders/filter.wgsl`) against its CPU twin
-//! (`runtime::baseline::filter`): the same kernels, the same per-pixel plan, the sums in the
+//! (`spreadlet::baseline::filter`): the same kernels, the same per-pixel plan, the sums in the
 //! same order, so the images agree to f32 rounding.
 #![cfg(feature = "gpu")]
 
@@ -8,16 +8,16 @@ mod support;
 
 use gpu_support::{context, max_diff};
 use psf_db::PsfModel;
-use runtime::baseline::{filter, DenseKernels, FilterOptions};
-use runtime::dbset::DbSet;
-use runtime::gbuffer::GBuffer;
-use runtime::gpu::{filter_gpu, GpuFilter};
-use runtime::pipeline::RotationSampling;
+use spreadlet::baseline::{filter, DenseKernels, FilterOptions};
+use spreadlet::dbset::DbSet;
+use spreadlet::gbuffer::GBuffer;
+use spreadlet::gpu::{filter_gpu, GpuFilter};
+use spreadlet::pipeline::RotationSampling;
 use support::{camera, depth_for_coc, test_db};
 
 /// Textured, with CoC from 0 to 10 px and motion up to 20 px in every direction (so kernels
 /// are rotated, copied and clamped), and a transparent corner.
-fn busy_gbuffer(w: usize, h: usize, cam: &runtime::camera::Camera) -> GBuffer {
+fn busy_gbuffer(w: usize, h: usize, cam: &spreadlet::camera::Camera) -> GBuffer {
     let mut color = Vec::with_capacity(w * h);
     let mut depth = Vec::with_capacity(w * h);
     let mut motion = Vec::with_capacity(w * h);
@@ -56,7 +56,7 @@ fn gpu_filter_matches_the_cpu_filter() {
         assert_eq!(cpu_stats.filtered, gpu_stats.filtered);
         assert_eq!(cpu_stats.copied, gpu_stats.copied);
         assert!(cpu_stats.filtered > w * h / 2, "{cpu_stats:?}");
-        let flat = |i: &runtime::rgba::RgbaImage| -> Vec<f32> {
+        let flat = |i: &formats::image::RgbaImage| -> Vec<f32> {
             i.pixels.iter().flat_map(|p| p.iter().copied()).collect()
         };
         let (diff, peak) = max_diff(&flat(&gpu_image), &flat(&cpu));
@@ -79,7 +79,7 @@ fn gpu_filter_matches_the_cpu_filter() {
 /// one with a 1x1 kernel of weight 0.5 halves it.
 #[test]
 fn gpu_filter_keeps_the_colour_of_pixels_with_an_empty_kernel() {
-    use runtime::baseline::{DenseKernel, PixelPsf};
+    use spreadlet::baseline::{DenseKernel, PixelPsf};
     let Some(ctx) = context() else {
         return;
     };

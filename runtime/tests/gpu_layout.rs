@@ -5,11 +5,11 @@
 use std::mem::{offset_of, size_of};
 
 use psf_db::DenseEntry;
-use runtime::gpu::layout::{
+use spreadlet::gpu::layout::{
     FilterParams, FilterPixel, KernelEntry, MicroParams, PassParams, PlaneSet, PsfFootprint,
     SplatTargets, TileGrid,
 };
-use runtime::pipeline::types::{FrameParams, SplatRecord};
+use spreadlet::pipeline::types::{FrameParams, SplatRecord};
 
 fn wgsl_struct(module: &naga::Module, name: &str) -> (u32, Vec<(String, u32)>) {
     for (_, ty) in module.types.iter() {
@@ -113,12 +113,12 @@ fn tile_constants_match_the_shaders() {
     let common = include_str!("../../shaders/common.wgsl");
     assert!(common.contains(&format!(
         "const SPLAT_TILE: u32 = {}u;",
-        runtime::gpu::tiles::SPLAT_TILE
+        spreadlet::gpu::tiles::SPLAT_TILE
     )));
     let bin = include_str!("../../shaders/bin.wgsl");
     assert!(bin.contains(&format!(
         "const TILE_META: u32 = {}u;",
-        runtime::gpu::tiles::TILE_META_WORDS
+        spreadlet::gpu::tiles::TILE_META_WORDS
     )));
 }
 
@@ -140,7 +140,7 @@ fn dense_entry_packing_is_little_endian_halves() {
 
 #[test]
 fn every_stage_shader_parses_and_validates() {
-    for (name, src) in runtime::gpu::shader_sources_for_validation() {
+    for (name, src) in spreadlet::gpu::shader_sources_for_validation() {
         let module = naga::front::wgsl::parse_str(&src)
             .unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(&src)));
         naga::valid::Validator::new(

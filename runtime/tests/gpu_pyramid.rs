@@ -5,7 +5,7 @@ mod gpu_support;
 
 use gpu_support::{context, max_diff, noise_plane};
 use poisson::{Plane, PyramidWorkspace};
-use runtime::gpu::GpuPyramid;
+use spreadlet::gpu::GpuPyramid;
 
 /// Relative tolerance (of the level's largest value): the GPU sums in the CPU's order, but may
 /// fuse multiply-adds.

@@ -1,5 +1,5 @@
-//! Reconstruction on the GPU (`runtime::gpu::reconstruct_gpu`) matches the CPU path
-//! (`runtime::reconstruct::reconstruct`) on a small built-in scene with defocus and motion:
+//! Reconstruction on the GPU (`spreadlet::gpu::reconstruct_gpu`) matches the CPU path
+//! (`spreadlet::reconstruct::reconstruct`) on a small built-in scene with defocus and motion:
 //! the same records, SSIM >= 0.999 and a bounded largest difference.
 #![cfg(feature = "gpu")]
 
@@ -7,11 +7,11 @@ mod gpu_support;
 
 use gpu_support::{context, max_diff};
 use psf_db::PsfModel;
-use runtime::camera::Camera;
-use runtime::dbset::DbSet;
-use runtime::gpu::{reconstruct_gpu, GpuSynthOptions, GpuSynthesizer};
-use runtime::reconstruct::reconstruct;
-use runtime::synth::SynthOptions;
+use spreadlet::camera::Camera;
+use spreadlet::dbset::DbSet;
+use spreadlet::gpu::{reconstruct_gpu, GpuSynthOptions, GpuSynthesizer};
+use spreadlet::reconstruct::reconstruct;
+use spreadlet::synth::SynthOptions;
 
 /// Frame edge, px (small: lavapipe in CI).
 const SIZE: u32 = 96;

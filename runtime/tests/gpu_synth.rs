@@ -1,4 +1,4 @@
-//! The GPU pipeline matches the CPU path (`runtime::pipeline`) stage by stage on synthetic
+//! The GPU pipeline matches the CPU path (`spreadlet::pipeline`) stage by stage on synthetic
 //! record lists: single pixels, every PSF model, image borders, many overlapping splats,
 //! rotations, both splat stages (tiled, global atomics), both atomic paths and both
 //! integrators; the tiled stage's fixed point against a near worst case of its bound.
@@ -13,14 +13,14 @@ use poisson::Plane;
 use psf_db::{DatabaseBuilder, DbHeader, ParamSpace, PsfDatabase, PsfModel};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use runtime::gpu::tiles::{self, BinSetup};
-use runtime::gpu::{AtomicMode, GpuSynthOptions, GpuSynthesizer, SplatMode};
-use runtime::pipeline::types::{FrameParams, SplatPath, SplatRecord};
-use runtime::pipeline::{
+use spreadlet::gpu::tiles::{self, BinSetup};
+use spreadlet::gpu::{AtomicMode, GpuSynthOptions, GpuSynthesizer, SplatMode};
+use spreadlet::pipeline::types::{FrameParams, SplatPath, SplatRecord};
+use spreadlet::pipeline::{
     composite, integrate, splat, Classified, CompositeOptions, Integrator, LayerInfo, PathCounts,
     RotationSampling, SplatOptions,
 };
-use runtime::rgba::RgbaImage;
+use formats::image::RgbaImage;
 
 /// Splat planes: largest difference relative to the plane set's largest value (atomic adds
 /// in another order than the CPU's bands).

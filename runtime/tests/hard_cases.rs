@@ -17,15 +17,15 @@ mod gpu_support;
 
 use poisson::Plane;
 use psf_db::{DatabaseBuilder, DbHeader, ParamSpace, PsfDatabase, PsfModel};
-use runtime::camera::Camera;
-use runtime::dbset::DbSet;
-use runtime::gbuffer::GBuffer;
-use runtime::pipeline::types::{FrameParams, SplatPath, SplatRecord};
-use runtime::pipeline::{
+use spreadlet::camera::Camera;
+use spreadlet::dbset::DbSet;
+use spreadlet::gbuffer::GBuffer;
+use spreadlet::pipeline::types::{FrameParams, SplatPath, SplatRecord};
+use spreadlet::pipeline::{
     classify, composite, integrate, splat, Classified, ClassifyOptions, CompositeOptions,
     IntegratedLayers, Integrator, LayerInfo, PathCounts, RotationSampling, SplatOptions,
 };
-use runtime::synth::{synthesize, SynthOptions};
+use spreadlet::synth::{synthesize, SynthOptions};
 use support::{camera, depth_for_coc};
 
 /// A PSF image: `size x size` f32 values (sum 1) centred at `(half, half)`.
@@ -210,7 +210,7 @@ fn run_pipeline(
     cam: &Camera,
     dbs: &DbSet,
     integrator: Integrator,
-) -> (Classified, runtime::rgba::RgbaImage) {
+) -> (Classified, formats::image::RgbaImage) {
     run_pipeline_with(g, cam, dbs, integrator, RotationSampling::default())
 }
 
@@ -220,7 +220,7 @@ fn run_pipeline_with(
     dbs: &DbSet,
     integrator: Integrator,
     rotation: RotationSampling,
-) -> (Classified, runtime::rgba::RgbaImage) {
+) -> (Classified, formats::image::RgbaImage) {
     let opts = one_layer(integrator);
     let c = classify(g, cam, dbs, &opts.classify).expect("classify");
     let stack = splat(&c, dbs.combined.as_ref(), &SplatOptions { rotation });
@@ -335,7 +335,7 @@ fn one_pixel_case(
     w: usize,
     coc: f64,
     motion: [f32; 2],
-) -> (Classified, runtime::rgba::RgbaImage) {
+) -> (Classified, formats::image::RgbaImage) {
     one_pixel_case_with(dbs, w, coc, motion, RotationSampling::default())
 }
 
@@ -345,7 +345,7 @@ fn one_pixel_case_with(
     coc: f64,
     motion: [f32; 2],
     rotation: RotationSampling,
-) -> (Classified, runtime::rgba::RgbaImage) {
+) -> (Classified, formats::image::RgbaImage) {
     let shutter = if motion == [0.0, 0.0] { 0.0 } else { 1.0 };
     let cam = camera(w as u32, w as u32, true, shutter);
     let depth = depth_for_coc(&cam, coc) as f32;
@@ -360,7 +360,7 @@ fn one_pixel_case_with(
     run_pipeline_with(&g, &cam, dbs, Integrator::Exact, rotation)
 }
 
-fn bits(img: &runtime::rgba::RgbaImage) -> Vec<u32> {
+fn bits(img: &formats::image::RgbaImage) -> Vec<u32> {
     img.pixels
         .iter()
         .flat_map(|p| p.map(f32::to_bits))
@@ -370,7 +370,7 @@ fn bits(img: &runtime::rgba::RgbaImage) -> Vec<u32> {
 /// Largest |output - f64 reference| over the image, relative to the reference's peak.
 fn rel_error(
     c: &Classified,
-    img: &runtime::rgba::RgbaImage,
+    img: &formats::image::RgbaImage,
     images: &[PsfImage],
     dbs: &DbSet,
 ) -> f64 {
@@ -698,7 +698,7 @@ fn empty_frames_and_empty_layers() {
 // Still, tiny, diagonal and vertical motion
 
 /// Energy (sum of R), centroid and second moments (about the centroid) of an image's R.
-fn moments(img: &runtime::rgba::RgbaImage) -> (f64, [f64; 2], [f64; 3]) {
+fn moments(img: &formats::image::RgbaImage) -> (f64, [f64; 2], [f64; 3]) {
     let (mut s, mut sx, mut sy) = (0.0f64, 0.0f64, 0.0f64);
     for (i, p) in img.pixels.iter().enumerate() {
         let (x, y) = ((i % img.width) as f64, (i / img.width) as f64);
@@ -958,7 +958,7 @@ fn cpu_results_are_bit_identical_across_runs_and_threads() {
 #[cfg(feature = "gpu")]
 #[test]
 fn gpu_matches_the_cpu_on_hard_cases() {
-    use runtime::gpu::{GpuSynthOptions, GpuSynthesizer};
+    use spreadlet::gpu::{GpuSynthOptions, GpuSynthesizer};
     let Some(ctx) = gpu_support::context() else {
         return;
     };
@@ -1046,7 +1046,7 @@ fn with_declared_size(bytes: &[u8], w: i32, h: i32) -> Vec<u8> {
 /// other tests' memory does not count.
 #[test]
 fn huge_declared_size_in_a_tiny_file_is_an_error_without_a_huge_allocation() {
-    use runtime::gbuffer::ChannelOptions;
+    use spreadlet::gbuffer::ChannelOptions;
     const CHILD: &str = "SPREADLET_HARD_CASES_CHILD";
     if std::env::var_os(CHILD).is_none() {
         let exe = std::env::current_exe().expect("test binary");
@@ -1108,7 +1108,7 @@ fn huge_declared_size_in_a_tiny_file_is_an_error_without_a_huge_allocation() {
 /// camera parser: errors are fine, panics are not, and whatever loads satisfies the policy.
 #[test]
 fn readers_survive_seeded_mutations_of_the_fuzz_seeds() {
-    use runtime::gbuffer::ChannelOptions;
+    use spreadlet::gbuffer::ChannelOptions;
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../fuzz/seeds");
     let mut s = 0x9E37_79B9_7F4A_7C15u64;
     let mut next = move || {

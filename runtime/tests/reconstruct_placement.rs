@@ -6,9 +6,9 @@
 mod support;
 
 use psf_db::PsfModel;
-use runtime::dbset::DbSet;
-use runtime::reconstruct::{effects_of, prepare, SamplePlacement};
-use runtime::synth::SynthOptions;
+use spreadlet::dbset::DbSet;
+use spreadlet::reconstruct::{effects_of, prepare, SamplePlacement};
+use spreadlet::synth::SynthOptions;
 use scene::{Sample, StochasticFrames};
 use support::{camera, test_db};
 

@@ -6,14 +6,14 @@ mod support;
 use poisson::Plane;
 use precompute::{BuildConfig, BuildPlan, Profile};
 use psf_db::{PsfDatabase, PsfModel};
-use runtime::camera::Camera;
-use runtime::dbset::DbSet;
-use runtime::gbuffer::GBuffer;
-use runtime::pipeline::{
+use spreadlet::camera::Camera;
+use spreadlet::dbset::DbSet;
+use spreadlet::gbuffer::GBuffer;
+use spreadlet::pipeline::{
     classify, composite, integrate, splat, ClassifyOptions, CompositeOptions, Effects, Integrator,
     SplatOptions, SplatPath,
 };
-use runtime::synth::{synthesize, SynthOptions};
+use spreadlet::synth::{synthesize, SynthOptions};
 use support::{camera, depth_for_coc, one_pixel, raw_test_db, test_db};
 
 /// A set of one database.
@@ -41,7 +41,7 @@ fn splat_one(
     cam: &Camera,
     db: &PsfDatabase,
     integrator: Integrator,
-) -> (Plane, u32, runtime::pipeline::types::SplatRecord) {
+) -> (Plane, u32, spreadlet::pipeline::types::SplatRecord) {
     let opts = plain_options(integrator);
     let dbs = set(db);
     let c = classify(g, cam, &dbs, &opts.classify).expect("classify");
@@ -406,7 +406,7 @@ fn synthesis_is_bit_identical_across_runs_and_thread_counts() {
     let a = run(1);
     let b = run(2);
     let c = run(3);
-    let bits = |img: &runtime::rgba::RgbaImage| {
+    let bits = |img: &formats::image::RgbaImage| {
         img.pixels
             .iter()
             .flat_map(|p| p.map(f32::to_bits))

@@ -58,6 +58,20 @@ pub enum Error {
     },
 }
 
+impl From<formats::Error> for Error {
+    fn from(e: formats::Error) -> Self {
+        match e {
+            formats::Error::Io { path, source } => Error::Io { path, source },
+            formats::Error::Exr { path, source } => Error::Exr { path, source },
+            formats::Error::Layout { path, message } => Error::Layout { path, message },
+            formats::Error::Png { path, source } => Error::Io {
+                path,
+                source: std::io::Error::other(source),
+            },
+        }
+    }
+}
+
 /// Shorthand for results of this crate.
 pub type Result<T> = std::result::Result<T, Error>;
 

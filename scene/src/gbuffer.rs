@@ -36,6 +36,17 @@ impl GBuffer {
         DVec2::new(-f64::from(v[2]), f64::from(v[3]))
     }
 
+    /// Every pixel's forward motion, row-major (pixels per frame, x right, y down): the motion
+    /// plane a renderer's G-buffer holds.
+    pub fn forward_motion_plane(&self) -> Vec<[f32; 2]> {
+        (0..self.width * self.height)
+            .map(|i| {
+                let m = self.forward_motion(i % self.width, i / self.width);
+                [m.x as f32, m.y as f32]
+            })
+            .collect()
+    }
+
     /// Blender's `[X, Y, Z, W]` from the image positions (pixels, y down) of a surface point in
     /// the previous frame, now and in the next frame.
     pub fn blender_vector(previous: DVec2, now: DVec2, next: DVec2) -> [f32; 4] {
@@ -78,7 +89,7 @@ impl GBuffer {
                 ),
             });
         }
-        exr_io::write_channels_with_overscan(
+        Ok(exr_io::write_channels_with_overscan(
             path,
             self.width,
             self.height,
@@ -95,7 +106,7 @@ impl GBuffer {
                 (name("Vector", "W"), vector(3)),
             ],
             None,
-        )
+        )?)
     }
 
     /// Reads a G-buffer in Blender's layout; the view layer name is whatever precedes

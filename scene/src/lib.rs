@@ -17,17 +17,16 @@
 //! # Ok::<(), scene::Error>(())
 //! ```
 
+pub use formats::{exr_io, image, stochastic};
+
 pub mod camera;
 pub mod error;
-pub mod exr_io;
 pub mod gbuffer;
-pub mod image;
 pub mod material;
 pub mod render;
 pub mod sampling;
 pub mod scene;
 pub mod shapes;
-pub mod stochastic;
 pub mod texture;
 
 pub use camera::{Camera, CameraPose, CameraSpec, Ray};

@@ -8,7 +8,9 @@ use rayon::prelude::*;
 
 use crate::error::{invalid, Result};
 use crate::gbuffer::GBuffer;
-use crate::image::{srgb_encode, RgbaImage};
+use formats::srgb_encode;
+
+use crate::image::RgbaImage;
 use crate::sampling::{latin_hypercube, pixel_rng, uniform, Stream};
 use crate::scene::{Scene, MISS_DEPTH};
 use crate::stochastic::{Sample, StochasticFrames};

@@ -127,7 +127,7 @@ impl GpuContext {
     }
 
     /// Takes the first wgpu error reported since the last call, as a [`GpuError::Wgpu`].
-    pub(crate) fn take_error(&self, stage: &'static str) -> Result<(), GpuError> {
+    pub fn take_error(&self, stage: &'static str) -> Result<(), GpuError> {
         let message = self.uncaptured.lock().ok().and_then(|mut s| s.take());
         match message {
             Some(message) => Err(GpuError::Wgpu { stage, message }),
@@ -136,7 +136,7 @@ impl GpuContext {
     }
 
     /// Blocks until all submitted work is done, then reports any captured wgpu error.
-    pub(crate) fn wait(&self, stage: &'static str) -> Result<(), GpuError> {
+    pub fn wait(&self, stage: &'static str) -> Result<(), GpuError> {
         self.device
             .poll(wgpu::PollType::wait_indefinitely())
             .map_err(|e| GpuError::Wgpu {

@@ -16,7 +16,7 @@ use crate::camera::Camera;
 use crate::dbset::DbSet;
 use crate::gbuffer::GBuffer;
 use crate::pipeline::RotationSampling;
-use crate::rgba::RgbaImage;
+use formats::RgbaImage;
 
 /// Workgroup edge of `filter_pixels` (8 x 8 invocations).
 const TILE: u32 = 8;

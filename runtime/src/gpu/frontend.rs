@@ -8,7 +8,7 @@ use super::{GpuContext, GpuError, GpuSynthOptions, GpuSynthesizer, StageTimes};
 use crate::camera::Camera;
 use crate::dbset::DbSet;
 use crate::gbuffer::GBuffer;
-use crate::rgba::RgbaImage;
+use formats::RgbaImage;
 use crate::synth::{prepare, Prepared, SynthOptions, SynthStats};
 
 impl GpuSynthOptions {
@@ -57,7 +57,7 @@ pub fn synthesize_gpu(
 /// density normalisation on the CPU.
 pub fn reconstruct_gpu(
     gpu: &mut GpuSynthesizer,
-    frames: &scene::StochasticFrames,
+    frames: &formats::StochasticFrames,
     camera: &Camera,
     dbs: &DbSet,
     options: &SynthOptions,

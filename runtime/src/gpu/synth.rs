@@ -24,7 +24,7 @@ use crate::pipeline::composite::CompositeOptions;
 use crate::pipeline::integrate::Integrator;
 use crate::pipeline::splat::RotationSampling;
 use crate::pipeline::types::{FrameParams, SplatRecord};
-use crate::rgba::RgbaImage;
+use formats::RgbaImage;
 
 /// How splats are accumulated.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -37,7 +37,8 @@ pub enum AtomicMode {
 }
 
 /// How the splat stage accumulates.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum SplatMode {
     /// Records binned into 16 x 16 px screen tiles; each tile sums its pixels in workgroup
     /// memory (fixed point, scaled from the tile's bound so that nothing overflows) and writes

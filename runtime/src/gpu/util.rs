@@ -5,7 +5,7 @@ use wgpu::util::DeviceExt;
 use super::{GpuContext, GpuError};
 
 /// A storage buffer initialised with `data` (at least 16 bytes: empty arrays cannot be bound).
-pub(crate) fn storage_init(ctx: &GpuContext, label: &str, data: &[u8]) -> wgpu::Buffer {
+pub fn storage_init(ctx: &GpuContext, label: &str, data: &[u8]) -> wgpu::Buffer {
     let mut bytes = data.to_vec();
     if bytes.len() < 16 {
         bytes.resize(16, 0);
@@ -22,7 +22,7 @@ pub(crate) fn storage_init(ctx: &GpuContext, label: &str, data: &[u8]) -> wgpu::
 }
 
 /// A zeroed storage buffer of `bytes` bytes (at least 16), checked against the device limits.
-pub(crate) fn storage_zeroed(
+pub fn storage_zeroed(
     ctx: &GpuContext,
     what: &'static str,
     bytes: u64,
@@ -46,7 +46,7 @@ pub(crate) fn storage_zeroed(
 }
 
 /// A uniform buffer holding `data`.
-pub(crate) fn uniform_init(ctx: &GpuContext, label: &str, data: &[u8]) -> wgpu::Buffer {
+pub fn uniform_init(ctx: &GpuContext, label: &str, data: &[u8]) -> wgpu::Buffer {
     ctx.device
         .create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some(label),
@@ -56,7 +56,7 @@ pub(crate) fn uniform_init(ctx: &GpuContext, label: &str, data: &[u8]) -> wgpu::
 }
 
 /// Layout entry: binding `b`, a uniform buffer.
-pub(crate) fn uniform_entry(b: u32) -> wgpu::BindGroupLayoutEntry {
+pub fn uniform_entry(b: u32) -> wgpu::BindGroupLayoutEntry {
     wgpu::BindGroupLayoutEntry {
         binding: b,
         visibility: wgpu::ShaderStages::COMPUTE,
@@ -70,7 +70,7 @@ pub(crate) fn uniform_entry(b: u32) -> wgpu::BindGroupLayoutEntry {
 }
 
 /// Layout entry: binding `b`, a storage buffer.
-pub(crate) fn storage_entry(b: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
+pub fn storage_entry(b: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
     wgpu::BindGroupLayoutEntry {
         binding: b,
         visibility: wgpu::ShaderStages::COMPUTE,
@@ -84,7 +84,7 @@ pub(crate) fn storage_entry(b: u32, read_only: bool) -> wgpu::BindGroupLayoutEnt
 }
 
 /// A bind group binding `buffers[i]` at binding `i`, whole.
-pub(crate) fn bind_group(
+pub fn bind_group(
     ctx: &GpuContext,
     label: &str,
     layout: &wgpu::BindGroupLayout,
@@ -107,7 +107,7 @@ pub(crate) fn bind_group(
 
 /// Compute pipelines for `entry_points` of one WGSL source sharing `layout`. Shader or
 /// pipeline errors come back as [`GpuError::Wgpu`] instead of wgpu's default panic.
-pub(crate) fn compute_pipelines(
+pub fn compute_pipelines(
     ctx: &GpuContext,
     label: &'static str,
     source: &str,
@@ -157,7 +157,7 @@ pub(crate) fn compute_pipelines(
 
 /// Copies `bytes` bytes from `offset` of `buffer` into a fresh staging buffer and reads them
 /// back as f32 (blocking).
-pub(crate) fn read_f32(
+pub fn read_f32(
     ctx: &GpuContext,
     what: &'static str,
     buffer: &wgpu::Buffer,
@@ -183,7 +183,7 @@ pub(crate) fn read_f32(
 
 /// Maps the first `bytes` of a MAP_READ buffer (after the copy into it was submitted), reads
 /// them as f32 and unmaps.
-pub(crate) fn map_read(
+pub fn map_read(
     ctx: &GpuContext,
     what: &'static str,
     staging: &wgpu::Buffer,
@@ -196,7 +196,7 @@ pub(crate) fn map_read(
 
 /// Maps the first `bytes` of a MAP_READ buffer (after the copy into it was submitted), copies
 /// them out and unmaps.
-pub(crate) fn map_read_bytes(
+pub fn map_read_bytes(
     ctx: &GpuContext,
     what: &'static str,
     staging: &wgpu::Buffer,

@@ -438,7 +438,8 @@ impl DataWindow {
 }
 
 /// What lies beyond the input's pixels, where a blurred frame's border gathers light from.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 #[serde(rename_all = "kebab-case")]
 pub enum FrameEdges {
     /// The input continues beyond its outermost pixels as they are (clamp to edge, as a

@@ -9,7 +9,7 @@
 //! Negative values (approximation ringing) are clamped to zero in the output.
 
 use super::integrate::IntegratedLayers;
-use crate::rgba::RgbaImage;
+use formats::RgbaImage;
 
 /// Knobs of compositing.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -23,7 +23,8 @@ use super::types::{FrameParams, SplatPath, SplatRecord};
 pub const BAND_ROWS: usize = 32;
 
 /// How rotated offsets land on the pixel grid.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum RotationSampling {
     /// Laplacian spreadlets go onto the 3x3 quadratic B-spline around the nearest pixel
     /// ([`bspline_footprint`]), which adds the same variance to every spreadlet, so a rotated

@@ -4,7 +4,7 @@
 use std::sync::OnceLock;
 
 use poisson::Plane;
-use runtime::gpu::GpuContext;
+use spreadlet::gpu::GpuContext;
 
 /// The process-wide GPU context; `None` (test skipped, with a message) when there is no
 /// adapter and `SPREADLET_REQUIRE_GPU` is not `1`; a panic (test failure) when it is.

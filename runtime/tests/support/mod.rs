@@ -7,8 +7,8 @@ use std::sync::OnceLock;
 
 use precompute::{build_database, BuildConfig, Profile};
 use psf_db::{PsfDatabase, PsfModel};
-use runtime::camera::Camera;
-use runtime::gbuffer::GBuffer;
+use spreadlet::camera::Camera;
+use spreadlet::gbuffer::GBuffer;
 
 /// The Test-profile database of `model`, built once per test binary and conditioned as the
 /// `spreadlet` binary conditions it.
@@ -20,7 +20,7 @@ pub fn test_db(model: PsfModel) -> &'static PsfDatabase {
         PsfModel::PhysicalLens => &DBS[2],
     };
     slot.get_or_init(|| {
-        runtime::condition::condition(raw_test_db(model))
+        spreadlet::condition::condition(raw_test_db(model))
             .expect("condition")
             .0
     })
@@ -87,4 +87,17 @@ pub fn one_pixel(
         Some(vec![motion; w * h]),
     )
     .expect("valid g-buffer")
+}
+
+/// The renderer's G-buffer of what the scene renderer made, validated like any other input.
+#[allow(dead_code)]
+pub fn gbuffer_of(g: &scene::GBuffer) -> GBuffer {
+    GBuffer::from_planes(
+        g.width,
+        g.height,
+        g.color_image().pixels,
+        Some(g.depth.clone()),
+        Some(g.forward_motion_plane()),
+    )
+    .expect("a valid scene G-buffer")
 }

@@ -1,0 +1,387 @@
+//! `spreadlet synth`: depth of field and motion blur from a pinhole G-buffer, one frame or a
+//! sequence, through [`spreadlet::Renderer`].
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use clap::Args;
+
+use spreadlet::baseline::{FilterOptions, METHODS};
+use spreadlet::gbuffer::{ChannelOptions, GBuffer, Layout};
+use spreadlet::pipeline::{
+    ClassifyOptions, CompositeOptions, Effects, FrameEdges, Integrator, RotationSampling,
+    SplatOptions,
+};
+use spreadlet::{Backend, Method, Renderer, SynthOptions};
+
+use super::camera_flags::{load_camera, CameraFlags};
+use super::frames::{frame_jobs, FrameJob, FramePaths};
+use super::{renderer_options, write_json};
+
+#[derive(Args, Debug)]
+pub(crate) struct SynthArgs {
+    /// Pinhole G-buffer: OpenEXR with colour, depth and (for motion blur) motion vectors. For a
+    /// sequence, a run of # stands for the frame number (frames/####.exr with --frames).
+    #[arg(long)]
+    pub(crate) input: PathBuf,
+    /// Method: spreadlet; the baselines dense (every pre-filtered PSF drawn whole, no
+    /// Laplacian) and filter (gathering with the same PSFs; docs/STUDY.md); or a peer
+    /// method for comparison (mcguire, guertin: motion blur from the G-buffer, no defocus;
+    /// docs/PEERS.md).
+    #[arg(long, default_value = "spreadlet")]
+    pub(crate) method: String,
+    /// Frame range A-B of a sequence: # in --input, --out, --camera, --preview and --stats is
+    /// replaced by the frame number; databases and GPU pipelines are reused across frames.
+    #[arg(long)]
+    pub(crate) frames: Option<String>,
+    /// Synthesise only part K of N of the frame range (0-based; auto/N takes K from
+    /// SLURM_ARRAY_TASK_ID or JOB_COMPLETION_INDEX).
+    #[arg(long)]
+    pub(crate) shard: Option<String>,
+    /// Camera description (`camera.json`); flags with the same names override its fields.
+    #[arg(long)]
+    pub(crate) camera: Option<PathBuf>,
+    #[command(flatten)]
+    pub(crate) camera_flags: CameraFlags,
+    /// Output OpenEXR (linear RGBA, f32), written atomically.
+    #[arg(long)]
+    pub(crate) out: PathBuf,
+    /// PSF database to use instead of the cached one (built on demand).
+    #[arg(long)]
+    pub(crate) db: Option<PathBuf>,
+    /// Profile of databases built on demand.
+    #[arg(long, default_value = "quick")]
+    pub(crate) db_profile: String,
+    /// Number of global depth layers (binned in constant parallax).
+    #[arg(long, default_value_t = 8)]
+    pub(crate) layers: u32,
+    /// Soft layering: blend width between neighbouring layers in layer units (0 = hard
+    /// layers; the flag alone = 1).
+    #[arg(long, num_args = 0..=1, default_missing_value = "1.0", default_value = "1.0")]
+    pub(crate) soft_layers: f32,
+    /// Do not split anti-aliased edge pixels into foreground and background parts.
+    #[arg(long)]
+    pub(crate) no_edge_split: bool,
+    /// Do not scale the composite up to the layers' joint coverage.
+    #[arg(long)]
+    pub(crate) no_coverage_renormalization: bool,
+    /// What lies beyond the input's pixels (its overscan, if the file has any): extend (the
+    /// outermost pixels continue outwards, so a blurred frame keeps its brightness to the
+    /// edge) or black (the frame's border loses light; for comparison).
+    #[arg(long, value_enum, default_value_t = FrameEdges::default())]
+    pub(crate) frame_edges: FrameEdges,
+    /// Do not continue a blurred background behind the silhouettes of sharper occluders (the
+    /// background then darkens along them).
+    #[arg(long)]
+    pub(crate) no_hidden_fill: bool,
+    /// Poisson integrator (exact by default: the pyramid's small relative error becomes
+    /// visible around HDR highlights).
+    #[arg(long, value_enum, default_value_t = Integrator::default())]
+    pub(crate) integrate: Integrator,
+    /// Placement of rotated (motion-aligned) spreadlets.
+    #[arg(long, value_enum, default_value_t = RotationSampling::default())]
+    pub(crate) rotation: RotationSampling,
+    /// Write statistics (effects, databases, counts per path, stage times) as JSON.
+    #[arg(long)]
+    pub(crate) stats: Option<PathBuf>,
+    /// Write an sRGB PNG preview.
+    #[arg(long)]
+    pub(crate) preview: Option<PathBuf>,
+    /// Device.
+    #[arg(long, value_enum, default_value_t = Backend::Auto)]
+    pub(crate) backend: Backend,
+    /// Input layout.
+    #[arg(long, value_enum, default_value_t = Layout::Auto)]
+    pub(crate) layout: Layout,
+    /// Blender view layer to read (when the file has several).
+    #[arg(long)]
+    pub(crate) layer: Option<String>,
+    /// Plain layout: depth channel name.
+    #[arg(long)]
+    pub(crate) depth_channel: Option<String>,
+    /// Plain layout: forward motion channels, "X,Y" (pixels per frame, x right, y down).
+    #[arg(long)]
+    pub(crate) motion_channels: Option<String>,
+    /// Plain layout: the motion's y axis points up.
+    #[arg(long)]
+    pub(crate) motion_y_up: bool,
+    /// Use the database's spreadlets as stored (no monopole removal, no energy
+    /// normalisation).
+    #[arg(long)]
+    pub(crate) no_condition: bool,
+    /// Print no progress.
+    #[arg(long, short)]
+    pub(crate) quiet: bool,
+}
+
+
+impl SynthArgs {
+    /// The library's options these flags ask for; no flags give [`SynthOptions::default`].
+    pub(crate) fn synth_options(&self) -> SynthOptions {
+        SynthOptions {
+            classify: ClassifyOptions {
+                layers: self.layers,
+                // Zero is hard layers; anything else, negative or NaN too, goes to the validation.
+                soft_layers: (self.soft_layers != 0.0).then_some(self.soft_layers),
+                edge_split: !self.no_edge_split,
+                frame_edges: self.frame_edges,
+                fill_hidden: !self.no_hidden_fill,
+                ..ClassifyOptions::default()
+            },
+            splat: SplatOptions {
+                rotation: self.rotation,
+            },
+            integrator: self.integrate,
+            composite: CompositeOptions {
+                renormalize_coverage: !self.no_coverage_renormalization,
+            },
+        }
+    }
+
+    fn channel_options(&self) -> Result<ChannelOptions> {
+        let motion = match &self.motion_channels {
+            Some(s) => match s.split_once(',') {
+                Some((x, y)) => Some((x.trim().to_string(), y.trim().to_string())),
+                None => bail!("--motion-channels takes two names separated by a comma, got '{s}'"),
+            },
+            None => None,
+        };
+        Ok(ChannelOptions {
+            layout: self.layout,
+            layer: self.layer.clone(),
+            depth: self.depth_channel.clone(),
+            motion,
+            motion_y_up: self.motion_y_up,
+        })
+    }
+}
+
+/// Runs `spreadlet synth`: every frame of the run through one renderer, so databases and GPU
+/// pipelines are loaded once.
+pub(crate) fn run(args: SynthArgs) -> Result<()> {
+    let jobs = frame_jobs(&FramePaths {
+        input: &args.input,
+        out: &args.out,
+        camera: &args.camera,
+        preview: &args.preview,
+        stats: &args.stats,
+        frames: &args.frames,
+        shard: &args.shard,
+    })?;
+    let method = match args.method.as_str() {
+        "dense" => Method::Dense,
+        "filter" => Method::Filter,
+        _ => Method::Spreadlet,
+    };
+    let mut renderer = Renderer::new(renderer_options(
+        args.backend,
+        args.db.as_deref(),
+        &args.db_profile,
+        method,
+        !args.no_condition,
+        args.quiet,
+    )?)?;
+    let started = Instant::now();
+    let mut frame_ms = Vec::with_capacity(jobs.len());
+    for job in &jobs {
+        let t = Instant::now();
+        synth_frame(&args, job, &mut renderer)
+            .with_context(|| format!("frame {}", job.input.display()))?;
+        frame_ms.push(t.elapsed().as_secs_f64() * 1e3);
+    }
+    if jobs.len() > 1 && !args.quiet {
+        let first = frame_ms.first().copied().unwrap_or(0.0);
+        let mut rest = frame_ms[1..].to_vec();
+        eprintln!(
+            "{} frames in {:.1} s: first {:.0} ms, median of the others {:.0} ms",
+            jobs.len(),
+            started.elapsed().as_secs_f64(),
+            first,
+            metrics::median(&mut rest)
+        );
+    }
+    Ok(())
+}
+
+fn synth_frame(args: &SynthArgs, job: &FrameJob, renderer: &mut Renderer) -> Result<()> {
+    let started = Instant::now();
+    let camera = load_camera(job.camera.as_deref(), &args.camera_flags)?;
+    let t = Instant::now();
+    let gbuffer = GBuffer::read_exr(&job.input, &args.channel_options()?)?;
+    let read_ms = t.elapsed().as_secs_f64() * 1e3;
+    let options = args.synth_options();
+    options.validate()?;
+    if !METHODS.contains(&args.method.as_str()) {
+        return peer_frame(args, job, &gbuffer, &camera);
+    }
+    if args.method == "filter" {
+        return filter_frame(args, job, &gbuffer, &camera, renderer);
+    }
+    let effects = Effects::of(&camera, &gbuffer);
+    let frame = renderer.synthesize(&gbuffer, &camera, &options)?;
+    let (image, stats) = (&frame.image, &frame.stats);
+    let t = Instant::now();
+    image.write_exr(&job.out)?;
+    // Everything after the image: on failure the image is removed too, so a failed run leaves
+    // no output behind.
+    let finish = || -> Result<()> {
+        if let Some(p) = &job.preview {
+            image.write_png(p)?;
+        }
+        let write_ms = t.elapsed().as_secs_f64() * 1e3;
+        if !args.quiet {
+            eprintln!(
+                "{}x{} ({}{}): {} sparse, {} dense, {} copied, {} dropped; {} of {} layers; \
+             synthesis {:.0} ms (classify {:.0}, splat {:.0}, integrate {:.0}, composite {:.0}) \
+             on the {}",
+                stats.width,
+                stats.height,
+                if effects.defocus {
+                    "defocus"
+                } else {
+                    "no defocus"
+                },
+                if effects.motion { " + motion" } else { "" },
+                stats.counts.sparse,
+                stats.counts.dense,
+                stats.counts.copied,
+                stats.counts.dropped,
+                stats.layers_used,
+                stats.layers,
+                stats.times.total_ms,
+                stats.times.classify_ms,
+                stats.times.splat_ms,
+                stats.times.integrate_ms,
+                stats.times.composite_ms,
+                frame.device,
+            );
+        }
+        if let Some(p) = &job.stats {
+            #[cfg(feature = "gpu")]
+            let gpu_stages = frame.gpu_stages.map(serde_json::to_value).transpose()?;
+            #[cfg(not(feature = "gpu"))]
+            let gpu_stages: Option<serde_json::Value> = None;
+            let json = serde_json::json!({
+                "input": job.input,
+                "output": job.out,
+                "backend": frame.device,
+                "effects": { "defocus": stats.defocus, "motion": stats.motion },
+                "databases": frame.databases,
+                "conditioning": frame.conditioning,
+                "synthesis": stats,
+                "gpu_stages_ms": gpu_stages,
+                "times_ms": {
+                    "read_input": read_ms,
+                    "database": frame.database_ms,
+                    "write_output": write_ms,
+                    "wall": started.elapsed().as_secs_f64() * 1e3,
+                },
+            });
+            write_json(p, &json)?;
+        }
+        Ok(())
+    };
+    if let Err(e) = finish() {
+        let _ = std::fs::remove_file(&job.out);
+        if let Some(p) = &job.preview {
+            let _ = std::fs::remove_file(p);
+        }
+        return Err(e);
+    }
+    if stats.counts.clamped > 0 {
+        eprintln!(
+            "warning: {} pixel(s) asked for a PSF beyond the database's range and were drawn with its largest (see --stats: counts.clamped)",
+            stats.counts.clamped
+        );
+    }
+    Ok(())
+}
+
+/// One frame of a peer method (`--method mcguire|guertin`): they know no overscan and see the
+/// frame alone.
+fn peer_frame(
+    args: &SynthArgs,
+    job: &FrameJob,
+    gbuffer: &GBuffer,
+    camera: &spreadlet::Camera,
+) -> Result<()> {
+    let t = Instant::now();
+    let image = spreadlet_cli::peer::synthesize_peer(&args.method, &gbuffer.frame_only(), camera)?;
+    let ms = t.elapsed().as_secs_f64() * 1e3;
+    image.write_exr(&job.out)?;
+    if let Some(p) = &job.preview {
+        image.write_png(p)?;
+    }
+    if !args.quiet {
+        eprintln!("{}: {} in {ms:.0} ms", job.out.display(), args.method);
+    }
+    if let Some(p) = &job.stats {
+        let json = serde_json::json!({
+            "input": job.input, "output": job.out, "method": args.method, "ms": ms,
+        });
+        write_json(p, &json)?;
+    }
+    Ok(())
+}
+
+/// One frame of the filter baseline: gathering with the same PSFs (CPU or GPU).
+fn filter_frame(
+    args: &SynthArgs,
+    job: &FrameJob,
+    gbuffer: &GBuffer,
+    camera: &spreadlet::Camera,
+    renderer: &mut Renderer,
+) -> Result<()> {
+    let options = FilterOptions {
+        rotation: args.rotation,
+        ..Default::default()
+    };
+    let frame = renderer.filter(gbuffer, camera, &options)?;
+    frame.image.write_exr(&job.out)?;
+    if let Some(p) = &job.preview {
+        frame.image.write_png(p)?;
+    }
+    let fstats = &frame.stats;
+    if !args.quiet {
+        eprintln!(
+            "{}: filter baseline, {} pixels filtered ({} kernels integrated from \
+             spreadlets), {} copied, in {:.0} ms on the {}",
+            job.out.display(),
+            fstats.filtered,
+            frame.kernels_integrated,
+            fstats.copied,
+            fstats.total_ms,
+            frame.device
+        );
+    }
+    if let Some(p) = &job.stats {
+        let json = serde_json::json!({
+            "input": job.input, "output": job.out, "method": "filter", "backend": frame.device,
+            "databases": frame.databases, "filter": fstats,
+            "kernels_integrated_from_spreadlets": frame.kernels_integrated,
+        });
+        write_json(p, &json)?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::Parser;
+
+    use super::*;
+
+    #[derive(Parser)]
+    struct Wrapper {
+        #[command(flatten)]
+        synth: SynthArgs,
+    }
+
+    #[test]
+    fn no_flags_give_the_library_defaults() {
+        let parsed = Wrapper::parse_from(["spreadlet", "--input", "in.exr", "--out", "out.exr"]);
+        assert_eq!(parsed.synth.synth_options(), SynthOptions::default());
+        assert_eq!(parsed.synth.backend, Backend::default());
+    }
+}

@@ -1,0 +1,73 @@
+//! The harness around the `spreadlet` library, used by the `spreadlet` binary: the demo on
+//! built-in data, the accuracy-against-time study, the benchmarks and the one-shot device
+//! check, and the peer methods (Blender-style and published DoF and MB methods) for
+//! comparison. None of it is needed to embed the renderer.
+
+pub mod bench;
+pub mod demo;
+#[cfg(feature = "gpu")]
+pub mod device_check;
+#[cfg(feature = "gpu")]
+pub mod microbench;
+pub mod peer;
+pub mod peer_study;
+pub mod study;
+
+use precompute::{BuildConfig, Profile};
+use psf_db::PsfDatabase;
+use spreadlet::baseline::without_recorded_error;
+use spreadlet::dbcache;
+use spreadlet::dbset::DbSet;
+use spreadlet::pipeline::Effects;
+
+/// The databases `effects` call for, through the one loader ([`spreadlet::databases::load`]: from
+/// the cache, built when missing, conditioned), with `build` applied to the runtime's build
+/// settings for `profile`. With `keep_sparse`, the recorded errors are dropped before
+/// conditioning (see [`without_recorded_error`](spreadlet::baseline::without_recorded_error)), so no sparse PSF is swapped for a dense
+/// analytic one.
+pub fn cached_dbs_with(
+    effects: Effects,
+    profile: Profile,
+    blades: u32,
+    progress: bool,
+    keep_sparse: bool,
+    build: &dyn Fn(BuildConfig) -> BuildConfig,
+) -> Result<DbSet, spreadlet::Error> {
+    let dir = dbcache::cache_dir();
+    let strip = |db: PsfDatabase| -> Result<PsfDatabase, spreadlet::Error> {
+        Ok(without_recorded_error(&db)?)
+    };
+    let request = spreadlet::databases::Request {
+        source: spreadlet::databases::Source::Cache { dir: &dir, profile },
+        needed: effects.cheapest_model(),
+        blades,
+        condition: true,
+        adjust: Some(build),
+        transform: keep_sparse.then_some(&strip as &dyn Fn(_) -> _),
+        progress,
+    };
+    let mut on_event = |e: dbcache::CacheEvent| {
+        if progress {
+            eprintln!("{e}");
+        }
+    };
+    spreadlet::databases::load(&request, &mut on_event)
+        .map(|loaded| loaded.set)
+}
+
+/// Prints what the database cache does (builds, rebuilds) on stderr.
+pub fn print_cache_event(event: spreadlet::dbcache::CacheEvent) {
+    eprintln!("{event}");
+}
+
+/// The renderer's G-buffer of what the scene renderer made (colour, planar depth, forward
+/// motion in pixels per frame), validated like any other input.
+pub fn gbuffer_of(g: &scene::GBuffer) -> Result<spreadlet::GBuffer, spreadlet::gbuffer::GBufferError> {
+    spreadlet::GBuffer::from_planes(
+        g.width,
+        g.height,
+        g.color_image().pixels,
+        Some(g.depth.clone()),
+        Some(g.forward_motion_plane()),
+    )
+}

@@ -1,0 +1,64 @@
+//! `spreadlet`: depth of field and motion blur by splatting sparse Laplacian PSFs.
+//!
+//! A thin front of the `spreadlet` library: each subcommand (in `cmd/`) parses its flags into
+//! the library's options, calls [`spreadlet::Renderer`] or the harness, and writes the files.
+
+mod cmd;
+
+use clap::{Parser, Subcommand};
+
+#[derive(Parser, Debug)]
+#[command(
+    name = "spreadlet",
+    version,
+    about = "Depth of field and motion blur by splatting sparse Laplacian PSFs (Leimkühler et al. 2018)",
+    after_help = CACHE_HELP
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+/// Where databases built on demand are kept, for `--help`.
+const CACHE_HELP: &str = "PSF databases built on demand are cached in $SPREADLET_CACHE, else \
+    $XDG_CACHE_HOME/spreadlet (~/.cache/spreadlet; ~/Library/Caches/spreadlet on macOS, \
+    %LOCALAPPDATA%\\spreadlet on Windows).";
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Synthesise depth of field and motion blur from a pinhole G-buffer (OpenEXR).
+    #[command(after_help = CACHE_HELP)]
+    Synth(cmd::synth::SynthArgs),
+    /// SSIM and PSNR (sRGB, as DEVELOPERS.md defines them) of two OpenEXR images.
+    Compare(cmd::compare::CompareArgs),
+    /// Reconstruct depth of field and motion blur from noisy stochastic frames (each sample
+    /// labelled with its lens position and time; layout in docs/STOCHASTIC.md).
+    #[command(after_help = CACHE_HELP)]
+    Reconstruct(cmd::reconstruct::ReconstructArgs),
+    /// The whole job on built-in data: render a scene, synthesise, reconstruct, score.
+    Demo(cmd::demo::DemoArgs),
+    /// Per-stage and total times of both backends at several sizes (median of runs), as a
+    /// Markdown table.
+    #[cfg(feature = "gpu")]
+    Bench(cmd::bench::BenchArgs),
+    /// What accuracy costs in time: sweeps of every knob and the dense and filter baselines on
+    /// a scene, scored against a reference (CSV, Markdown, PNG; docs/STUDY.md).
+    Study(cmd::study::StudyArgs),
+}
+
+fn main() {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Synth(args) => cmd::synth::run(args),
+        Command::Compare(args) => cmd::compare::run(args),
+        Command::Reconstruct(args) => cmd::reconstruct::run(args),
+        Command::Demo(args) => cmd::demo::run(args),
+        #[cfg(feature = "gpu")]
+        Command::Bench(args) => cmd::bench::run(args),
+        Command::Study(args) => cmd::study::run(args),
+    };
+    if let Err(e) = result {
+        eprintln!("error: {e:#}");
+        std::process::exit(1);
+    }
+}

@@ -1,0 +1,25 @@
+//! spreadlet's file formats, each defined once and shared by the renderer (`spreadlet`), the
+//! ground-truth renderer (`scene`), the metrics and the tools:
+//!
+//! - [`RgbaImage`]: linear premultiplied RGBA, row-major from the top-left pixel, y down; EXR
+//!   in and out, an sRGB PNG preview.
+//! - [`StochasticFrames`]: labelled samples (lens position, time, motion) in one EXR
+//!   (`docs/STOCHASTIC.md`).
+//! - [`exr_io`]: named f32 channels in and out, with the header's size checked against the
+//!   file's before any pixel is decoded.
+//! - [`srgb_encode`]: the one sRGB transfer function (IEC 61966-2-1).
+//! - [`write_atomically`]: every output appears complete or not at all, with the permissions
+//!   any new file gets (0666 less the umask).
+
+pub mod atomic;
+pub mod error;
+pub mod exr_io;
+pub mod image;
+pub mod srgb;
+pub mod stochastic;
+
+pub use atomic::write_atomically;
+pub use error::{Error, Result};
+pub use image::RgbaImage;
+pub use srgb::srgb_encode;
+pub use stochastic::{Sample, StochasticFrames};

@@ -1,0 +1,167 @@
+//! The one database loader, and the one rule for which PSF model serves which effect.
+//!
+//! - Still pixels are drawn with the thin-lens database; pixels that move with the lens-motion
+//!   database; a frame that moves loads both ([`crate::dbset::DbSet`] looks each pixel up in the
+//!   one it needs). A pinhole, still frame needs none.
+//! - A set loaded for lens-motion also serves a frame with defocus alone, so a sequence whose
+//!   motion stops keeps its databases ([`serves`]).
+//! - Databases come from the cache folder, built there with `precompute` when missing or
+//!   unreadable ([`crate::dbcache`]), or from one file the caller names (then that file serves
+//!   every pixel; it must be of a model the input can use).
+
+use std::path::{Path, PathBuf};
+
+use precompute::{BuildConfig, Profile};
+use psf_db::{PsfDatabase, PsfModel};
+
+use crate::condition::{condition, ConditionReport};
+use crate::dbcache;
+use crate::dbset::DbSet;
+use crate::error::Error;
+
+/// A database the loader used: its model, its file and whether this call built it.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct DbUsed {
+    /// The model's name (`thin-lens`, `lens-motion`, `physical-lens`).
+    pub model: &'static str,
+    /// The file.
+    pub path: PathBuf,
+    /// True when it was built by this call.
+    pub built_now: bool,
+}
+
+/// How a database was conditioned before use (see [`crate::condition`]).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Conditioned {
+    /// The model's name.
+    pub model: &'static str,
+    /// What conditioning changed.
+    pub report: ConditionReport,
+}
+
+/// Where the loader finds databases.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Source<'a> {
+    /// The cache folder (built on demand with the given profile).
+    Cache {
+        /// The folder.
+        dir: &'a Path,
+        /// The profile of databases built on demand.
+        profile: Profile,
+    },
+    /// One file for every pixel.
+    File(&'a Path),
+}
+
+/// What one load needs.
+pub struct Request<'a> {
+    /// Where the databases come from.
+    pub source: Source<'a>,
+    /// The cheapest model that reproduces the input's effects (`None`: nothing to simulate).
+    pub needed: Option<PsfModel>,
+    /// Aperture blades (0 = circular).
+    pub blades: u32,
+    /// Conditioning (monopole removal, energy normalisation) before use.
+    pub condition: bool,
+    /// Changes the runtime's build settings before the cache is asked (the baselines store
+    /// every PSF dense); `None` keeps them.
+    pub adjust: Option<&'a dyn Fn(BuildConfig) -> BuildConfig>,
+    /// Applied to each database as read, before conditioning (the dense baseline densifies a
+    /// file whose PSFs are stored sparse).
+    pub transform: Option<&'a dyn Fn(PsfDatabase) -> Result<PsfDatabase, Error>>,
+    /// Prints the builder's progress bars (database builds take minutes).
+    pub progress: bool,
+}
+
+/// What a load returned.
+pub struct Loaded {
+    /// The databases, ready for classification.
+    pub set: DbSet,
+    /// Which files were used.
+    pub used: Vec<DbUsed>,
+    /// What conditioning changed, per database (empty without conditioning).
+    pub conditioning: Vec<Conditioned>,
+}
+
+/// True when a set loaded for `loaded` can serve an input that needs `needed`: the same model,
+/// or a lens-motion set for defocus alone.
+pub fn serves(loaded: Option<PsfModel>, needed: Option<PsfModel>) -> bool {
+    loaded == needed
+        || (loaded == Some(PsfModel::LensMotion) && needed == Some(PsfModel::ThinLens))
+}
+
+/// The models a cache load reads for `needed`: thin-lens for still pixels, plus lens-motion
+/// when something moves.
+pub fn models_for(needed: PsfModel) -> Vec<PsfModel> {
+    let mut models = vec![PsfModel::ThinLens];
+    if needed == PsfModel::LensMotion {
+        models.push(PsfModel::LensMotion);
+    }
+    models
+}
+
+/// Loads the databases `request` asks for; `on_event` hears of every database built.
+pub fn load(
+    request: &Request,
+    on_event: &mut dyn FnMut(dbcache::CacheEvent),
+) -> Result<Loaded, Error> {
+    let Some(needed) = request.needed else {
+        return Ok(Loaded {
+            set: DbSet::none(),
+            used: Vec::new(),
+            conditioning: Vec::new(),
+        });
+    };
+    let mut used = Vec::new();
+    let mut conditioning = Vec::new();
+    let mut prepare = |db: PsfDatabase| -> Result<PsfDatabase, Error> {
+        let db = match request.transform {
+            Some(t) => t(db)?,
+            None => db,
+        };
+        if !request.condition {
+            return Ok(db);
+        }
+        let (db, report) = condition(&db)?;
+        conditioning.push(Conditioned {
+            model: db.model().name(),
+            report,
+        });
+        Ok(db)
+    };
+    let set = match request.source {
+        Source::File(path) => {
+            let db = dbcache::explicit_database(path, needed)?;
+            used.push(DbUsed {
+                model: db.model().name(),
+                path: path.to_path_buf(),
+                built_now: false,
+            });
+            DbSet::single(prepare(db)?)?
+        }
+        Source::Cache { dir, profile } => {
+            let mut loaded = Vec::new();
+            for model in models_for(needed) {
+                let mut cfg = dbcache::build_config(model, profile, request.blades);
+                if let Some(adjust) = request.adjust {
+                    cfg = adjust(cfg);
+                }
+                let (db, source) =
+                    dbcache::cached_database(&cfg, dir, request.progress, on_event)?;
+                used.push(DbUsed {
+                    model: model.name(),
+                    path: source.path,
+                    built_now: source.built,
+                });
+                loaded.push(prepare(db)?);
+            }
+            let main = (loaded.len() > 1).then(|| loaded.remove(1));
+            DbSet::new(loaded.pop(), main)?
+        }
+    };
+    Ok(Loaded {
+        set,
+        used,
+        conditioning,
+    })
+}

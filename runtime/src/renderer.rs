@@ -1,0 +1,512 @@
+//! [`Renderer`]: the library's one entry point. It holds what is worth keeping between frames
+//! (the device, the PSF databases an input needed, conditioned, and the GPU pipelines with the
+//! database uploaded), so a sequence is just repeated calls, and it applies one policy for
+//! which device runs and which databases serve which effect, whoever calls it: the `spreadlet`
+//! command, the Python module or the Blender add-on.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Instant;
+
+use psf_db::PsfModel;
+
+use crate::baseline;
+use crate::camera::Camera;
+use crate::databases::{self, Conditioned, DbUsed, Source};
+use crate::dbcache::{self, CacheEvent};
+use crate::dbset::DbSet;
+use crate::error::Error;
+use crate::gbuffer::GBuffer;
+use crate::pipeline::Effects;
+use crate::synth::{SynthOptions, SynthStats};
+use formats::{RgbaImage, StochasticFrames};
+
+/// Which device runs the stages after classification.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+pub enum Backend {
+    /// The GPU when an adapter exists, else the CPU
+    #[default]
+    Auto,
+    /// The GPU (an error when there is none)
+    Gpu,
+    /// The CPU (rayon)
+    Cpu,
+}
+
+/// Where the PSF databases come from.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum DbSource {
+    /// The cache folder; a database missing there is built on demand with `profile`.
+    Cache {
+        /// The folder ([`dbcache::cache_dir`] by default).
+        dir: PathBuf,
+        /// The profile of databases built on demand.
+        profile: precompute::Profile,
+    },
+    /// One database file, used for every pixel; it must be of a model the input can use (a
+    /// lens-motion database also serves defocus alone).
+    File(PathBuf),
+}
+
+impl Default for DbSource {
+    fn default() -> Self {
+        DbSource::Cache {
+            dir: dbcache::cache_dir(),
+            profile: precompute::Profile::Quick,
+        }
+    }
+}
+
+/// The synthesis method.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Method {
+    /// Sparse Laplacian splatting (the paper's method).
+    #[default]
+    Spreadlet,
+    /// Baseline: the same pipeline with every pre-filtered PSF drawn whole (no Laplacian).
+    Dense,
+    /// Baseline: every output pixel gathers the input with its own pre-filtered PSF
+    /// ([`Renderer::filter`]); databases are built with every PSF dense, as for `Dense`.
+    Filter,
+}
+
+/// What the renderer tells its caller while it works (the library prints nothing).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Event {
+    /// The database cache rebuilds or builds a database.
+    Cache(CacheEvent),
+    /// `Backend::Auto` runs on the CPU, and why (no adapter, or only a software one, which is
+    /// slower than the CPU path).
+    CpuFallback {
+        /// Why, in words.
+        reason: String,
+    },
+    /// The dense baseline was given a database whose PSFs are stored sparse: it draws their
+    /// integrated spreadlets instead of the pre-filtered PSFs.
+    DensifiedSparse {
+        /// The database file.
+        path: PathBuf,
+        /// PSFs stored sparse.
+        count: usize,
+    },
+}
+
+impl std::fmt::Display for Event {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Event::Cache(e) => e.fmt(f),
+            Event::CpuFallback { reason } => write!(f, "backend auto: {reason}; using the CPU"),
+            Event::DensifiedSparse { path, count } => write!(
+                f,
+                "--method dense: {count} PSFs of {} are stored sparse; drawing their \
+                 integrated spreadlets (not the pre-filtered PSFs)",
+                path.display()
+            ),
+        }
+    }
+}
+
+/// A callback for [`Event`]s.
+pub type EventSink = Arc<dyn Fn(&Event) + Send + Sync>;
+
+/// How a [`Renderer`] is set up; fixed for its life.
+#[derive(Clone)]
+pub struct RendererOptions {
+    /// The device.
+    pub backend: Backend,
+    /// Where the databases come from.
+    pub databases: DbSource,
+    /// The method.
+    pub method: Method,
+    /// Condition the databases before use (monopole removal, energy normalisation); off only
+    /// to study the stored spreadlets as they are.
+    pub condition: bool,
+    /// Show the database builder's progress bars on stderr (builds take minutes).
+    pub progress: bool,
+    /// Told of builds and fallbacks; `None` hears nothing.
+    pub on_event: Option<EventSink>,
+}
+
+impl Default for RendererOptions {
+    fn default() -> Self {
+        Self {
+            backend: Backend::Auto,
+            databases: DbSource::default(),
+            method: Method::Spreadlet,
+            condition: true,
+            progress: false,
+            on_event: None,
+        }
+    }
+}
+
+impl std::fmt::Debug for RendererOptions {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("RendererOptions")
+            .field("backend", &self.backend)
+            .field("databases", &self.databases)
+            .field("method", &self.method)
+            .field("condition", &self.condition)
+            .field("progress", &self.progress)
+            .field("on_event", &self.on_event.as_ref().map(|_| "callback"))
+            .finish()
+    }
+}
+
+/// One rendered frame and what it took.
+#[derive(Clone, Debug)]
+pub struct Frame {
+    /// The image: linear premultiplied RGBA, the frame's size (overscan removed).
+    pub image: RgbaImage,
+    /// Effects, counts per path, layers and stage times.
+    pub stats: SynthStats,
+    /// The device that ran it: `cpu` or `gpu (<adapter>)`.
+    pub device: String,
+    /// The GPU's own breakdown of its stages (upload, readback, timestamps), on the GPU.
+    #[cfg(feature = "gpu")]
+    pub gpu_stages: Option<crate::gpu::StageTimes>,
+    /// The databases loaded by this call (empty when they were kept from an earlier call).
+    pub databases: Vec<DbUsed>,
+    /// What conditioning changed in the databases loaded by this call.
+    pub conditioning: Vec<Conditioned>,
+    /// Time spent finding, building, reading and conditioning databases, milliseconds.
+    pub database_ms: f64,
+}
+
+/// The databases a renderer holds: what they were loaded for, and the set.
+struct HeldDatabases {
+    model: Option<PsfModel>,
+    blades: u32,
+    set: Arc<DbSet>,
+}
+
+/// The device a renderer settled on at its first frame.
+enum Device {
+    Cpu,
+    #[cfg(feature = "gpu")]
+    Gpu(Box<GpuState>),
+}
+
+#[cfg(feature = "gpu")]
+struct GpuState {
+    ctx: crate::gpu::GpuContext,
+    /// Pipelines with the current databases uploaded; rebuilt when they change.
+    synthesizer: Option<crate::gpu::GpuSynthesizer>,
+}
+
+/// The renderer: synthesis from pinhole G-buffers and reconstruction from stochastic frames,
+/// on the device [`RendererOptions::backend`] picks, with databases loaded once and kept.
+///
+/// The device is chosen at the first frame and kept; databases are kept as long as the frames
+/// need the same model and aperture (a set loaded for motion blur also serves a still frame).
+pub struct Renderer {
+    options: RendererOptions,
+    device: Option<Device>,
+    databases: Option<HeldDatabases>,
+    loads: usize,
+}
+
+impl Renderer {
+    /// A renderer; nothing is loaded until the first frame needs it.
+    pub fn new(options: RendererOptions) -> Result<Self, Error> {
+        #[cfg(not(feature = "gpu"))]
+        if options.backend == Backend::Gpu {
+            return Err(Error::NoGpuSupport);
+        }
+        Ok(Self {
+            options,
+            device: None,
+            databases: None,
+            loads: 0,
+        })
+    }
+
+    /// The options it was made with.
+    pub fn options(&self) -> &RendererOptions {
+        &self.options
+    }
+
+    /// How many times databases were loaded (a sequence of frames with the same needs loads
+    /// them once).
+    pub fn database_loads(&self) -> usize {
+        self.loads
+    }
+
+    /// The databases held now (after a frame), if any.
+    pub fn databases(&self) -> Option<&DbSet> {
+        self.databases.as_ref().map(|d| d.set.as_ref())
+    }
+
+    fn emit(&self, event: Event) {
+        if let Some(sink) = &self.options.on_event {
+            sink(&event);
+        }
+    }
+
+    /// Adds depth of field and motion blur to a pinhole G-buffer as `camera` sees it.
+    /// `options` apply to this call, on either device. A pinhole, still input comes back
+    /// unchanged.
+    pub fn synthesize(
+        &mut self,
+        gbuffer: &GBuffer,
+        camera: &Camera,
+        options: &SynthOptions,
+    ) -> Result<Frame, Error> {
+        options.validate()?;
+        let effects = Effects::of(camera, gbuffer);
+        let (set, databases, conditioning, database_ms) = self.databases_for(effects, camera)?;
+        self.run(Work::Synthesis(gbuffer), camera, &set, options, databases, conditioning, database_ms)
+    }
+
+    /// Reconstructs depth of field and motion blur from stochastic frames (each sample
+    /// labelled with its lens position and time; `docs/STOCHASTIC.md`).
+    pub fn reconstruct(
+        &mut self,
+        frames: &StochasticFrames,
+        camera: &Camera,
+        options: &SynthOptions,
+    ) -> Result<Frame, Error> {
+        options.validate()?;
+        let effects = crate::reconstruct::effects_of(camera, frames);
+        let (set, databases, conditioning, database_ms) = self.databases_for(effects, camera)?;
+        self.run(Work::Reconstruction(frames), camera, &set, options, databases, conditioning, database_ms)
+    }
+
+    /// The databases `effects` need: the held set when it serves them, else loaded now.
+    fn databases_for(
+        &mut self,
+        effects: Effects,
+        camera: &Camera,
+    ) -> Result<(Arc<DbSet>, Vec<DbUsed>, Vec<Conditioned>, f64), Error> {
+        let started = Instant::now();
+        let needed = effects.cheapest_model();
+        if let Some(held) = &self.databases {
+            if held.blades == camera.aperture_blades && databases::serves(held.model, needed) {
+                return Ok((held.set.clone(), Vec::new(), Vec::new(), 0.0));
+            }
+        }
+        let sink = self.options.on_event.clone();
+        let mut on_cache = |e: CacheEvent| {
+            if let Some(sink) = &sink {
+                sink(&Event::Cache(e));
+            }
+        };
+        let method = self.options.method;
+        let densify = |db: psf_db::PsfDatabase| -> Result<psf_db::PsfDatabase, Error> {
+            // A given database that stores PSFs sparse has no pre-filtered images of them:
+            // the dense baseline integrates their spreadlets instead.
+            if baseline::sparse_psf_count(&db) == 0 {
+                return Ok(db);
+            }
+            let (dense, count) = baseline::densify(&db)?;
+            if let (Some(sink), DbSource::File(path)) = (&sink, &self.options.databases) {
+                sink(&Event::DensifiedSparse {
+                    path: path.clone(),
+                    count,
+                });
+            }
+            Ok(dense)
+        };
+        let adjust = |cfg: precompute::BuildConfig| baseline::dense_build_config(&cfg);
+        let source = match &self.options.databases {
+            DbSource::Cache { dir, profile } => Source::Cache {
+                dir,
+                profile: *profile,
+            },
+            DbSource::File(path) => Source::File(path),
+        };
+        let is_file = matches!(source, Source::File(_));
+        let request = databases::Request {
+            source,
+            needed,
+            blades: camera.aperture_blades,
+            condition: self.options.condition,
+            // The baselines draw the pre-filtered PSFs the spreadlets were fitted to.
+            adjust: (method != Method::Spreadlet && !is_file).then_some(&adjust as &dyn Fn(_) -> _),
+            transform: (method == Method::Dense && is_file).then_some(&densify as &dyn Fn(_) -> _),
+            progress: self.options.progress,
+        };
+        let loaded = databases::load(&request, &mut on_cache)?;
+        let set = Arc::new(loaded.set);
+        self.databases = Some(HeldDatabases {
+            model: needed,
+            blades: camera.aperture_blades,
+            set: set.clone(),
+        });
+        self.loads += 1;
+        #[cfg(feature = "gpu")]
+        if let Some(Device::Gpu(gpu)) = &mut self.device {
+            gpu.synthesizer = None; // new databases: upload them again
+        }
+        let ms = started.elapsed().as_secs_f64() * 1e3;
+        Ok((set, loaded.used, loaded.conditioning, ms))
+    }
+
+    /// The device for this renderer, chosen at its first frame.
+    fn device(&mut self) -> Result<&mut Device, Error> {
+        if self.device.is_none() {
+            let device = self.pick_device()?;
+            self.device = Some(device);
+        }
+        Ok(self.device.as_mut().expect("set above"))
+    }
+
+    #[cfg(feature = "gpu")]
+    fn pick_device(&self) -> Result<Device, Error> {
+        let backend = self.options.backend;
+        if backend == Backend::Cpu {
+            return Ok(Device::Cpu);
+        }
+        match crate::gpu::GpuContext::with_requirement(backend == Backend::Gpu)? {
+            // A software adapter (lavapipe) is slower than the CPU path: `auto` skips it.
+            Some(ctx)
+                if backend == Backend::Gpu
+                    || ctx.adapter_info().device_type != wgpu::DeviceType::Cpu =>
+            {
+                Ok(Device::Gpu(Box::new(GpuState {
+                    ctx,
+                    synthesizer: None,
+                })))
+            }
+            Some(ctx) => {
+                self.emit(Event::CpuFallback {
+                    reason: format!("{} is a software adapter", ctx.adapter_name()),
+                });
+                Ok(Device::Cpu)
+            }
+            None => {
+                self.emit(Event::CpuFallback {
+                    reason: "no GPU adapter".into(),
+                });
+                Ok(Device::Cpu)
+            }
+        }
+    }
+
+    #[cfg(not(feature = "gpu"))]
+    fn pick_device(&self) -> Result<Device, Error> {
+        Ok(Device::Cpu)
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn run(
+        &mut self,
+        work: Work,
+        camera: &Camera,
+        dbs: &DbSet,
+        options: &SynthOptions,
+        databases: Vec<DbUsed>,
+        conditioning: Vec<Conditioned>,
+        database_ms: f64,
+    ) -> Result<Frame, Error> {
+        let frame = |image, stats, device, _stages| Frame {
+            image,
+            stats,
+            device,
+            #[cfg(feature = "gpu")]
+            gpu_stages: _stages,
+            databases,
+            conditioning,
+            database_ms,
+        };
+        match self.device()? {
+            #[cfg(feature = "gpu")]
+            Device::Gpu(gpu) => {
+                use crate::gpu::{GpuSynthOptions, GpuSynthesizer};
+                if gpu.synthesizer.is_none() {
+                    gpu.synthesizer = Some(GpuSynthesizer::for_database(
+                        &gpu.ctx,
+                        dbs.combined.as_ref(),
+                        GpuSynthOptions::from_synth(options),
+                    )?);
+                }
+                let name = format!("gpu ({})", gpu.ctx.adapter_name());
+                let synthesizer = gpu.synthesizer.as_mut().expect("set above");
+                let (image, stats, stages) = match work {
+                    Work::Synthesis(g) => {
+                        crate::gpu::synthesize_gpu(synthesizer, g, camera, dbs, options)?
+                    }
+                    Work::Reconstruction(f) => {
+                        crate::gpu::reconstruct_gpu(synthesizer, f, camera, dbs, options)?
+                    }
+                };
+                Ok(frame(image, stats, name, Some(stages)))
+            }
+            Device::Cpu => {
+                let (image, stats) = match work {
+                    Work::Synthesis(g) => crate::synth::synthesize(g, camera, dbs, options)?,
+                    Work::Reconstruction(f) => {
+                        crate::reconstruct::reconstruct(f, camera, dbs, options)?
+                    }
+                };
+                Ok(frame(image, stats, "cpu".to_string(), None))
+            }
+        }
+    }
+
+    /// The filter baseline (every output pixel gathers the input with its own pre-filtered
+    /// PSF; the paper's comparison), on the renderer's device, with the renderer's databases
+    /// made dense. Returns the image, the device's name and the baseline's statistics.
+    pub fn filter(
+        &mut self,
+        gbuffer: &GBuffer,
+        camera: &Camera,
+        options: &baseline::FilterOptions,
+    ) -> Result<FilterFrame, Error> {
+        let effects = Effects::of(camera, &gbuffer.frame_only());
+        let (dbs, databases, _, _) = self.databases_for(effects, camera)?;
+        let kernels = match &dbs.combined {
+            Some(db) => baseline::DenseKernels::from_db(db),
+            None => baseline::DenseKernels::default(),
+        };
+        let frame_only = gbuffer.frame_only();
+        match self.device()? {
+            #[cfg(feature = "gpu")]
+            Device::Gpu(gpu) => {
+                let filter = crate::gpu::GpuFilter::new(&gpu.ctx, &kernels)?;
+                let (image, stats) =
+                    crate::gpu::filter_gpu(&filter, &frame_only, camera, &dbs, options)?;
+                Ok(FilterFrame {
+                    image,
+                    stats,
+                    device: format!("gpu ({})", gpu.ctx.adapter_name()),
+                    kernels_integrated: kernels.integrated,
+                    databases,
+                })
+            }
+            Device::Cpu => {
+                let (image, stats) = baseline::filter(&frame_only, camera, &dbs, &kernels, options)?;
+                Ok(FilterFrame {
+                    image,
+                    stats,
+                    device: "cpu".into(),
+                    kernels_integrated: kernels.integrated,
+                    databases,
+                })
+            }
+        }
+    }
+}
+
+/// A frame of the filter baseline.
+#[derive(Clone, Debug)]
+pub struct FilterFrame {
+    /// The image.
+    pub image: RgbaImage,
+    /// The baseline's statistics.
+    pub stats: baseline::FilterStats,
+    /// The device that ran it.
+    pub device: String,
+    /// Kernels integrated from spreadlets (PSFs stored sparse).
+    pub kernels_integrated: usize,
+    /// The databases loaded by this call.
+    pub databases: Vec<DbUsed>,
+}
+
+/// What [`Renderer::run`] runs.
+#[derive(Clone, Copy)]
+enum Work<'a> {
+    Synthesis(&'a GBuffer),
+    Reconstruction(&'a StochasticFrames),
+}
