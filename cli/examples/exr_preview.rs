@@ -1,8 +1,8 @@
 //! Writes the sRGB PNG preview of an OpenEXR image and prints its channel means:
 //! `cargo run --release -p runtime --example exr_preview -- IN.exr OUT.png`.
 
-use spreadlet::gbuffer::{ChannelOptions, GBuffer};
 use formats::image::RgbaImage;
+use spreadlet::gbuffer::{ChannelOptions, GBuffer};
 
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().collect();
@@ -23,6 +23,6 @@ fn main() -> anyhow::Result<()> {
         img.height,
         sums.map(|s| s / n)
     );
-    img.write_preview_png(output.as_ref())?;
+    img.write_png(output.as_ref())?;
     Ok(())
 }

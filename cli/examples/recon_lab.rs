@@ -6,9 +6,9 @@
 //! `$TMPDIR/recon_lab` for `tile_lab`.
 
 use anyhow::Context;
+use formats::image::RgbaImage;
 use spreadlet::camera::Camera;
 use spreadlet::reconstruct::{effects_of, reconstruct_with, SamplePlacement};
-use formats::image::RgbaImage;
 use spreadlet::synth::SynthOptions;
 
 fn ssim(a: &RgbaImage, b: &RgbaImage) -> anyhow::Result<f64> {

@@ -7,7 +7,8 @@ fn main() -> anyhow::Result<()> {
     if a.len() != 5 {
         bail!("usage: records_at G.exr camera.json X Y");
     }
-    let g = spreadlet::gbuffer::GBuffer::read_exr(std::path::Path::new(&a[1]), &Default::default())?;
+    let g =
+        spreadlet::gbuffer::GBuffer::read_exr(std::path::Path::new(&a[1]), &Default::default())?;
     let cam = spreadlet::camera::Camera::from_json_str(&std::fs::read_to_string(&a[2])?)?;
     let (x, y): (i32, i32) = (a[3].parse().context("x")?, a[4].parse().context("y")?);
     let effects = spreadlet::pipeline::Effects::of(&cam, &g);

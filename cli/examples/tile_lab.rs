@@ -4,8 +4,8 @@
 //! reference side by side, enlarged 4x, to /tmp/tile.png.
 
 use anyhow::{bail, Context};
-use spreadlet::gbuffer::{ChannelOptions, GBuffer};
 use formats::image::RgbaImage;
+use spreadlet::gbuffer::{ChannelOptions, GBuffer};
 
 fn read(path: &str) -> anyhow::Result<RgbaImage> {
     let g = GBuffer::read_exr(std::path::Path::new(path), &ChannelOptions::default())
@@ -43,9 +43,7 @@ fn main() -> anyhow::Result<()> {
     let crop = |img: &RgbaImage, x0: usize, y0: usize| RgbaImage {
         width: n,
         height: n,
-        pixels: (0..n * n)
-            .map(|i| img.get(x0 + i % n, y0 + i / n))
-            .collect(),
+        pixels: (0..n * n).map(|i| img.at(x0 + i % n, y0 + i / n)).collect(),
     };
     println!("A {:.4}  B {:.4}", ssim(&a, &r)?, ssim(&b, &r)?);
     for ty in 0..r.height / n {
@@ -69,11 +67,11 @@ fn main() -> anyhow::Result<()> {
             for py in 0..n * scale {
                 for px in 0..n * scale {
                     strip.pixels[py * strip.width + k * n * scale + px] =
-                        img.get(tx * n + px / scale, ty * n + py / scale);
+                        img.at(tx * n + px / scale, ty * n + py / scale);
                 }
             }
         }
-        strip.write_preview_png(std::path::Path::new("/tmp/tile.png"))?;
+        strip.write_png(std::path::Path::new("/tmp/tile.png"))?;
     }
     Ok(())
 }

@@ -12,11 +12,11 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use serde::Serialize;
 
+use formats::image::RgbaImage;
 use spreadlet::camera::Camera;
 use spreadlet::dbset::DbSet;
 use spreadlet::pipeline::Effects;
 use spreadlet::reconstruct::reconstruct;
-use formats::image::RgbaImage;
 use spreadlet::synth::{synthesize, SynthOptions};
 
 /// Knobs of the demo.
@@ -84,7 +84,12 @@ pub fn cached_dbs(
     progress: bool,
 ) -> Result<DbSet> {
     Ok(crate::cached_dbs_with(
-        effects, profile, blades, progress, false, &|c| c,
+        effects,
+        profile,
+        blades,
+        progress,
+        false,
+        &|c| c,
     )?)
 }
 

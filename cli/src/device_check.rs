@@ -16,9 +16,11 @@ use metrics::median;
 use poisson::pyramid::level_sizes;
 use psf_db::PsfDatabase;
 
-use crate::microbench::{run_microbenchmarks, MicroConfig, MicroReport};
-use spreadlet::gpu::{GpuContext, GpuError, GpuSynthOptions, GpuSynthesizer, SplatMode, StageTimes};
 use crate::bench::{scene_frame, Scene};
+use crate::microbench::{run_microbenchmarks, MicroConfig, MicroReport};
+use spreadlet::gpu::{
+    GpuContext, GpuError, GpuSynthOptions, GpuSynthesizer, SplatMode, StageTimes,
+};
 use spreadlet::pipeline::types::SplatPath;
 use spreadlet::pipeline::{Classified, Integrator, RotationSampling};
 
@@ -710,7 +712,12 @@ pub fn run_to_folder(
     let ctx = GpuContext::with_requirement(true)?.ok_or(CheckError::NoAdapter)?;
     let load = |model| -> Result<PsfDatabase, CheckError> {
         let cfg = spreadlet::dbcache::build_config(model, profile, 0);
-        let (db, _) = spreadlet::dbcache::cached_database(&cfg, &spreadlet::dbcache::cache_dir(), true, &mut crate::print_cache_event)?;
+        let (db, _) = spreadlet::dbcache::cached_database(
+            &cfg,
+            &spreadlet::dbcache::cache_dir(),
+            true,
+            &mut crate::print_cache_event,
+        )?;
         // As `DbSet` hands it to the pipeline: spreadlets in row order.
         Ok(db.into_spreadlets_in_row_order())
     };

@@ -51,8 +51,7 @@ pub fn cached_dbs_with(
             eprintln!("{e}");
         }
     };
-    spreadlet::databases::load(&request, &mut on_event)
-        .map(|loaded| loaded.set)
+    spreadlet::databases::load(&request, &mut on_event).map(|loaded| loaded.set)
 }
 
 /// Prints what the database cache does (builds, rebuilds) on stderr.
@@ -62,7 +61,9 @@ pub fn print_cache_event(event: spreadlet::dbcache::CacheEvent) {
 
 /// The renderer's G-buffer of what the scene renderer made (colour, planar depth, forward
 /// motion in pixels per frame), validated like any other input.
-pub fn gbuffer_of(g: &scene::GBuffer) -> Result<spreadlet::GBuffer, spreadlet::gbuffer::GBufferError> {
+pub fn gbuffer_of(
+    g: &scene::GBuffer,
+) -> Result<spreadlet::GBuffer, spreadlet::gbuffer::GBufferError> {
     spreadlet::GBuffer::from_planes(
         g.width,
         g.height,

@@ -189,7 +189,8 @@ pub fn run_microbenchmarks(
         (x, groups.div_ceil(x))
     };
     let make_group = |params: MicroParams| {
-        let buf = spreadlet::gpu::util::uniform_init(ctx, "micro params", bytemuck::bytes_of(&params));
+        let buf =
+            spreadlet::gpu::util::uniform_init(ctx, "micro params", bytemuck::bytes_of(&params));
         let group = bind_group_entries(ctx, &layout, &buf, &src, &dst, &target, &spare);
         (buf, group)
     };

@@ -13,11 +13,11 @@ use std::time::Instant;
 use peers::{GBufferView, InputKind, PeerInput, PeerMethod, SampleView};
 use scene::StochasticFrames;
 
+use formats::image::RgbaImage;
 use spreadlet::camera::Camera;
 use spreadlet::gbuffer::GBuffer;
 use spreadlet::pipeline::Effects;
 use spreadlet::reconstruct::effects_of;
-use formats::image::RgbaImage;
 
 /// Every method name `--method` accepts for `reconstruct`, ours first.
 pub const RECONSTRUCT_METHODS: [&str; 7] = [

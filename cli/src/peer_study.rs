@@ -32,14 +32,14 @@ use anyhow::{Context, Result};
 use peers::{InputKind, PeerMethod};
 use scene::StochasticFrames;
 
+use crate::demo::cached_dbs;
+use crate::peer::{reconstruct_peer, synthesize_peer, unhandled_effects};
+use formats::{srgb_encode as linear_to_srgb, Error as WriteError, RgbaImage};
 use spreadlet::camera::Camera;
 use spreadlet::dbset::DbSet;
-use crate::demo::cached_dbs;
 use spreadlet::gbuffer::{ChannelOptions, GBuffer};
-use crate::peer::{reconstruct_peer, synthesize_peer, unhandled_effects};
 use spreadlet::pipeline::{Effects, Integrator};
 use spreadlet::reconstruct::{effects_of, reconstruct};
-use formats::{srgb_encode as linear_to_srgb, Error as WriteError, RgbaImage};
 use spreadlet::synth::{synthesize, SynthOptions};
 
 /// What `spreadlet study --peers` asks for.

@@ -24,12 +24,12 @@ use psf_db::PsfModel;
 use serde::Serialize;
 
 use crate::cached_dbs_with;
+use formats::image::RgbaImage;
 use spreadlet::baseline::{filter, DenseKernels, FilterOptions};
 use spreadlet::camera::Camera;
 use spreadlet::dbset::DbSet;
 use spreadlet::gbuffer::{ChannelOptions, GBuffer};
 use spreadlet::pipeline::{ClassifyOptions, Effects, Integrator};
-use formats::image::RgbaImage;
 use spreadlet::synth::{synthesize, SynthOptions};
 
 /// A G-buffer, its camera and a reference image, given as files.
@@ -559,7 +559,13 @@ fn run_config(
                     let gpu_filter = spreadlet::gpu::GpuFilter::new(&state.ctx, &kernels)?;
                     let opts = FilterOptions::default();
                     // Warm-up: pipeline compiled, kernels resident.
-                    spreadlet::gpu::filter_gpu(&gpu_filter, &input.gbuffer, &input.camera, dbs, &opts)?;
+                    spreadlet::gpu::filter_gpu(
+                        &gpu_filter,
+                        &input.gbuffer,
+                        &input.camera,
+                        dbs,
+                        &opts,
+                    )?;
                     for _ in 0..runs {
                         let (image, st) = spreadlet::gpu::filter_gpu(
                             &gpu_filter,

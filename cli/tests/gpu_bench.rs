@@ -2,14 +2,17 @@
 //! PSF size, rotations, copies, several layers) the GPU image matches the CPU's.
 #![cfg(feature = "gpu")]
 
-use spreadlet::bench;
+use spreadlet_cli::bench;
 
+#[path = "../../runtime/tests/gpu_support/mod.rs"]
 mod gpu_support;
 
 use gpu_support::{context, max_diff};
 use psf_db::PsfModel;
 use spreadlet::gpu::{GpuSynthOptions, GpuSynthesizer};
-use spreadlet::pipeline::{composite, integrate, splat, CompositeOptions, Integrator, SplatOptions};
+use spreadlet::pipeline::{
+    composite, integrate, splat, CompositeOptions, Integrator, SplatOptions,
+};
 
 fn lens_motion_db() -> psf_db::PsfDatabase {
     let cfg = precompute::BuildConfig::new(PsfModel::LensMotion, precompute::Profile::Test);

@@ -70,10 +70,17 @@ mod tests {
         // What the umask makes of 0666: the mode of a file created the ordinary way.
         let plain = dir.path().join("plain");
         std::fs::write(&plain, b"x").expect("write");
-        let expected = std::fs::metadata(&plain).expect("stat").permissions().mode() & 0o777;
+        let expected = std::fs::metadata(&plain)
+            .expect("stat")
+            .permissions()
+            .mode()
+            & 0o777;
         let path = dir.path().join("atomic");
         write_bytes_atomically(&path, b"x").expect("write");
         let mode = std::fs::metadata(&path).expect("stat").permissions().mode() & 0o777;
-        assert_eq!(mode, expected, "atomic output {mode:o}, plain file {expected:o}");
+        assert_eq!(
+            mode, expected,
+            "atomic output {mode:o}, plain file {expected:o}"
+        );
     }
 }

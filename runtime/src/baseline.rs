@@ -64,7 +64,6 @@ pub fn dense_build_config(cfg: &BuildConfig) -> BuildConfig {
     dense
 }
 
-
 /// `cfg` with every PSF stored sparse: no fast track (the spreadlet ratio, similarity and L1
 /// rules of the precompute all disabled).
 pub fn sparse_build_config(cfg: &BuildConfig) -> BuildConfig {

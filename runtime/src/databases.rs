@@ -86,8 +86,7 @@ pub struct Loaded {
 /// True when a set loaded for `loaded` can serve an input that needs `needed`: the same model,
 /// or a lens-motion set for defocus alone.
 pub fn serves(loaded: Option<PsfModel>, needed: Option<PsfModel>) -> bool {
-    loaded == needed
-        || (loaded == Some(PsfModel::LensMotion) && needed == Some(PsfModel::ThinLens))
+    loaded == needed || (loaded == Some(PsfModel::LensMotion) && needed == Some(PsfModel::ThinLens))
 }
 
 /// The models a cache load reads for `needed`: thin-lens for still pixels, plus lens-motion
@@ -146,8 +145,7 @@ pub fn load(
                 if let Some(adjust) = request.adjust {
                     cfg = adjust(cfg);
                 }
-                let (db, source) =
-                    dbcache::cached_database(&cfg, dir, request.progress, on_event)?;
+                let (db, source) = dbcache::cached_database(&cfg, dir, request.progress, on_event)?;
                 used.push(DbUsed {
                     model: model.name(),
                     path: source.path,

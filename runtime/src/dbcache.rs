@@ -58,7 +58,11 @@ pub enum CacheError {
 /// `~/.cache/spreadlet`; `~/Library/Caches/spreadlet` on macOS; `%LOCALAPPDATA%\spreadlet` on
 /// Windows), else `.spreadlet-cache` in the working directory when no home is known.
 pub fn cache_dir() -> PathBuf {
-    let var = |name: &str| std::env::var_os(name).filter(|v| !v.is_empty()).map(PathBuf::from);
+    let var = |name: &str| {
+        std::env::var_os(name)
+            .filter(|v| !v.is_empty())
+            .map(PathBuf::from)
+    };
     if let Some(dir) = var(CACHE_ENV) {
         return dir;
     }
@@ -100,7 +104,11 @@ impl std::fmt::Display for CacheEvent {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             CacheEvent::Unusable { path } => {
-                write!(f, "cached database {} is unusable; rebuilding", path.display())
+                write!(
+                    f,
+                    "cached database {} is unusable; rebuilding",
+                    path.display()
+                )
             }
             CacheEvent::Building {
                 model,

@@ -26,8 +26,8 @@ use crate::pipeline::classify::{
     classify_fragments, resolve_model, ClassifyError, DataWindow, Fragment,
 };
 use crate::pipeline::{Classified, Effects, PathCounts};
-use formats::RgbaImage;
 use crate::synth::{record_classified, render_classified, SynthOptions, SynthStats};
+use formats::RgbaImage;
 
 /// The effects a camera and stochastic frames call for.
 pub fn effects_of(camera: &Camera, frames: &StochasticFrames) -> Effects {

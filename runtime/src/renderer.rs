@@ -256,7 +256,15 @@ impl Renderer {
         options.validate()?;
         let effects = Effects::of(camera, gbuffer);
         let (set, databases, conditioning, database_ms) = self.databases_for(effects, camera)?;
-        self.run(Work::Synthesis(gbuffer), camera, &set, options, databases, conditioning, database_ms)
+        self.run(
+            Work::Synthesis(gbuffer),
+            camera,
+            &set,
+            options,
+            databases,
+            conditioning,
+            database_ms,
+        )
     }
 
     /// Reconstructs depth of field and motion blur from stochastic frames (each sample
@@ -270,7 +278,15 @@ impl Renderer {
         options.validate()?;
         let effects = crate::reconstruct::effects_of(camera, frames);
         let (set, databases, conditioning, database_ms) = self.databases_for(effects, camera)?;
-        self.run(Work::Reconstruction(frames), camera, &set, options, databases, conditioning, database_ms)
+        self.run(
+            Work::Reconstruction(frames),
+            camera,
+            &set,
+            options,
+            databases,
+            conditioning,
+            database_ms,
+        )
     }
 
     /// The databases `effects` need: the held set when it serves them, else loaded now.
@@ -476,7 +492,8 @@ impl Renderer {
                 })
             }
             Device::Cpu => {
-                let (image, stats) = baseline::filter(&frame_only, camera, &dbs, &kernels, options)?;
+                let (image, stats) =
+                    baseline::filter(&frame_only, camera, &dbs, &kernels, options)?;
                 Ok(FilterFrame {
                     image,
                     stats,

@@ -6,6 +6,7 @@ mod support;
 
 use std::sync::OnceLock;
 
+use formats::image::RgbaImage;
 use precompute::{build_database, BuildConfig, Profile};
 use psf_db::{PsfDatabase, PsfModel};
 use spreadlet::baseline::{
@@ -15,7 +16,6 @@ use spreadlet::camera::Camera;
 use spreadlet::dbset::DbSet;
 use spreadlet::gbuffer::GBuffer;
 use spreadlet::pipeline::{ClassifyOptions, FrameEdges, Integrator};
-use formats::image::RgbaImage;
 use spreadlet::synth::{synthesize, SynthOptions};
 use support::{camera, depth_for_coc, one_pixel, test_db};
 
@@ -128,7 +128,7 @@ fn dense_and_spreadlet_agree_on_a_smooth_input() {
     let mut worst = 0.0f32;
     for y in 12..n - 12 {
         for x in 12..n - 12 {
-            let (a, b) = (dense.get(x, y), sparse.get(x, y));
+            let (a, b) = (dense.at(x, y), sparse.at(x, y));
             for c in 0..3 {
                 worst = worst.max((a[c] - b[c]).abs() / a[c].max(1e-3));
             }
@@ -222,13 +222,13 @@ fn filter_differs_from_splat_at_an_occlusion_boundary() {
                 continue;
             }
             // In focus: the filter keeps the background as it is ...
-            let f = filtered.get(x, y);
+            let f = filtered.at(x, y);
             assert!(
                 (f[0] - color[y * n + x][0]).abs() < 1e-6,
                 "filter at ({x},{y})"
             );
             // ... while the splat spreads the blurred square over it.
-            diff += f64::from(splatted.get(x, y)[0] - f[0]);
+            diff += f64::from(splatted.at(x, y)[0] - f[0]);
             count += 1;
         }
     }

@@ -8,6 +8,7 @@ mod gpu_support;
 
 use std::sync::OnceLock;
 
+use formats::image::RgbaImage;
 use gpu_support::{context, max_diff};
 use poisson::Plane;
 use psf_db::{DatabaseBuilder, DbHeader, ParamSpace, PsfDatabase, PsfModel};
@@ -20,7 +21,6 @@ use spreadlet::pipeline::{
     composite, integrate, splat, Classified, CompositeOptions, Integrator, LayerInfo, PathCounts,
     RotationSampling, SplatOptions,
 };
-use formats::image::RgbaImage;
 
 /// Splat planes: largest difference relative to the plane set's largest value (atomic adds
 /// in another order than the CPU's bands).

@@ -6,10 +6,10 @@
 mod support;
 
 use psf_db::PsfModel;
+use scene::{Sample, StochasticFrames};
 use spreadlet::dbset::DbSet;
 use spreadlet::reconstruct::{effects_of, prepare, SamplePlacement};
 use spreadlet::synth::SynthOptions;
-use scene::{Sample, StochasticFrames};
 use support::{camera, test_db};
 
 /// Motion of the test sample, pixels per frame.

@@ -455,7 +455,7 @@ fn hdr_highlight_keeps_the_dim_side_clean() {
             for x in 8..w - 8 {
                 let (dx, dy) = (x as f32 - 32.0, y as f32 - 32.0);
                 if dx * dx + dy * dy >= 16.0 * 16.0 {
-                    lo = lo.min(img.get(x, y)[0]);
+                    lo = lo.min(img.at(x, y)[0]);
                 }
             }
         }
@@ -464,7 +464,7 @@ fn hdr_highlight_keeps_the_dim_side_clean() {
             for x in 8..w - 8 {
                 let (dx, dy) = (x as f32 - 32.0, y as f32 - 32.0);
                 if dx * dx + dy * dy >= 16.0 * 16.0 {
-                    hi = hi.max(img.get(x, y)[0]);
+                    hi = hi.max(img.at(x, y)[0]);
                 }
             }
         }

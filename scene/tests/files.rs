@@ -25,10 +25,10 @@ fn render_all(dir: &Path, tag: &str, seed: u64) -> Vec<Vec<u8>> {
         .and_then(|g| g.write_exr(&paths[0]))
         .expect("gbuffer");
     render_stochastic(&scene, 3, &options)
-        .and_then(|s| s.write_exr(&paths[1]))
+        .and_then(|s| Ok(s.write_exr(&paths[1])?))
         .expect("stochastic");
     render_reference(&scene, 16, &options)
-        .and_then(|r| r.write_exr(&paths[2]))
+        .and_then(|r| Ok(r.write_exr(&paths[2])?))
         .expect("reference");
     paths
         .iter()

@@ -51,7 +51,6 @@ pub(crate) struct BenchArgs {
     pub(crate) quick: bool,
 }
 
-
 /// Runs `spreadlet bench`.
 pub(crate) fn run(args: BenchArgs) -> Result<()> {
     let profile: precompute::Profile = args.db_profile.parse()?;
@@ -64,7 +63,12 @@ pub(crate) fn run(args: BenchArgs) -> Result<()> {
     if args.scaling {
         let cfg = dbcache::build_config(psf_db::PsfModel::ThinLens, profile, 0);
         let load = |cfg: &precompute::BuildConfig| -> Result<psf_db::PsfDatabase> {
-            let (db, _) = dbcache::cached_database(cfg, &dbcache::cache_dir(), true, &mut spreadlet_cli::print_cache_event)?;
+            let (db, _) = dbcache::cached_database(
+                cfg,
+                &dbcache::cache_dir(),
+                true,
+                &mut spreadlet_cli::print_cache_event,
+            )?;
             Ok(spreadlet::condition::condition(&db)?.0)
         };
         let sparse = load(&cfg)?;
@@ -90,11 +94,19 @@ pub(crate) fn run(args: BenchArgs) -> Result<()> {
             sparse.spreadlet_count(),
             sparse.max_extent_px()
         );
-        println!("{}", spreadlet_cli::bench::scaling_markdown(&rows, &database));
+        println!(
+            "{}",
+            spreadlet_cli::bench::scaling_markdown(&rows, &database)
+        );
         return Ok(());
     }
     let cfg = dbcache::build_config(psf_db::PsfModel::LensMotion, profile, 0);
-    let (db, _) = dbcache::cached_database(&cfg, &dbcache::cache_dir(), true, &mut spreadlet_cli::print_cache_event)?;
+    let (db, _) = dbcache::cached_database(
+        &cfg,
+        &dbcache::cache_dir(),
+        true,
+        &mut spreadlet_cli::print_cache_event,
+    )?;
     let config = spreadlet_cli::bench::BenchConfig {
         sizes: args.sizes,
         runs: args.runs.max(1),

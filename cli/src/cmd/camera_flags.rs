@@ -72,4 +72,3 @@ pub(crate) fn load_camera(path: Option<&Path>, f: &CameraFlags) -> Result<Camera
     })?;
     Ok(camera)
 }
-

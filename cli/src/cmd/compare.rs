@@ -97,4 +97,3 @@ fn write_rgb8_png(path: &Path, width: usize, height: usize, rgb: Vec<u8>) -> Res
     })?;
     Ok(())
 }
-

@@ -28,7 +28,6 @@ pub(crate) struct DemoArgs {
     pub(crate) quiet: bool,
 }
 
-
 /// Runs `spreadlet demo`.
 pub(crate) fn run(args: DemoArgs) -> Result<()> {
     let options = spreadlet_cli::demo::DemoOptions {
@@ -49,4 +48,3 @@ pub(crate) fn run(args: DemoArgs) -> Result<()> {
     );
     Ok(())
 }
-

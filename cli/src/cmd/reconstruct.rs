@@ -182,4 +182,3 @@ fn reconstruct_frame_peer(
     }
     Ok(())
 }
-

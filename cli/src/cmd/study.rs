@@ -50,7 +50,6 @@ pub(crate) struct StudyArgs {
     pub(crate) quiet: bool,
 }
 
-
 /// Runs `spreadlet study`.
 pub(crate) fn run(args: StudyArgs) -> Result<()> {
     if args.peers {
@@ -97,4 +96,3 @@ pub(crate) fn run(args: StudyArgs) -> Result<()> {
     );
     Ok(())
 }
-

@@ -115,7 +115,6 @@ pub(crate) struct SynthArgs {
     pub(crate) quiet: bool,
 }
 
-
 impl SynthArgs {
     /// The library's options these flags ask for; no flags give [`SynthOptions::default`].
     pub(crate) fn synth_options(&self) -> SynthOptions {

@@ -8,8 +8,8 @@ use super::{GpuContext, GpuError, GpuSynthOptions, GpuSynthesizer, StageTimes};
 use crate::camera::Camera;
 use crate::dbset::DbSet;
 use crate::gbuffer::GBuffer;
-use formats::RgbaImage;
 use crate::synth::{prepare, Prepared, SynthOptions, SynthStats};
+use formats::RgbaImage;
 
 impl GpuSynthOptions {
     /// The GPU knobs matching the CPU path's `options` (rotation sampling, compositing).

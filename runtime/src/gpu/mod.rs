@@ -23,12 +23,12 @@ mod synth;
 pub mod tiles;
 pub mod util;
 
+pub use ::shaders::shader_sources_for_validation;
 pub use context::{GpuContext, REQUIRE_GPU_ENV};
 pub use error::GpuError;
 pub use filter::{filter_gpu, GpuFilter};
 pub use frontend::{reconstruct_gpu, synthesize_gpu};
 pub use pyramid::{GpuPyramid, PyramidLevels};
-pub use ::shaders::shader_sources_for_validation;
 pub use synth::{
     AtomicMode, GpuSynthOptions, GpuSynthesizer, SplatMode, SplatPlanes, StageTimes, SynthCounters,
 };
