@@ -69,13 +69,13 @@ command -v nvidia-smi >/dev/null 2>&1 && nvidia-smi --query-gpu=name,driver_vers
 tests=()
 for f in runtime/tests/gpu_*.rs; do tests+=(--test "$(basename "$f" .rs)"); done
 step "building (release): spreadlet and $(( ${#tests[@]} / 2 )) GPU test binaries"
-cargo build --release -p runtime --bin spreadlet 2>&1 | tail -n 2 >&2
-cargo test --release -p runtime --no-run "${tests[@]}" 2>&1 | tail -n 1 >&2
+cargo build --release -p spreadlet-cli --bin spreadlet 2>&1 | tail -n 2 >&2
+cargo test --release -p spreadlet --no-run "${tests[@]}" 2>&1 | tail -n 1 >&2
 
 tests_failed=""
 if [ -z "$skip_tests" ]; then
   step "GPU tests (SPREADLET_REQUIRE_GPU=1), log in $out/gpu-tests.log"
-  if ! cargo test --release -p runtime --no-fail-fast "${tests[@]}" >"$out/gpu-tests.log" 2>&1; then
+  if ! cargo test --release -p spreadlet --no-fail-fast "${tests[@]}" >"$out/gpu-tests.log" 2>&1; then
     tests_failed=1
   fi
   grep -E "^test result|^     Running|FAILED|panicked" "$out/gpu-tests.log" >&2 || true

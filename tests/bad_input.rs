@@ -1,4 +1,4 @@
-//! Issue 7: bad input, end to end through the binaries. Every case gives a clear message that
+//! Bad input, end to end through the binaries. Every case gives a clear message that
 //! names the problem, a non-zero exit, no panic, no hang (each run has a time limit) and leaves
 //! no file in the output folder (no partial output, no temporary file). The policy where a
 //! choice exists (docs/ROBUSTNESS.md): non-finite colour pixels are dropped and counted in the

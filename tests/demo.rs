@@ -1,6 +1,6 @@
 //! `spreadlet demo` end to end, small: it renders a built-in scene, builds (test profile) or
 //! reuses databases, synthesises and reconstructs, and writes a summary whose figures hold
-//! what issue 5 promises: reconstruction from 1 spp beats the per-pixel average of the same
+//! what the demo promises: reconstruction from 1 spp beats the per-pixel average of the same
 //! samples.
 
 use spreadlet_e2e::{assert_success, cache_dir, run};
@@ -60,7 +60,7 @@ fn demo_writes_the_summary_and_reconstruction_beats_the_1spp_average() {
     }
 }
 
-/// Issue 5's stronger bar on a scene with large blur (bokeh highlights), small enough for CI:
+/// The stronger bar on a scene with large blur (bokeh highlights), small enough for CI:
 /// reconstruction from 1 spp beats the plain average of 16 spp of the same renderer. Measured
 /// at 96 px with the test databases: 0.941 against 0.864 (`spreadlet demo --scene bokeh
 /// --size 96 --reference-spp 256 --db-profile test`).

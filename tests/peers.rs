@@ -1,4 +1,4 @@
-//! `spreadlet reconstruct --method PEER` end to end (issue 8): the peer reconstruction methods
+//! `spreadlet reconstruct --method PEER` end to end: the peer reconstruction methods
 //! run through the binary on the same stochastic frames and camera as spreadlet's
 //! reconstruction, give the `peers` crate's result bit for bit, beat the plain average of the
 //! same samples, and refuse (cleanly) a method that ignores an effect of the input.

@@ -1,4 +1,4 @@
-//! Issue 9: frame sequences. `synth --frames A-B` with # in the paths gives every frame the
+//! Frame sequences. `synth --frames A-B` with # in the paths gives every frame the
 //! same result as a single-frame run; `--shard K/N` takes its contiguous share of the range; a
 //! missing frame is a clean error naming the file.
 

@@ -1,4 +1,4 @@
-//! Issue 9: a database built as one part and as three shards merged is the same file, byte for
+//! A database built as one part and as three shards merged is the same file, byte for
 //! byte; parts that do not belong together, or do not cover every PSF, are refused by name.
 
 use spreadlet_e2e::{assert_clean_failure, assert_success, cache_dir, run};

@@ -1,4 +1,4 @@
-//! Peer methods side by side (issue #8): SSIM, PSNR and time of every peer method and of
+//! Peer methods side by side: SSIM, PSNR and time of every peer method and of
 //! spreadlet on the shipped scenes and the shared Blender examples, as `spreadlet study --peers`
 //! writes them into docs/PEERS.md.
 //!

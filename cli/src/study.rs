@@ -1,4 +1,4 @@
-//! `spreadlet study`: what accuracy costs in time (issue #6).
+//! `spreadlet study`: what accuracy costs in time.
 //!
 //! On one scene (a built-in scene rendered with the `scene` crate: pinhole G-buffer and a
 //! converged reference; or a G-buffer, camera and reference given as files), every knob of the

@@ -1,4 +1,4 @@
-//! The peer study (issue 8) on a tiny configuration: two built-in scenes at 40 px, a few
+//! The peer study on a tiny configuration: two built-in scenes at 40 px, a few
 //! methods, the `test` database profile. Checks the table's shape and what holds by
 //! construction: on a scene with a closed shutter the G-buffer motion-blur peers return the
 //! G-buffer itself (equal scores, flagged as ignoring depth of field), defocus-only peers are

@@ -1,4 +1,4 @@
-//! `spreadlet study` end to end on a tiny input (issue #6, built-in 'bokeh' at 64x64): the CSV has the documented
+//! `spreadlet study` end to end on a tiny input (built-in 'bokeh' at 64x64): the CSV has the documented
 //! columns, every method appears, the dense splat (the method's quality upper bound) scores at
 //! least as well as the sparsest spreadlet database, the Pareto front is consistent, and the
 //! Markdown table and the PNG plot are written.

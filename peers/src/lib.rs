@@ -1,4 +1,4 @@
-//! Peer methods measured against spreadlet (issue 8), on the CPU:
+//! Peer methods measured against spreadlet, on the CPU:
 //!
 //! - [`mcguire()`]: McGuire et al. 2012, single-velocity tile-based motion blur (G-buffer);
 //! - [`guertin()`]: Guertin et al. 2014, feature-aware motion blur (G-buffer);

@@ -1,4 +1,4 @@
-//! Numerical hard cases of the integrators (issue 7): large planes keep the error of small
+//! Numerical hard cases of the integrators: large planes keep the error of small
 //! ones (no drift of the DC level across the image), content touching the borders, and HDR
 //! content (a 1e6 highlight beside 1e-3 values). References: the image whose Laplacian is
 //! integrated (analytic: integration must return it), and the exact integrator for the

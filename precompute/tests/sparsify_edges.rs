@@ -1,4 +1,4 @@
-//! Sparsification edge cases (issue #7): a PSF with one non-zero pixel, flat PSFs, collinear and
+//! Sparsification edge cases: a PSF with one non-zero pixel, flat PSFs, collinear and
 //! coincident Voronoi sites in `spade`, empty and tiny images. None may panic; where the answer
 //! is known it is checked:
 //!

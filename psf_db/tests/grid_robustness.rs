@@ -1,5 +1,5 @@
 //! Property tests of the nested grid and the parameter-space lookup that `grid_props.rs` does
-//! not cover (issue 7): the boxes tile the domain exactly once, levels grow with the distance
+//! not cover: the boxes tile the domain exactly once, levels grow with the distance
 //! from the origin, cell edges follow the level, and lookups of values outside the space
 //! (negative, beyond the maximum, infinite, NaN) clamp, say so, and land in the space's edge
 //! cells, never out of range.

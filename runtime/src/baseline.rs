@@ -1,4 +1,4 @@
-//! Baselines for the study (issue #6), on the same inputs and with the same PSFs as spreadlet:
+//! Baselines for the study, on the same inputs and with the same PSFs as spreadlet:
 //!
 //! - **dense splat** (`--method dense`): every pixel's full pre-filtered PSF drawn directly,
 //!   no Laplacian. It is the spreadlet pipeline itself run on a database whose every PSF is

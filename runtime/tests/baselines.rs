@@ -1,4 +1,4 @@
-//! The study's baselines (issue #6) against what they must be: the dense splat of one bright
+//! The study's baselines against what they must be: the dense splat of one bright
 //! pixel is its stored pre-filtered PSF; dense and spreadlet agree on a smooth input; filtering
 //! equals splatting where the PSF is the same everywhere and differs at an occlusion boundary.
 

@@ -1,4 +1,4 @@
-//! Property tests of the layer binning in `spreadlet::pipeline::classify` (issue 7): every
+//! Property tests of the layer binning in `spreadlet::pipeline::classify`: every
 //! fragment lands in exactly one layer with its whole weight, or (soft layering) in two
 //! neighbouring layers whose weights sum to its weight; the layer is monotone in parallax
 //! (so in signed CoC: nearer, more negative CoC, is a higher layer); hard layers hold the

@@ -1,4 +1,4 @@
-//! Numerical hard cases of the synthesis pipeline (issue 7), each against an f64 or analytic
+//! Numerical hard cases of the synthesis pipeline, each against an f64 or analytic
 //! reference with a stated tolerance: HDR highlights beside dark values, PSFs at and beyond
 //! the database's maximum, 100,000 splats on one pixel, compositing at the edges of coverage,
 //! still, tiny, diagonal and vertical motion, CPU determinism, the GPU within the CPU bound,

@@ -29,7 +29,7 @@ pub fn binary(name: &str) -> PathBuf {
                 "build",
                 "--bins",
                 "-p",
-                "runtime",
+                "spreadlet-cli",
                 "-p",
                 "precompute",
                 "-p",

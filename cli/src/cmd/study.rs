@@ -42,7 +42,7 @@ pub(crate) struct StudyArgs {
     /// Skip the GPU rows.
     #[arg(long)]
     pub(crate) no_gpu: bool,
-    /// Run the peer comparison (issue #8) instead.
+    /// Run the peer comparison instead.
     #[arg(long)]
     pub(crate) peers: bool,
     /// Print no progress.
