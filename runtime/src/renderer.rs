@@ -238,6 +238,7 @@ impl Renderer {
         self.databases.as_ref().map(|d| d.set.as_ref())
     }
 
+    #[cfg_attr(not(feature = "gpu"), allow(dead_code))]
     fn emit(&self, event: Event) {
         if let Some(sink) = &self.options.on_event {
             sink(&event);
@@ -255,16 +256,8 @@ impl Renderer {
     ) -> Result<Frame, Error> {
         options.validate()?;
         let effects = Effects::of(camera, gbuffer);
-        let (set, databases, conditioning, database_ms) = self.databases_for(effects, camera)?;
-        self.run(
-            Work::Synthesis(gbuffer),
-            camera,
-            &set,
-            options,
-            databases,
-            conditioning,
-            database_ms,
-        )
+        let selected = self.databases_for(effects, camera)?;
+        self.run(Work::Synthesis(gbuffer), camera, selected, options)
     }
 
     /// Reconstructs depth of field and motion blur from stochastic frames (each sample
@@ -277,29 +270,22 @@ impl Renderer {
     ) -> Result<Frame, Error> {
         options.validate()?;
         let effects = crate::reconstruct::effects_of(camera, frames);
-        let (set, databases, conditioning, database_ms) = self.databases_for(effects, camera)?;
-        self.run(
-            Work::Reconstruction(frames),
-            camera,
-            &set,
-            options,
-            databases,
-            conditioning,
-            database_ms,
-        )
+        let selected = self.databases_for(effects, camera)?;
+        self.run(Work::Reconstruction(frames), camera, selected, options)
     }
 
     /// The databases `effects` need: the held set when it serves them, else loaded now.
-    fn databases_for(
-        &mut self,
-        effects: Effects,
-        camera: &Camera,
-    ) -> Result<(Arc<DbSet>, Vec<DbUsed>, Vec<Conditioned>, f64), Error> {
+    fn databases_for(&mut self, effects: Effects, camera: &Camera) -> Result<Selected, Error> {
         let started = Instant::now();
         let needed = effects.cheapest_model();
         if let Some(held) = &self.databases {
             if held.blades == camera.aperture_blades && databases::serves(held.model, needed) {
-                return Ok((held.set.clone(), Vec::new(), Vec::new(), 0.0));
+                return Ok(Selected {
+                    set: held.set.clone(),
+                    used: Vec::new(),
+                    conditioning: Vec::new(),
+                    ms: 0.0,
+                });
             }
         }
         let sink = self.options.on_event.clone();
@@ -355,8 +341,12 @@ impl Renderer {
         if let Some(Device::Gpu(gpu)) = &mut self.device {
             gpu.synthesizer = None; // new databases: upload them again
         }
-        let ms = started.elapsed().as_secs_f64() * 1e3;
-        Ok((set, loaded.used, loaded.conditioning, ms))
+        Ok(Selected {
+            set,
+            used: loaded.used,
+            conditioning: loaded.conditioning,
+            ms: started.elapsed().as_secs_f64() * 1e3,
+        })
     }
 
     /// The device for this renderer, chosen at its first frame.
@@ -405,26 +395,23 @@ impl Renderer {
         Ok(Device::Cpu)
     }
 
-    #[allow(clippy::too_many_arguments)]
     fn run(
         &mut self,
         work: Work,
         camera: &Camera,
-        dbs: &DbSet,
+        selected: Selected,
         options: &SynthOptions,
-        databases: Vec<DbUsed>,
-        conditioning: Vec<Conditioned>,
-        database_ms: f64,
     ) -> Result<Frame, Error> {
-        let frame = |image, stats, device, _stages| Frame {
+        let dbs = selected.set.as_ref();
+        let frame = |image, stats, device, _stages: Option<GpuStages>| Frame {
             image,
             stats,
             device,
             #[cfg(feature = "gpu")]
             gpu_stages: _stages,
-            databases,
-            conditioning,
-            database_ms,
+            databases: selected.used.clone(),
+            conditioning: selected.conditioning.clone(),
+            database_ms: selected.ms,
         };
         match self.device()? {
             #[cfg(feature = "gpu")]
@@ -471,7 +458,8 @@ impl Renderer {
         options: &baseline::FilterOptions,
     ) -> Result<FilterFrame, Error> {
         let effects = Effects::of(camera, &gbuffer.frame_only());
-        let (dbs, databases, _, _) = self.databases_for(effects, camera)?;
+        let selected = self.databases_for(effects, camera)?;
+        let (dbs, databases) = (selected.set, selected.used);
         let kernels = match &dbs.combined {
             Some(db) => baseline::DenseKernels::from_db(db),
             None => baseline::DenseKernels::default(),
@@ -519,6 +507,20 @@ pub struct FilterFrame {
     pub kernels_integrated: usize,
     /// The databases loaded by this call.
     pub databases: Vec<DbUsed>,
+}
+
+#[cfg(feature = "gpu")]
+type GpuStages = crate::gpu::StageTimes;
+#[cfg(not(feature = "gpu"))]
+type GpuStages = ();
+
+/// The databases for one frame: the set and, when this call loaded it, what was loaded.
+struct Selected {
+    set: Arc<DbSet>,
+    used: Vec<DbUsed>,
+    conditioning: Vec<Conditioned>,
+    /// Time spent loading, milliseconds.
+    ms: f64,
 }
 
 /// What [`Renderer::run`] runs.

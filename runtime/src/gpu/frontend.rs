@@ -34,6 +34,7 @@ pub fn synthesize_gpu(
     options: &SynthOptions,
 ) -> Result<(RgbaImage, SynthStats, StageTimes), GpuError> {
     gpu.check_database(dbs.combined.as_ref())?;
+    gpu.apply_call_options(options);
     let total = Instant::now();
     let (prepared, mut stats) =
         prepare(gbuffer, camera, dbs, options).map_err(|e| GpuError::Input(e.to_string()))?;
@@ -63,6 +64,7 @@ pub fn reconstruct_gpu(
     options: &SynthOptions,
 ) -> Result<(RgbaImage, SynthStats, StageTimes), GpuError> {
     gpu.check_database(dbs.combined.as_ref())?;
+    gpu.apply_call_options(options);
     let total = Instant::now();
     let (classified, mut stats) = crate::reconstruct::prepare(
         frames,

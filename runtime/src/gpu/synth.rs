@@ -235,9 +235,13 @@ impl DbBuffers {
     }
 }
 
-/// Everything that depends on the frame size and layer count.
+/// What the frame buffers are made for: the frame's size, padding and layers, and the options
+/// baked into their uniforms (rotation sampling, coverage renormalisation).
+type FrameKey = (u32, u32, u32, u32, RotationSampling, bool);
+
+/// Everything that depends on the frame size and layer count (and the options in uniforms).
 struct FrameBuffers {
-    key: (u32, u32, u32, u32),
+    key: FrameKey,
     frame_uniform: wgpu::Buffer,
     records: wgpu::Buffer,
     record_capacity: usize,
@@ -522,6 +526,13 @@ impl GpuSynthesizer {
         self.float_atomics
     }
 
+    /// Takes the options of one call that the pipelines do not bake in (rotation sampling,
+    /// compositing), so every call runs with its own, as on the CPU.
+    pub fn apply_call_options(&mut self, options: &crate::synth::SynthOptions) {
+        self.options.rotation = options.splat.rotation;
+        self.options.composite = options.composite;
+    }
+
     /// The options.
     pub fn options(&self) -> &GpuSynthOptions {
         &self.options
@@ -727,10 +738,18 @@ impl GpuSynthesizer {
         Ok(())
     }
 
-    /// (Re)creates the frame buffers when the size or layer count changed, and the record
-    /// buffer (and the tiled splat's entry list) when it is too small.
+    /// (Re)creates the frame buffers when the size, the layer count or an option in their
+    /// uniforms changed, and the record buffer (and the tiled splat's entry list) when it is
+    /// too small.
     fn prepare(&mut self, frame: &FrameParams, records: &[SplatRecord]) -> Result<(), GpuError> {
-        let key = (frame.width, frame.height, frame.pad, frame.layers);
+        let key = (
+            frame.width,
+            frame.height,
+            frame.pad,
+            frame.layers,
+            self.options.rotation,
+            self.options.composite.renormalize_coverage,
+        );
         let mut rebuild = false;
         if self.frame.as_ref().is_none_or(|f| f.key != key) {
             self.frame = None;
@@ -868,7 +887,7 @@ impl GpuSynthesizer {
     fn frame_buffers_for(
         &self,
         frame: &FrameParams,
-        key: (u32, u32, u32, u32),
+        key: FrameKey,
     ) -> Result<FrameBuffers, GpuError> {
         let ctx = &self.ctx;
         let (pw, ph) = (frame.padded_width as usize, frame.padded_height as usize);
