@@ -8,7 +8,6 @@
 //! The report names the adapter and its device type; a software device (lavapipe) is marked
 //! as such in both files, so that its figures are never read as a GPU's.
 
-use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -685,15 +684,10 @@ impl DeviceCheckReport {
 
 /// Writes `contents` to `path` through a temporary file and a rename (never half a file).
 fn write_atomically(path: &Path, contents: &[u8]) -> Result<(), CheckError> {
-    let io = |source| CheckError::Io {
+    formats::atomic::write_bytes_atomically(path, contents).map_err(|e| CheckError::Io {
         path: path.to_path_buf(),
-        source,
-    };
-    let dir = path.parent().unwrap_or(Path::new("."));
-    let mut tmp = tempfile::NamedTempFile::new_in(dir).map_err(io)?;
-    tmp.write_all(contents).map_err(io)?;
-    tmp.persist(path).map_err(|e| io(e.error))?;
-    Ok(())
+        source: std::io::Error::other(e),
+    })
 }
 
 /// The device check as `spreadlet bench --device-check DIR` runs it: loads (or builds) the

@@ -246,15 +246,7 @@ fn main() -> Result<()> {
         .with_context(|| format!("writing {}", args.out.display()))?;
     if let Some(path) = &args.report {
         let json = serde_json::to_string_pretty(&report)?;
-        let dir = path
-            .parent()
-            .filter(|p| !p.as_os_str().is_empty())
-            .unwrap_or(std::path::Path::new("."));
-        let mut tmp = tempfile::NamedTempFile::new_in(dir)
-            .with_context(|| format!("creating a temporary file beside {}", path.display()))?;
-        std::io::Write::write_all(&mut tmp, json.as_bytes())?;
-        tmp.persist(path)
-            .with_context(|| format!("writing {}", path.display()))?;
+        formats::atomic::write_bytes_atomically(path, json.as_bytes())?;
     }
     eprintln!(
         "{model} {profile}: {} PSFs ({} dense), {} spreadlets stored, mean sparsity {:.2} %, \

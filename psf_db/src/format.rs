@@ -22,7 +22,6 @@
 //! that every count, index, offset and position is in bounds. Any failure is a [`DbError`].
 //! bincode is used only inside this module.
 
-use std::io::Write;
 use std::path::Path;
 
 use bytemuck::{Pod, Zeroable};
@@ -472,23 +471,11 @@ impl PsfDatabase {
             path: path.to_path_buf(),
             source,
         };
-        let dir = match path.parent() {
-            Some(p) if !p.as_os_str().is_empty() => p,
-            _ => Path::new("."),
-        };
-        let mut tmp = tempfile::NamedTempFile::new_in(dir).map_err(io)?;
-        tmp.write_all(&bytes).map_err(io)?;
-        // Temporary files are private (0600); a database is an ordinary shared file.
-        #[cfg(unix)]
-        {
-            use std::os::unix::fs::PermissionsExt;
-            tmp.as_file()
-                .set_permissions(std::fs::Permissions::from_mode(0o644))
-                .map_err(io)?;
-        }
-        tmp.as_file().sync_all().map_err(io)?;
-        tmp.persist(path).map_err(|e| io(e.error))?;
-        Ok(())
+        // An ordinary shared file (0666 less the umask), never half written.
+        formats::atomic::write_bytes_atomically(path, &bytes).map_err(|e| match e {
+            formats::Error::Io { source, .. } => io(source),
+            other => io(std::io::Error::other(other)),
+        })
     }
 
     /// The file's bytes.

@@ -58,11 +58,12 @@ pub enum CacheError {
 /// `~/.cache/spreadlet`; `~/Library/Caches/spreadlet` on macOS; `%LOCALAPPDATA%\spreadlet` on
 /// Windows), else `.spreadlet-cache` in the working directory when no home is known.
 pub fn cache_dir() -> PathBuf {
-    let var = |name: &str| {
-        std::env::var_os(name)
-            .filter(|v| !v.is_empty())
-            .map(PathBuf::from)
-    };
+    cache_dir_from(&|name| std::env::var_os(name))
+}
+
+/// [`cache_dir`] with the environment given as a lookup.
+fn cache_dir_from(env: &dyn Fn(&str) -> Option<std::ffi::OsString>) -> PathBuf {
+    let var = |name: &str| env(name).filter(|v| !v.is_empty()).map(PathBuf::from);
     if let Some(dir) = var(CACHE_ENV) {
         return dir;
     }
@@ -229,6 +230,49 @@ pub fn explicit_database(path: &Path, needed: PsfModel) -> Result<PsfDatabase, C
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_cache_follows_the_platform_not_the_working_directory() {
+        let env = |pairs: &'static [(&'static str, &'static str)]| {
+            move |name: &str| {
+                pairs
+                    .iter()
+                    .find(|(k, _)| *k == name)
+                    .map(|(_, v)| std::ffi::OsString::from(v))
+            }
+        };
+        let all = env(&[
+            ("SPREADLET_CACHE", "/c/spreadlet"),
+            ("XDG_CACHE_HOME", "/x"),
+            ("HOME", "/h"),
+            ("LOCALAPPDATA", "/l"),
+        ]);
+        assert_eq!(cache_dir_from(&all), PathBuf::from("/c/spreadlet"));
+        let empty_override = env(&[
+            ("SPREADLET_CACHE", ""),
+            ("XDG_CACHE_HOME", "/x"),
+            ("HOME", "/h"),
+            ("LOCALAPPDATA", "/l"),
+        ]);
+        let home_only = env(&[("HOME", "/h"), ("LOCALAPPDATA", "/l")]);
+        if cfg!(target_os = "linux") {
+            assert_eq!(
+                cache_dir_from(&empty_override),
+                PathBuf::from("/x/spreadlet")
+            );
+            assert_eq!(
+                cache_dir_from(&home_only),
+                PathBuf::from("/h/.cache/spreadlet")
+            );
+            // A relative XDG_CACHE_HOME is invalid by the specification and ignored.
+            let relative = env(&[("XDG_CACHE_HOME", "rel"), ("HOME", "/h")]);
+            assert_eq!(
+                cache_dir_from(&relative),
+                PathBuf::from("/h/.cache/spreadlet")
+            );
+        }
+        assert_eq!(cache_dir_from(&env(&[])), PathBuf::from(".spreadlet-cache"));
+    }
 
     #[test]
     fn cache_names_differ_by_model_profile_and_settings() {

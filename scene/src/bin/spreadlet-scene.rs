@@ -112,16 +112,10 @@ fn load_scene(args: &SceneArgs) -> Result<Scene> {
 }
 
 fn write_text_atomically(path: &Path, text: &str) -> Result<()> {
-    let dir = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
-    let mut temp = tempfile::NamedTempFile::new_in(dir)
-        .with_context(|| format!("creating a temporary file for {}", path.display()))?;
-    std::io::Write::write_all(&mut temp, text.as_bytes())?;
-    temp.persist(path)
-        .with_context(|| format!("writing {}", path.display()))?;
-    Ok(())
+    Ok(formats::atomic::write_bytes_atomically(
+        path,
+        text.as_bytes(),
+    )?)
 }
 
 fn png_beside(path: &Path) -> PathBuf {
