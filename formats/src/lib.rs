@@ -1,6 +1,8 @@
 //! spreadlet's file formats, each defined once and shared by the renderer (`spreadlet`), the
 //! ground-truth renderer (`scene`), the metrics and the tools:
 //!
+//! - [`Camera`]: `camera.json` (lens, shutter, scene units), its one validation and the one
+//!   thin-lens circle-of-confusion formula.
 //! - [`RgbaImage`]: linear premultiplied RGBA, row-major from the top-left pixel, y down; EXR
 //!   in and out, an sRGB PNG preview.
 //! - [`StochasticFrames`]: labelled samples (lens position, time, motion) in one EXR
@@ -12,6 +14,7 @@
 //!   any new file gets (0666 less the umask).
 
 pub mod atomic;
+pub mod camera;
 pub mod error;
 pub mod exr_io;
 pub mod image;
@@ -19,6 +22,7 @@ pub mod srgb;
 pub mod stochastic;
 
 pub use atomic::write_atomically;
+pub use camera::{Camera, CameraError, ThinLens};
 pub use error::{Error, Result};
 pub use image::RgbaImage;
 pub use srgb::srgb_encode;

@@ -93,7 +93,7 @@ impl GBufferView<'_> {
 
 /// One stochastic sample of a distribution-effects render (one ray: a lens position and a time).
 /// The fields follow `scene::stochastic::Sample`, plus the signed CoC that the camera gives
-/// for the depth (`CameraSpec::signed_coc_radius_px`).
+/// for the depth (`formats::ThinLens::signed_coc_px`).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Sample {
     /// Sensor position of the ray relative to its pixel's centre, pixels, each component in

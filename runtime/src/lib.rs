@@ -23,7 +23,6 @@
 //! (back to front). The databases come from [`databases`] (the one loader) and `precompute`.
 
 pub mod baseline;
-pub mod camera;
 pub mod condition;
 pub mod databases;
 pub mod dbcache;
@@ -39,6 +38,8 @@ pub mod synth;
 
 pub use camera::Camera;
 pub use error::Error;
+/// `camera.json`: the camera type, its validation and the thin-lens CoC (from `formats`).
+pub use formats::camera;
 pub use formats::{RgbaImage, Sample, StochasticFrames};
 pub use gbuffer::{ChannelOptions, GBuffer};
 pub use renderer::{Backend, DbSource, Event, Frame, Method, Renderer, RendererOptions};

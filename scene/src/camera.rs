@@ -19,136 +19,42 @@ use serde::{Deserialize, Serialize};
 use crate::error::{invalid, Result};
 use crate::sampling::sample_aperture;
 
-/// Largest accepted image edge in pixels (guards against unbounded allocations).
-pub const MAX_IMAGE_EDGE: u32 = 16384;
+/// The lens and shutter of `camera.json`: the one camera type of the project
+/// ([`formats::Camera`], with its validation and CoC formula). This renderer works in metres
+/// (`scene_unit_mm` 1000).
+pub use formats::Camera as CameraSpec;
 
-/// The lens and shutter exactly as `camera.json` gives them (unknown fields are ignored).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct CameraSpec {
-    /// Image width in pixels.
-    pub width: u32,
-    /// Image height in pixels.
-    pub height: u32,
-    /// Focal length f in millimetres.
-    pub focal_length_mm: f64,
-    /// Sensor width in millimetres; it maps to the image width.
-    pub sensor_width_mm: f64,
-    /// Aperture as an f-number N (aperture diameter f / N); `None` for a pinhole.
-    #[serde(default)]
-    pub f_stop: Option<f64>,
-    /// Focus distance s in scene units (metres), planar like depth; `None` for a pinhole.
-    #[serde(default)]
-    pub focus_distance: Option<f64>,
-    /// Number of aperture blades; 0 (or fewer than 3) for a circular aperture.
-    #[serde(default)]
-    pub aperture_blades: u32,
-    /// Exposure as a fraction of the frame interval, centred on the frame time; 0 = no blur.
-    #[serde(default)]
-    pub shutter_frames: f64,
+/// Parses a `camera.json` document; `source_name` names it in error messages.
+pub fn camera_from_json(text: &str, source_name: &str) -> Result<CameraSpec> {
+    let spec: CameraSpec =
+        serde_json::from_str(text).map_err(|source| crate::error::Error::Json {
+            source_name: source_name.to_string(),
+            source,
+        })?;
+    validate_spec(&spec, source_name)?;
+    Ok(spec)
 }
 
-impl CameraSpec {
-    /// Parses a `camera.json` document; `source_name` names it in error messages.
-    pub fn from_json(text: &str, source_name: &str) -> Result<Self> {
-        let spec: CameraSpec =
-            serde_json::from_str(text).map_err(|source| crate::error::Error::Json {
-                source_name: source_name.to_string(),
-                source,
-            })?;
-        spec.validate(source_name)?;
-        Ok(spec)
+/// The camera's own validation, with `context` naming where it came from; this renderer also
+/// needs the scene in metres.
+pub fn validate_spec(spec: &CameraSpec, context: &str) -> Result<()> {
+    let ctx = format!("{context}: camera");
+    spec.validate()
+        .map_err(|e| invalid(ctx.clone(), e.to_string()))?;
+    if spec.scene_unit_mm != 1000.0 {
+        return Err(invalid(
+            ctx,
+            "the scene renderer works in metres: scene_unit_mm must be 1000",
+        ));
     }
+    Ok(())
+}
 
-    /// Checks that every field is usable; `context` prefixes the error message.
-    pub fn validate(&self, context: &str) -> Result<()> {
-        let ctx = format!("{context}: camera");
-        if self.width == 0 || self.height == 0 {
-            return Err(invalid(ctx, "width and height must be at least 1 pixel"));
-        }
-        if self.width > MAX_IMAGE_EDGE || self.height > MAX_IMAGE_EDGE {
-            return Err(invalid(
-                ctx,
-                format!("width and height must be at most {MAX_IMAGE_EDGE} pixels"),
-            ));
-        }
-        if !(self.focal_length_mm.is_finite() && self.focal_length_mm > 0.0) {
-            return Err(invalid(ctx, "focal_length_mm must be a positive number"));
-        }
-        if !(self.sensor_width_mm.is_finite() && self.sensor_width_mm > 0.0) {
-            return Err(invalid(ctx, "sensor_width_mm must be a positive number"));
-        }
-        if let Some(n) = self.f_stop {
-            if !(n.is_finite() && n > 0.0) {
-                return Err(invalid(ctx, "f_stop must be a positive number or null"));
-            }
-        }
-        if let Some(s) = self.focus_distance {
-            if !(s.is_finite() && s > self.focal_length_mm * 1e-3) {
-                return Err(invalid(
-                    ctx,
-                    "focus_distance must be longer than the focal length (metres) or null",
-                ));
-            }
-        }
-        if !(self.shutter_frames.is_finite() && (0.0..=16.0).contains(&self.shutter_frames)) {
-            return Err(invalid(ctx, "shutter_frames must lie in [0, 16]"));
-        }
-        if self.aperture_blades > 64 {
-            return Err(invalid(ctx, "aperture_blades must be at most 64"));
-        }
-        Ok(())
-    }
-
-    /// True when the camera has no lens (no `f_stop` or no `focus_distance`).
-    pub fn is_pinhole(&self) -> bool {
-        self.f_stop.is_none() || self.focus_distance.is_none()
-    }
-
-    /// Pixels per millimetre on the sensor (`width / sensor_width_mm`).
-    pub fn pixels_per_mm(&self) -> f64 {
-        f64::from(self.width) / self.sensor_width_mm
-    }
-
-    /// Projection distance in millimetres: the focal length, focused or not (Blender's
-    /// convention: the field of view does not change with focus).
-    pub fn image_distance_mm(&self) -> f64 {
-        self.focal_length_mm
-    }
-
-    /// Aperture radius in metres, `f / (2 N)`; 0 for a pinhole.
-    pub fn aperture_radius_m(&self) -> f64 {
-        match (self.f_stop, self.focus_distance) {
-            (Some(n), Some(_)) => self.focal_length_mm * 1e-3 / (2.0 * n),
-            _ => 0.0,
-        }
-    }
-
-    /// Signed circle-of-confusion radius in pixels at planar depth `depth` (metres).
-    ///
-    /// A ray through the lens point `(u, v)` (unit disk, u right, v down) from a point at
-    /// `depth` lands at its pinhole position plus `signed_coc_radius_px(depth) * (u, v)`:
-    /// positive behind the focus plane, negative in front of it, 0 for a pinhole.
-    pub fn signed_coc_radius_px(&self, depth: f64) -> f64 {
-        match self.focus_distance {
-            Some(s) if !self.is_pinhole() => {
-                self.image_distance_mm()
-                    * self.aperture_radius_m()
-                    * (1.0 / s - 1.0 / depth)
-                    * self.pixels_per_mm()
-            }
-            _ => 0.0,
-        }
-    }
-
-    /// Circle-of-confusion radius in pixels at planar depth `depth` (metres):
-    /// half of `A f |d - s| / (d s)` converted with `width / sensor_width_mm`.
-    pub fn coc_radius_px(&self, depth: f64) -> f64 {
-        self.signed_coc_radius_px(depth).abs()
-    }
-
-    /// Half the shutter interval in frames.
-    pub fn half_shutter(&self) -> f64 {
-        0.5 * self.shutter_frames
+/// Aperture radius in metres, `f / (2 N)`; 0 for a pinhole.
+fn aperture_radius_m(spec: &CameraSpec) -> f64 {
+    match (spec.f_stop, spec.focus_distance) {
+        (Some(n), Some(_)) => spec.focal_length_mm * 1e-3 / (2.0 * n),
+        _ => 0.0,
     }
 }
 
@@ -199,7 +105,7 @@ pub struct Camera {
 impl Camera {
     /// Builds the camera frame; fails if the pose is degenerate.
     pub fn new(spec: CameraSpec, pose: CameraPose, context: &str) -> Result<Self> {
-        spec.validate(context)?;
+        validate_spec(&spec, context)?;
         let ctx = format!("{context}: camera pose");
         let finite = pose.position.is_finite()
             && pose.look_at.is_finite()
@@ -254,7 +160,8 @@ impl Camera {
 
     /// Image scale in pixels per unit of `x / z` in camera space.
     fn scale_px(&self) -> f64 {
-        self.spec.image_distance_mm() * self.spec.pixels_per_mm()
+        // Blender's convention: the projection distance is the focal length, focused or not.
+        self.spec.focal_length_mm * self.spec.pixels_per_mm()
     }
 
     /// The ray through continuous pixel position `pixel` (pixels), lens point `lens` (unit
@@ -270,9 +177,9 @@ impl Camera {
         // Camera-space direction of the pinhole ray (z = 1).
         let pinhole = DVec3::new(slope.x, slope.y, 1.0);
         let (origin_cam, dir_cam) = match self.spec.focus_distance {
-            Some(s) if !self.spec.is_pinhole() => {
+            Some(s) if self.spec.has_lens() => {
                 let focus_point = pinhole * s;
-                let lens_point = DVec3::new(lens.x, lens.y, 0.0) * self.spec.aperture_radius_m();
+                let lens_point = DVec3::new(lens.x, lens.y, 0.0) * aperture_radius_m(&self.spec);
                 (lens_point, focus_point - lens_point)
             }
             _ => (DVec3::ZERO, pinhole),
@@ -288,7 +195,7 @@ impl Camera {
     /// A ray with a lens sample drawn from two uniform numbers in [0, 1) (see
     /// [`sample_aperture`]); returns the ray and the lens point used.
     pub fn ray_with_lens_sample(&self, pixel: DVec2, xi: DVec2, time: f64) -> (Ray, DVec2) {
-        let lens = if self.spec.is_pinhole() {
+        let lens = if !self.spec.has_lens() {
             DVec2::ZERO
         } else {
             sample_aperture(self.spec.aperture_blades, xi)
@@ -331,6 +238,7 @@ mod tests {
             focus_distance: Some(1.0),
             aperture_blades: 0,
             shutter_frames: 0.5,
+            scene_unit_mm: 1000.0,
         }
     }
 
@@ -348,17 +256,15 @@ mod tests {
         let text = r#"{"scene":"comets","width":512,"height":512,"focal_length_mm":50.0,
             "sensor_width_mm":36.0,"f_stop":1.6,"focus_distance":0.7,"aperture_blades":0,
             "shutter_frames":1.0,"reference_spp":2048,"renderer":"x"}"#;
-        let spec = CameraSpec::from_json(text, "camera.json").expect("valid camera");
+        let spec = camera_from_json(text, "camera.json").expect("valid camera");
         assert_eq!(spec.width, 512);
         assert_eq!(spec.f_stop, Some(1.6));
-        assert!(!spec.is_pinhole());
+        assert!(spec.has_lens());
         let pinhole = r#"{"width":8,"height":8,"focal_length_mm":50,"sensor_width_mm":36,
             "f_stop":null,"focus_distance":null,"aperture_blades":0,"shutter_frames":0}"#;
-        assert!(CameraSpec::from_json(pinhole, "p")
-            .expect("pinhole")
-            .is_pinhole());
+        assert!(!camera_from_json(pinhole, "p").expect("pinhole").has_lens());
         let bad = r#"{"width":0,"height":8,"focal_length_mm":50,"sensor_width_mm":36}"#;
-        let err = CameraSpec::from_json(bad, "bad.json").expect_err("zero width");
+        let err = camera_from_json(bad, "bad.json").expect_err("zero width");
         assert!(err.to_string().contains("width"), "{err}");
     }
 
@@ -370,7 +276,8 @@ mod tests {
         for d in [0.3, 0.8, 1.0, 2.5, 40.0] {
             let diameter_m = a * f * (d - focus).abs() / (d * focus);
             let expected = 0.5 * diameter_m * 1e3 * 200.0 / 36.0;
-            assert!((s.coc_radius_px(d) - expected).abs() < 1e-9 * expected.max(1.0));
+            let coc = s.thin_lens().expect("lens").coc_px(d);
+            assert!((coc - expected).abs() < 1e-9 * expected.max(1.0));
         }
     }
 
@@ -380,7 +287,7 @@ mod tests {
         // A point at depth 3 m slightly off axis.
         let p = DVec3::new(0.1, 0.05, -3.0);
         let pin = cam.project(p, 0.0).expect("in front");
-        let r = cam.spec.signed_coc_radius_px(3.0);
+        let r = cam.spec.thin_lens().expect("lens").signed_coc_px(3.0);
         let lens = DVec2::new(0.6, -0.3);
         // The ray through pixel pin + r * lens with that lens point must pass through p.
         let ray = cam.ray(pin + r * lens, lens, 0.0);

@@ -3,7 +3,7 @@
 
 use std::process::Command;
 
-use scene::{CameraSpec, GBuffer, RgbaImage, StochasticFrames};
+use scene::{GBuffer, RgbaImage, StochasticFrames};
 
 fn binary() -> Command {
     Command::new(env!("CARGO_BIN_EXE_spreadlet-scene"))
@@ -41,7 +41,7 @@ fn renders_every_output_and_camera_json() {
     assert_eq!((r.width, r.height), (20, 20));
     assert!(p("g.png").exists() && p("r.png").exists());
     let text = std::fs::read_to_string(p("camera.json")).expect("camera.json");
-    let camera = CameraSpec::from_json(&text, "camera.json").expect("valid camera.json");
+    let camera = scene::camera::camera_from_json(&text, "camera.json").expect("valid camera.json");
     assert_eq!((camera.width, camera.height), (20, 20));
     assert_eq!(camera.f_stop, Some(5.6));
     assert!(text.contains("\"scene\": \"rotating\""));

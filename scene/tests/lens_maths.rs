@@ -335,7 +335,7 @@ fn stochastic_labels_map_samples_back_to_the_pinhole_image() {
         .project(DVec3::new(0.0, 0.0, -1.2), 0.0)
         .expect("in front");
     // Silhouette radius of a sphere: k r / sqrt(d^2 - r^2) (in pixels).
-    let k_px = camera.spec.image_distance_mm() * camera.spec.pixels_per_mm();
+    let k_px = camera.spec.focal_length_mm * camera.spec.pixels_per_mm();
     let silhouette = k_px * 0.08 / (1.2f64 * 1.2 - 0.08 * 0.08).sqrt();
     let mut hits = 0;
     let mut lens_used = 0.0f64;
@@ -360,7 +360,11 @@ fn stochastic_labels_map_samples_back_to_the_pinhole_image() {
                 );
                 let motion = DVec2::new(s.motion[0].into(), s.motion[1].into());
                 let pinhole = position
-                    - camera.spec.signed_coc_radius_px(f64::from(s.depth)) * lens
+                    - camera
+                        .spec
+                        .thin_lens()
+                        .map_or(0.0, |l| l.signed_coc_px(f64::from(s.depth)))
+                        * lens
                     - motion * f64::from(s.time);
                 let r = (pinhole - centre).length();
                 assert!(
@@ -460,7 +464,11 @@ fn bladed_aperture_gives_a_polygon_with_a_vertex_on_plus_u() {
     }}"#
     );
     let scene = Scene::from_json(&text, "hexagon").expect("scene");
-    let r = scene.camera.spec.coc_radius_px(depth);
+    let r = scene
+        .camera
+        .spec
+        .thin_lens()
+        .map_or(0.0, |l| l.coc_px(depth));
     let image = render_reference(
         &scene,
         4096,
