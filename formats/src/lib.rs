@@ -5,6 +5,8 @@
 //!   thin-lens circle-of-confusion formula.
 //! - [`RgbaImage`]: linear premultiplied RGBA, row-major from the top-left pixel, y down; EXR
 //!   in and out, an sRGB PNG preview.
+//! - [`GBuffer`]: the pinhole G-buffer (colour, planar depth, forward motion) from EXR, plain
+//!   or Blender multilayer, with its data window beyond the frame (overscan).
 //! - [`StochasticFrames`]: labelled samples (lens position, time, motion) in one EXR
 //!   (`docs/STOCHASTIC.md`).
 //! - [`exr_io`]: named f32 channels in and out, with the header's size checked against the
@@ -17,6 +19,7 @@ pub mod atomic;
 pub mod camera;
 pub mod error;
 pub mod exr_io;
+pub mod gbuffer;
 pub mod image;
 pub mod srgb;
 pub mod stochastic;
@@ -24,6 +27,7 @@ pub mod stochastic;
 pub use atomic::write_atomically;
 pub use camera::{Camera, CameraError, ThinLens};
 pub use error::{Error, Result};
+pub use gbuffer::{ChannelOptions, GBuffer, GBufferError};
 pub use image::RgbaImage;
 pub use srgb::srgb_encode;
 pub use stochastic::{Sample, StochasticFrames};

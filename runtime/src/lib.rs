@@ -28,7 +28,6 @@ pub mod databases;
 pub mod dbcache;
 pub mod dbset;
 pub mod error;
-pub mod gbuffer;
 #[cfg(feature = "gpu")]
 pub mod gpu;
 pub mod pipeline;
@@ -40,6 +39,8 @@ pub use camera::Camera;
 pub use error::Error;
 /// `camera.json`: the camera type, its validation and the thin-lens CoC (from `formats`).
 pub use formats::camera;
+/// The pinhole G-buffer and its EXR reader (from `formats`).
+pub use formats::gbuffer;
 pub use formats::{RgbaImage, Sample, StochasticFrames};
 pub use gbuffer::{ChannelOptions, GBuffer};
 pub use renderer::{Backend, DbSource, Event, Frame, Method, Renderer, RendererOptions};

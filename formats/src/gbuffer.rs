@@ -293,38 +293,10 @@ impl GBuffer {
             path: name.clone(),
             message: e.to_string(),
         };
-        // Check the declared size before decoding anything (a huge size in a tiny file): every
-        // part's pixel count, and the samples the decoder would allocate (pixels x channels).
         let meta =
             exr::meta::MetaData::read_from_buffered(open().map_err(|e| exr_err(e.into()))?, false)
                 .map_err(exr_err)?;
-        let header = meta.headers.first().ok_or_else(|| GBufferError::Layout {
-            path: name.clone(),
-            message: "the file has no image part".into(),
-        })?;
-        let size = header.layer_size;
-        check_size(&name, size.width(), size.height())?;
-        let mut samples = 0usize;
-        for h in meta.headers.iter() {
-            let (w, ht) = (h.layer_size.width(), h.layer_size.height());
-            check_size(&name, w, ht)?;
-            samples = samples.saturating_add((w * ht).saturating_mul(h.channels.list.len()));
-        }
-        if samples > MAX_SAMPLES {
-            return Err(GBufferError::Layout {
-                path: name.clone(),
-                message: format!(
-                    "the file declares {samples} samples (pixels x channels over all parts), \
-                     more than the limit of {MAX_SAMPLES}"
-                ),
-            });
-        }
-        formats::exr_io::check_expansion(&meta, file_len).map_err(|message| {
-            GBufferError::Layout {
-                path: name.clone(),
-                message,
-            }
-        })?;
+        check_header(&name, &meta, file_len)?;
 
         let image = read()
             .no_deep_data()
@@ -350,92 +322,8 @@ impl GBuffer {
             .map(|c| (c.name.to_string(), c.sample_data.values_as_f32().collect()))
             .collect();
         let names: Vec<String> = channels.iter().map(|(n, _)| n.clone()).collect();
-        let find = |n: &str| channels.iter().find(|(c, _)| c == n).map(|(_, d)| d);
-        let missing = |m: String| GBufferError::MissingChannel {
-            path: name.clone(),
-            missing: m,
-            present: names.join(", "),
-        };
-
-        let blender_layers: Vec<String> = names
-            .iter()
-            .filter_map(|n| n.strip_suffix(".Combined.R").map(str::to_string))
-            .collect();
-        let layout = match options.layout {
-            Layout::Auto if !blender_layers.is_empty() => Layout::Blender,
-            Layout::Auto => Layout::Plain,
-            l => l,
-        };
-
         let n = width * height;
-        let (rgba, depth, motion) = match layout {
-            Layout::Blender => {
-                let prefix = match &options.layer {
-                    Some(l) => {
-                        if !blender_layers.contains(l) {
-                            return Err(missing(format!("{l}.Combined.R")));
-                        }
-                        l.clone()
-                    }
-                    None => match blender_layers.as_slice() {
-                        [one] => one.clone(),
-                        [] => return Err(missing("<Layer>.Combined.R".into())),
-                        many => {
-                            return Err(GBufferError::Layout {
-                                path: name.clone(),
-                                message: format!(
-                                    "several view layers ({}); choose one with --layer",
-                                    many.join(", ")
-                                ),
-                            })
-                        }
-                    },
-                };
-                let get = |suffix: &str| {
-                    let full = format!("{prefix}.{suffix}");
-                    find(&full).ok_or_else(|| missing(full))
-                };
-                let rgba = [
-                    Some(get("Combined.R")?),
-                    Some(get("Combined.G")?),
-                    Some(get("Combined.B")?),
-                    get("Combined.A").ok(),
-                ];
-                let depth = get("Depth.Z").ok();
-                let motion = match (get("Vector.Z").ok(), get("Vector.W").ok()) {
-                    (Some(z), Some(w)) => Some(
-                        z.iter()
-                            .zip(w.iter())
-                            .map(|(&z, &w)| [-z, w])
-                            .collect::<Vec<_>>(),
-                    ),
-                    _ => None,
-                };
-                (rgba, depth, motion)
-            }
-            Layout::Plain | Layout::Auto => {
-                let get = |c: &str| find(c).ok_or_else(|| missing(c.to_string()));
-                let rgba = [Some(get("R")?), Some(get("G")?), Some(get("B")?), find("A")];
-                let depth = match &options.depth {
-                    Some(d) => Some(get(d)?),
-                    None => find("Z").or_else(|| find("depth.Z")),
-                };
-                let pair = match &options.motion {
-                    Some((x, y)) => Some((get(x)?, get(y)?)),
-                    None => find("forward.u")
-                        .zip(find("forward.v"))
-                        .or_else(|| find("motion.x").zip(find("motion.y"))),
-                };
-                let flip = if options.motion_y_up { -1.0 } else { 1.0 };
-                let motion = pair.map(|(u, v)| {
-                    u.iter()
-                        .zip(v.iter())
-                        .map(|(&u, &v)| [u, flip * v])
-                        .collect::<Vec<_>>()
-                });
-                (rgba, depth, motion)
-            }
-        };
+        let (rgba, depth, motion) = select_planes(&name, &channels, options)?;
         // Sub-sampled channels (EXR x/y sampling above 1) hold fewer values than pixels.
         for plane in rgba.iter().flatten() {
             if plane.len() != n {
@@ -525,6 +413,144 @@ impl GBuffer {
         }
         Ok(())
     }
+}
+
+/// Borrowed planes of a decoded file: colour (R, G, B, optional A), depth, forward motion.
+type Planes<'a> = (
+    [Option<&'a Vec<f32>>; 4],
+    Option<&'a Vec<f32>>,
+    Option<Vec<[f32; 2]>>,
+);
+
+/// Checks the declared size before anything is decoded (a huge size in a tiny file): every
+/// part's pixel count, the samples the decoder would allocate (pixels x channels), and what the
+/// file's compression could expand to.
+fn check_header(name: &str, meta: &exr::meta::MetaData, file_len: u64) -> Result<(), GBufferError> {
+    let name = name.to_string();
+    let header = meta.headers.first().ok_or_else(|| GBufferError::Layout {
+        path: name.clone(),
+        message: "the file has no image part".into(),
+    })?;
+    let size = header.layer_size;
+    check_size(&name, size.width(), size.height())?;
+    let mut samples = 0usize;
+    for h in meta.headers.iter() {
+        let (w, ht) = (h.layer_size.width(), h.layer_size.height());
+        check_size(&name, w, ht)?;
+        samples = samples.saturating_add((w * ht).saturating_mul(h.channels.list.len()));
+    }
+    if samples > MAX_SAMPLES {
+        return Err(GBufferError::Layout {
+            path: name.clone(),
+            message: format!(
+                "the file declares {samples} samples (pixels x channels over all parts), \
+                 more than the limit of {MAX_SAMPLES}"
+            ),
+        });
+    }
+    crate::exr_io::check_expansion(meta, file_len).map_err(|message| GBufferError::Layout {
+        path: name.clone(),
+        message,
+    })?;
+
+    Ok(())
+}
+
+/// The colour planes (R, G, B and A when present), depth and forward motion (pixels per frame,
+/// x right, y down) of a decoded file, found by the layout `options` ask for.
+fn select_planes<'a>(
+    name: &str,
+    channels: &'a [(String, Vec<f32>)],
+    options: &ChannelOptions,
+) -> Result<Planes<'a>, GBufferError> {
+    let names: Vec<String> = channels.iter().map(|(n, _)| n.clone()).collect();
+    let name = name.to_string();
+    let find = |n: &str| channels.iter().find(|(c, _)| c == n).map(|(_, d)| d);
+    let missing = |m: String| GBufferError::MissingChannel {
+        path: name.clone(),
+        missing: m,
+        present: names.join(", "),
+    };
+
+    let blender_layers: Vec<String> = names
+        .iter()
+        .filter_map(|n| n.strip_suffix(".Combined.R").map(str::to_string))
+        .collect();
+    let layout = match options.layout {
+        Layout::Auto if !blender_layers.is_empty() => Layout::Blender,
+        Layout::Auto => Layout::Plain,
+        l => l,
+    };
+
+    let planes = match layout {
+        Layout::Blender => {
+            let prefix = match &options.layer {
+                Some(l) => {
+                    if !blender_layers.contains(l) {
+                        return Err(missing(format!("{l}.Combined.R")));
+                    }
+                    l.clone()
+                }
+                None => match blender_layers.as_slice() {
+                    [one] => one.clone(),
+                    [] => return Err(missing("<Layer>.Combined.R".into())),
+                    many => {
+                        return Err(GBufferError::Layout {
+                            path: name.clone(),
+                            message: format!(
+                                "several view layers ({}); choose one with --layer",
+                                many.join(", ")
+                            ),
+                        })
+                    }
+                },
+            };
+            let get = |suffix: &str| {
+                let full = format!("{prefix}.{suffix}");
+                find(&full).ok_or_else(|| missing(full))
+            };
+            let rgba = [
+                Some(get("Combined.R")?),
+                Some(get("Combined.G")?),
+                Some(get("Combined.B")?),
+                get("Combined.A").ok(),
+            ];
+            let depth = get("Depth.Z").ok();
+            let motion = match (get("Vector.Z").ok(), get("Vector.W").ok()) {
+                (Some(z), Some(w)) => Some(
+                    z.iter()
+                        .zip(w.iter())
+                        .map(|(&z, &w)| [-z, w])
+                        .collect::<Vec<_>>(),
+                ),
+                _ => None,
+            };
+            (rgba, depth, motion)
+        }
+        Layout::Plain | Layout::Auto => {
+            let get = |c: &str| find(c).ok_or_else(|| missing(c.to_string()));
+            let rgba = [Some(get("R")?), Some(get("G")?), Some(get("B")?), find("A")];
+            let depth = match &options.depth {
+                Some(d) => Some(get(d)?),
+                None => find("Z").or_else(|| find("depth.Z")),
+            };
+            let pair = match &options.motion {
+                Some((x, y)) => Some((get(x)?, get(y)?)),
+                None => find("forward.u")
+                    .zip(find("forward.v"))
+                    .or_else(|| find("motion.x").zip(find("motion.y"))),
+            };
+            let flip = if options.motion_y_up { -1.0 } else { 1.0 };
+            let motion = pair.map(|(u, v)| {
+                u.iter()
+                    .zip(v.iter())
+                    .map(|(&u, &v)| [u, flip * v])
+                    .collect::<Vec<_>>()
+            });
+            (rgba, depth, motion)
+        }
+    };
+    Ok(planes)
 }
 
 /// The overscan of a data window (origin `data_origin`, `data_size` pixels) around a display
