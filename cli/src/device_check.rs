@@ -18,7 +18,7 @@ use psf_db::PsfDatabase;
 use crate::bench::{scene_frame, Scene};
 use crate::microbench::{run_microbenchmarks, MicroConfig, MicroReport};
 use spreadlet::gpu::{
-    GpuContext, GpuError, GpuSynthOptions, GpuSynthesizer, SplatMode, StageTimes,
+    GpuContext, GpuError, GpuStageTimes, GpuSynthOptions, GpuSynthesizer, SplatMode,
 };
 use spreadlet::pipeline::types::SplatPath;
 use spreadlet::pipeline::{Classified, Integrator, RotationSampling};
@@ -106,8 +106,8 @@ pub struct DeviceCheckRow {
     pub layers: u32,
     /// The frame's work.
     pub work: FrameWork,
-    /// Median of each stage over the runs, ms (`StageTimes` fields).
-    pub median: StageTimes,
+    /// Median of each stage over the runs, ms (`GpuStageTimes` fields).
+    pub median: GpuStageTimes,
     /// Fastest run's total (wall), ms.
     pub total_min_ms: f64,
     /// Slowest run's total (wall), ms.
@@ -260,9 +260,9 @@ pub fn frame_work(db: &PsfDatabase, frame: &Classified, rotation: RotationSampli
     w
 }
 
-fn median_times(runs: &[StageTimes]) -> StageTimes {
-    let col = |f: fn(&StageTimes) -> f64| median(&mut runs.iter().map(f).collect::<Vec<_>>());
-    StageTimes {
+fn median_times(runs: &[GpuStageTimes]) -> GpuStageTimes {
+    let col = |f: fn(&GpuStageTimes) -> f64| median(&mut runs.iter().map(f).collect::<Vec<_>>());
+    GpuStageTimes {
         upload_ms: col(|t| t.upload_ms),
         splat_ms: col(|t| t.splat_ms),
         bin_ms: col(|t| t.bin_ms),
@@ -361,7 +361,7 @@ pub fn run_device_check(
             scene: Scene,
             splat: SplatMode,
             frame: usize,
-            runs: Vec<StageTimes>,
+            runs: Vec<GpuStageTimes>,
         }
         let mut frames = Vec::new();
         let mut configs = Vec::new();

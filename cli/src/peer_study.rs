@@ -28,6 +28,8 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+use spreadlet::synth::ms_since;
+
 use anyhow::{Context, Result};
 use peers::{InputKind, PeerMethod};
 use scene::StochasticFrames;
@@ -388,10 +390,6 @@ fn cli_synth_options() -> SynthOptions {
         integrator: Integrator::Exact,
         ..SynthOptions::default()
     }
-}
-
-fn ms_since(t: Instant) -> f64 {
-    t.elapsed().as_secs_f64() * 1e3
 }
 
 /// The first `spp` samples of every pixel.

@@ -18,6 +18,8 @@
 
 use std::time::Instant;
 
+use crate::synth::ms_since;
+
 use formats::StochasticFrames;
 
 use crate::camera::Camera;
@@ -262,7 +264,7 @@ pub fn reconstruct_with(
     placement: SamplePlacement,
 ) -> Result<(RgbaImage, SynthStats), ClassifyError> {
     let total = Instant::now();
-    let (classified, mut stats) = prepare(frames, camera, dbs, options, placement)?;
+    let (classified, mut stats) = classify_samples(frames, camera, dbs, options, placement)?;
     let mut image = render_classified(&classified, dbs, options, &mut stats);
     normalize_density(&mut image);
     stats.times.total_ms = ms_since(total);
@@ -273,7 +275,7 @@ pub fn reconstruct_with(
 /// ([`reconstruct_with`]) and the GPU path (`gpu::reconstruct_gpu`): the samples moved back and
 /// classified, and the statistics started (effects, counts, classification time). The caller
 /// renders the records and then applies [`normalize_density`].
-pub fn prepare(
+pub fn classify_samples(
     frames: &StochasticFrames,
     camera: &Camera,
     dbs: &DbSet,
@@ -337,10 +339,6 @@ pub fn normalize_density(image: &mut RgbaImage) {
             }
         }
     }
-}
-
-fn ms_since(t: Instant) -> f64 {
-    t.elapsed().as_secs_f64() * 1e3
 }
 
 #[cfg(test)]

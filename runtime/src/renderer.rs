@@ -165,7 +165,7 @@ pub struct Frame {
     pub device: String,
     /// The GPU's own breakdown of its stages (upload, readback, timestamps), on the GPU.
     #[cfg(feature = "gpu")]
-    pub gpu_stages: Option<crate::gpu::StageTimes>,
+    pub gpu_stages: Option<crate::gpu::GpuStageTimes>,
     /// The databases loaded by this call (empty when they were kept from an earlier call).
     pub databases: Vec<DbUsed>,
     /// What conditioning changed in the databases loaded by this call.
@@ -510,7 +510,7 @@ pub struct FilterFrame {
 }
 
 #[cfg(feature = "gpu")]
-type GpuStages = crate::gpu::StageTimes;
+type GpuStages = crate::gpu::GpuStageTimes;
 #[cfg(not(feature = "gpu"))]
 type GpuStages = ();
 

@@ -95,7 +95,8 @@ pub struct SynthStats {
     pub times: StageTimes,
 }
 
-fn ms_since(t: Instant) -> f64 {
+/// Milliseconds since `t`: the one timer of the stage statistics.
+pub fn ms_since(t: Instant) -> f64 {
     t.elapsed().as_secs_f64() * 1e3
 }
 
@@ -112,7 +113,7 @@ pub enum Prepared {
 /// Classifies `gbuffer` (or recognises that it needs nothing) and starts the statistics of the
 /// run: effects, size, counts per path, layers used, classification time. Shared by the CPU
 /// path ([`synthesize`]) and the GPU path (`gpu::synthesize_gpu`), so both report alike.
-pub fn prepare(
+pub fn classify_for_synthesis(
     gbuffer: &GBuffer,
     camera: &Camera,
     dbs: &DbSet,
@@ -165,7 +166,7 @@ pub fn synthesize(
     options: &SynthOptions,
 ) -> Result<(RgbaImage, SynthStats), crate::pipeline::classify::ClassifyError> {
     let total = Instant::now();
-    let (prepared, mut stats) = prepare(gbuffer, camera, dbs, options)?;
+    let (prepared, mut stats) = classify_for_synthesis(gbuffer, camera, dbs, options)?;
     let image = match prepared {
         Prepared::PassThrough(image) => image,
         Prepared::Classified(classified) => {

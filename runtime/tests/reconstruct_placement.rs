@@ -8,7 +8,7 @@ mod support;
 use psf_db::PsfModel;
 use scene::{Sample, StochasticFrames};
 use spreadlet::dbset::DbSet;
-use spreadlet::reconstruct::{effects_of, prepare, SamplePlacement};
+use spreadlet::reconstruct::{classify_samples, effects_of, SamplePlacement};
 use spreadlet::synth::SynthOptions;
 use support::{camera, test_db};
 
@@ -47,7 +47,7 @@ fn footprint_keeps_the_psf_of_an_in_focus_moving_sample() {
     assert!(effects_of(&cam, &frames).motion);
     let options = SynthOptions::default();
     let records = |placement| {
-        prepare(&frames, &cam, &dbs, &options, placement)
+        classify_samples(&frames, &cam, &dbs, &options, placement)
             .expect("prepare")
             .0
             .records

@@ -45,7 +45,4 @@ pub enum GpuError {
     /// The input records do not fit the frame or the database.
     #[error("invalid GPU input: {0}")]
     Input(String),
-    /// Exact integration on the CPU (used by the GPU path for `IntegrateMethod::Exact`) failed.
-    #[error("exact integration failed: {0}")]
-    Integrate(String),
 }

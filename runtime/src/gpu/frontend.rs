@@ -4,11 +4,11 @@
 
 use std::time::Instant;
 
-use super::{GpuContext, GpuError, GpuSynthOptions, GpuSynthesizer, StageTimes};
+use super::{GpuContext, GpuError, GpuStageTimes, GpuSynthOptions, GpuSynthesizer};
 use crate::camera::Camera;
 use crate::dbset::DbSet;
 use crate::gbuffer::GBuffer;
-use crate::synth::{prepare, Prepared, SynthOptions, SynthStats};
+use crate::synth::{classify_for_synthesis, Prepared, SynthOptions, SynthStats};
 use formats::RgbaImage;
 
 impl GpuSynthOptions {
@@ -32,16 +32,16 @@ pub fn synthesize_gpu(
     camera: &Camera,
     dbs: &DbSet,
     options: &SynthOptions,
-) -> Result<(RgbaImage, SynthStats, StageTimes), GpuError> {
+) -> Result<(RgbaImage, SynthStats, GpuStageTimes), GpuError> {
     gpu.check_database(dbs.combined.as_ref())?;
     gpu.apply_call_options(options);
     let total = Instant::now();
-    let (prepared, mut stats) =
-        prepare(gbuffer, camera, dbs, options).map_err(|e| GpuError::Input(e.to_string()))?;
+    let (prepared, mut stats) = classify_for_synthesis(gbuffer, camera, dbs, options)
+        .map_err(|e| GpuError::Input(e.to_string()))?;
     let classified = match prepared {
         Prepared::PassThrough(image) => {
             stats.times.total_ms = total.elapsed().as_secs_f64() * 1e3;
-            return Ok((image, stats, StageTimes::default()));
+            return Ok((image, stats, GpuStageTimes::default()));
         }
         Prepared::Classified(classified) => classified,
     };
@@ -62,11 +62,11 @@ pub fn reconstruct_gpu(
     camera: &Camera,
     dbs: &DbSet,
     options: &SynthOptions,
-) -> Result<(RgbaImage, SynthStats, StageTimes), GpuError> {
+) -> Result<(RgbaImage, SynthStats, GpuStageTimes), GpuError> {
     gpu.check_database(dbs.combined.as_ref())?;
     gpu.apply_call_options(options);
     let total = Instant::now();
-    let (classified, mut stats) = crate::reconstruct::prepare(
+    let (classified, mut stats) = crate::reconstruct::classify_samples(
         frames,
         camera,
         dbs,

@@ -30,5 +30,6 @@ pub use filter::{filter_gpu, GpuFilter};
 pub use frontend::{reconstruct_gpu, synthesize_gpu};
 pub use pyramid::{GpuPyramid, PyramidLevels};
 pub use synth::{
-    AtomicMode, GpuSynthOptions, GpuSynthesizer, SplatMode, SplatPlanes, StageTimes, SynthCounters,
+    AtomicMode, GpuStageTimes, GpuSynthOptions, GpuSynthesizer, SplatMode, SplatPlanes,
+    SynthCounters,
 };

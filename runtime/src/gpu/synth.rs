@@ -101,7 +101,7 @@ impl Default for GpuSynthOptions {
 
 /// Milliseconds per stage of one frame.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
-pub struct StageTimes {
+pub struct GpuStageTimes {
     /// Writing the records and frame constants (CPU wall time of the queue writes).
     pub upload_ms: f64,
     /// Splatting (sparse, dense and copied records; binning included), ms.
@@ -574,7 +574,7 @@ impl GpuSynthesizer {
         frame: &FrameParams,
         records: &[SplatRecord],
         integrator: Integrator,
-    ) -> Result<(RgbaImage, StageTimes), GpuError> {
+    ) -> Result<(RgbaImage, GpuStageTimes), GpuError> {
         let t0 = Instant::now();
         let mut times = self.execute(frame, records, integrator, Until::Composite, |_, _, _| {
             Ok(())
@@ -741,7 +741,11 @@ impl GpuSynthesizer {
     /// (Re)creates the frame buffers when the size, the layer count or an option in their
     /// uniforms changed, and the record buffer (and the tiled splat's entry list) when it is
     /// too small.
-    fn prepare(&mut self, frame: &FrameParams, records: &[SplatRecord]) -> Result<(), GpuError> {
+    fn ensure_frame_buffers(
+        &mut self,
+        frame: &FrameParams,
+        records: &[SplatRecord],
+    ) -> Result<(), GpuError> {
         let key = (
             frame.width,
             frame.height,
@@ -1093,10 +1097,10 @@ impl GpuSynthesizer {
         integrator: Integrator,
         until: Until,
         mut readback: impl FnMut(&GpuContext, &FrameBuffers, &Chunk) -> Result<(), GpuError>,
-    ) -> Result<StageTimes, GpuError> {
+    ) -> Result<GpuStageTimes, GpuError> {
         Self::validate(frame, records)?;
         let t_upload = Instant::now();
-        self.prepare(frame, records)?;
+        self.ensure_frame_buffers(frame, records)?;
         let tiled = match (self.splat_mode(), self.tiled.as_ref()) {
             (SplatMode::Tiled, Some(t)) => Some(t),
             _ => None,
@@ -1112,7 +1116,7 @@ impl GpuSynthesizer {
             ctx.queue
                 .write_buffer(&fb.records, 0, bytemuck::cast_slice(records));
         }
-        let mut times = StageTimes {
+        let mut times = GpuStageTimes {
             upload_ms: ms(t_upload),
             ..Default::default()
         };
@@ -1298,7 +1302,7 @@ impl GpuSynthesizer {
         Ok(times)
     }
 
-    fn read_timestamps(&self, times: &mut StageTimes) -> Result<(), GpuError> {
+    fn read_timestamps(&self, times: &mut GpuStageTimes) -> Result<(), GpuError> {
         let Some(q) = self.frame.as_ref().and_then(|f| f.queries.as_ref()) else {
             return Ok(());
         };
