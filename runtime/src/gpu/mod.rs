@@ -12,12 +12,18 @@
 //!   `shaders/bin.wgsl`).
 //! - [`util`]: building blocks of compute stages (buffers, bind groups, pipelines, readback).
 
+mod composite;
 mod context;
+mod database;
 mod error;
 mod filter;
+mod frame;
 mod frontend;
+mod integrate;
 pub mod layout;
 mod pyramid;
+mod splat;
+mod splat_tiled;
 pub(crate) use ::shaders;
 mod synth;
 pub mod tiles;
