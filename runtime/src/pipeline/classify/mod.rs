@@ -17,7 +17,16 @@
 //! background part (its own), the foreground fraction estimated by projecting its colour onto
 //! the segment between the foreground neighbour's colour and the background colour opposite.
 
+mod edge_split;
+mod frame_edges;
+mod hidden;
+
 use psf_db::{PsfDatabase, PsfModel};
+
+use edge_split::edge_split;
+use frame_edges::{distance_to, extend_beyond};
+pub use frame_edges::{DataWindow, FrameEdges};
+use hidden::hidden_background;
 
 use super::splat::psf_reach;
 use super::types::{FrameParams, SplatPath, SplatRecord};
@@ -411,48 +420,6 @@ pub fn classify(
     )
 }
 
-/// The pixels an input holds, in frame coordinates (inclusive bounds): the frame
-/// `[0, w) x [0, h)` itself, or more where the input has overscan.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct DataWindow {
-    /// Leftmost column, pixels (0, or negative with overscan).
-    pub x0: i32,
-    /// Top row, pixels.
-    pub y0: i32,
-    /// Rightmost column, pixels (`w - 1`, or more with overscan).
-    pub x1: i32,
-    /// Bottom row, pixels.
-    pub y1: i32,
-}
-
-impl DataWindow {
-    /// The frame `w x h` and nothing beyond it.
-    pub fn frame(w: usize, h: usize) -> Self {
-        DataWindow {
-            x0: 0,
-            y0: 0,
-            x1: w as i32 - 1,
-            y1: h as i32 - 1,
-        }
-    }
-}
-
-/// What lies beyond the input's pixels, where a blurred frame's border gathers light from.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
-#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
-#[serde(rename_all = "kebab-case")]
-pub enum FrameEdges {
-    /// The input continues beyond its outermost pixels as they are (clamp to edge, as a
-    /// compositor's gather filter reads it): each outermost pixel is also splatted from the
-    /// positions outside the input that clamp to it, as far as its PSF reaches into the
-    /// frame. A blurred wall keeps its brightness up to the frame's edge.
-    #[default]
-    Extend,
-    /// Nothing beyond the input (black): the border of a blurred frame loses up to half its
-    /// light. Kept for comparison.
-    Black,
-}
-
 /// The model that drives the lookups for `effects`: lens-motion or physical-lens from
 /// `dbs.main`, else thin-lens; `None` when nothing needs simulating.
 pub fn resolve_model(effects: Effects, dbs: &DbSet) -> Result<Option<PsfModel>, ClassifyError> {
@@ -503,8 +470,6 @@ pub fn classify_fragments(
     if options.layers == 0 {
         return Err(ClassifyError::NoLayers);
     }
-    let thin = dbs.thin_lens.as_ref();
-    let main = dbs.main.as_ref();
     let combined = dbs.combined.as_ref();
     let lens = camera.thin_lens();
     let pixels_per_mm = camera.pixels_per_mm() as f32;
@@ -542,41 +507,22 @@ pub fn classify_fragments(
         let coc = signed_coc(frag.depth).abs();
         let m = frag.motion;
         let motion_len = (m[0] * m[0] + m[1] * m[1]).sqrt();
-        let (mut rot_cos, mut rot_sin) = (1.0f32, 0.0f32);
-        let offset = dbs.main_offset;
-        let (path, psf_index, clamped) = match (model, main, combined) {
-            (Some(PsfModel::PhysicalLens), Some(db), Some(all)) => {
-                let dx = x as f32 + 0.5 - centre[0];
-                let dy = y as f32 + 0.5 - centre[1];
-                let r = (dx * dx + dy * dy).sqrt();
-                if r > 0.0 {
-                    rot_cos = dx / r;
-                    rot_sin = dy / r;
-                }
-                let (idx, cl) = db.lookup([frag.depth, r / pixels_per_mm]);
-                (path_of(all, idx + offset), idx + offset, cl)
-            }
-            (Some(_), _, Some(all))
-                if coc >= options.copy_threshold_px || motion_len >= options.copy_threshold_px =>
-            {
-                let still = motion_len < options.copy_threshold_px;
-                let (idx, cl) = match (thin, main) {
-                    (Some(t), _) if still => t.lookup([coc, 0.0]),
-                    (_, Some(db_m)) => {
-                        if db_m.model() == PsfModel::LensMotion && motion_len > 0.0 {
-                            rot_cos = m[0] / motion_len;
-                            rot_sin = m[1] / motion_len;
-                        }
-                        let (i, cl) = db_m.lookup([coc, motion_len]);
-                        (i + offset, cl)
-                    }
-                    (Some(t), None) => t.lookup([coc, 0.0]),
-                    (None, None) => (0, false),
-                };
-                (path_of(all, idx), idx, cl)
-            }
-            _ => (SplatPath::Copy, 0, false),
-        };
+        let Lookup {
+            path,
+            psf_index,
+            clamped,
+            rot_cos,
+            rot_sin,
+        } = lookup_psf(
+            frag,
+            coc,
+            motion_len,
+            centre,
+            pixels_per_mm,
+            dbs,
+            model,
+            options,
+        );
         counts.clamped += usize::from(clamped);
         let bright = color[..3]
             .iter()
@@ -591,36 +537,15 @@ pub fn classify_fragments(
             (path, psf_index)
         };
 
-        // Layer weights: hard, or blended near the boundary between two layer centres.
-        let u = layer_coord(frag.parallax);
-        let mut targets = [(0usize, 0.0f32); 2];
-        let n_targets;
-        // A sharp fragment is not split: its PSF barely differs between the two layers, and
-        // a surface split across two layers lets what lies behind it show through (up to a
-        // quarter where the weights are even).
+        // Layer weights: hard, or blended near the boundary between two layer centres. A sharp
+        // fragment is not split: its PSF barely differs between the two layers, and a surface
+        // split across two layers lets what lies behind it show through (up to a quarter where
+        // the weights are even).
         let sharp = coc.max(motion_len) < options.soft_layers_min_blur_px;
-        match options.soft_layers {
-            Some(band) if band > 0.0 && n_layers > 1 && !sharp => {
-                let t = (u - 0.5).clamp(0.0, (n_layers - 1) as f32);
-                let a = (t.floor() as usize).min(n_layers - 2);
-                let f = t - a as f32;
-                let near = ((f - 0.5) / band + 0.5).clamp(0.0, 1.0);
-                if near <= 0.0 {
-                    targets[0] = (a, 1.0);
-                    n_targets = 1;
-                } else if near >= 1.0 {
-                    targets[0] = (a + 1, 1.0);
-                    n_targets = 1;
-                } else {
-                    targets = [(a, 1.0 - near), (a + 1, near)];
-                    n_targets = 2;
-                    counts.soft_split += 1;
-                }
-            }
-            _ => {
-                targets[0] = ((u.floor() as usize).min(n_layers - 1), 1.0);
-                n_targets = 1;
-            }
+        let band = options.soft_layers.filter(|_| !sharp);
+        let (targets, n_targets) = layer_targets(layer_coord(frag.parallax), n_layers, band);
+        if n_targets == 2 {
+            counts.soft_split += 1;
         }
         for &(layer, lw) in &targets[..n_targets] {
             let weight = frag.weight * lw;
@@ -639,6 +564,35 @@ pub fn classify_fragments(
         }
     }
 
+    Ok(assemble_layers(
+        per_layer,
+        w,
+        h,
+        data,
+        combined,
+        options,
+        counts,
+        (pmin, span),
+    ))
+}
+
+/// The frame's records from its layers' (frame coordinates): overscan records that cannot
+/// reach the frame dropped, the data's border extended outwards as
+/// [`ClassifyOptions::frame_edges`] says, row order within each layer, the padding every PSF
+/// needs, and the layers' summaries. `parallax` is the far edge and the span of the layers.
+#[allow(clippy::too_many_arguments)]
+fn assemble_layers(
+    mut per_layer: Vec<Vec<SplatRecord>>,
+    w: usize,
+    h: usize,
+    data: DataWindow,
+    combined: Option<&PsfDatabase>,
+    options: &ClassifyOptions,
+    mut counts: PathCounts,
+    parallax: (f32, f32),
+) -> Classified {
+    let (pmin, span) = parallax;
+    let n_layers = per_layer.len();
     // Beyond the data: records of the outermost pixels, repeated outwards (or nothing).
     let reach: Vec<i32> = combined.map_or_else(Vec::new, psf_reach);
     let reach_of = |r: &SplatRecord| -> i32 {
@@ -711,65 +665,117 @@ pub fn classify_fragments(
         record_count: records.len() as u32,
         db_channels: combined.map_or(1, |d| d.channels() as u32),
     };
-    Ok(Classified {
+    Classified {
         frame,
         records,
         layers,
         counts,
-    })
+    }
 }
 
-/// Euclidean distance (pixels) from pixel `(x, y)` to the nearest pixel of `window`; 0 inside.
-fn distance_to(window: DataWindow, x: i32, y: i32) -> f32 {
-    let dx = (window.x0 - x).max(x - window.x1).max(0) as f32;
-    let dy = (window.y0 - y).max(y - window.y1).max(0) as f32;
-    (dx * dx + dy * dy).sqrt()
+/// A fragment's PSF: its drawing path, index in the combined database, whether its
+/// parameters were clamped to the database's range, and the rotation of the PSF's reference
+/// direction (+x) onto the motion (lens-motion) or the radial direction (physical lens).
+struct Lookup {
+    path: SplatPath,
+    psf_index: u32,
+    clamped: bool,
+    rot_cos: f32,
+    rot_sin: f32,
 }
 
-/// Copies of the records on the border of `data` at every position outside it that clamps to
-/// their pixel (to the side, and into the corner's quadrant), as far as each record's PSF
-/// reaches into `frame` (`reach_of`, pixels). `records` are in frame coordinates.
-fn extend_beyond(
-    records: &[SplatRecord],
-    data: DataWindow,
-    frame: DataWindow,
-    reach_of: &dyn Fn(&SplatRecord) -> i32,
-) -> Vec<SplatRecord> {
-    let mut out = Vec::new();
-    for r in records {
-        let (x, y) = (r.center_x, r.center_y);
-        let on_x = x == data.x0 || x == data.x1;
-        let on_y = y == data.y0 || y == data.y1;
-        if !(on_x || on_y) {
-            continue;
+/// The PSF of `frag` (CoC `coc` and motion `motion_len`, pixels), O(1) through the nested
+/// grid: still pixels from the thin-lens database, moving ones from the lens-motion one,
+/// everything from a physical-lens one; copied when both are under
+/// [`ClassifyOptions::copy_threshold_px`]. `centre` is the frame's centre, pixels.
+#[allow(clippy::too_many_arguments)]
+fn lookup_psf(
+    frag: &Fragment,
+    coc: f32,
+    motion_len: f32,
+    centre: [f32; 2],
+    pixels_per_mm: f32,
+    dbs: &DbSet,
+    model: Option<PsfModel>,
+    options: &ClassifyOptions,
+) -> Lookup {
+    let (thin, main, combined) = (
+        dbs.thin_lens.as_ref(),
+        dbs.main.as_ref(),
+        dbs.combined.as_ref(),
+    );
+    let (x, y) = (frag.x, frag.y);
+    let m = frag.motion;
+    let (mut rot_cos, mut rot_sin) = (1.0f32, 0.0f32);
+    let offset = dbs.main_offset;
+    let (path, psf_index, clamped) = match (model, main, combined) {
+        (Some(PsfModel::PhysicalLens), Some(db), Some(all)) => {
+            let dx = x as f32 + 0.5 - centre[0];
+            let dy = y as f32 + 0.5 - centre[1];
+            let r = (dx * dx + dy * dy).sqrt();
+            if r > 0.0 {
+                rot_cos = dx / r;
+                rot_sin = dy / r;
+            }
+            let (idx, cl) = db.lookup([frag.depth, r / pixels_per_mm]);
+            (path_of(all, idx + offset), idx + offset, cl)
         }
-        let reach = reach_of(r);
-        if reach <= 0 {
-            continue;
-        }
-        let xs = (
-            if x == data.x0 { x - reach } else { x },
-            if x == data.x1 { x + reach } else { x },
-        );
-        let ys = (
-            if y == data.y0 { y - reach } else { y },
-            if y == data.y1 { y + reach } else { y },
-        );
-        for cy in ys.0..=ys.1 {
-            for cx in xs.0..=xs.1 {
-                let inside_data = cx >= data.x0 && cx <= data.x1 && cy >= data.y0 && cy <= data.y1;
-                if inside_data || distance_to(frame, cx, cy) > reach as f32 {
-                    continue;
+        (Some(_), _, Some(all))
+            if coc >= options.copy_threshold_px || motion_len >= options.copy_threshold_px =>
+        {
+            let still = motion_len < options.copy_threshold_px;
+            let (idx, cl) = match (thin, main) {
+                (Some(t), _) if still => t.lookup([coc, 0.0]),
+                (_, Some(db_m)) => {
+                    if db_m.model() == PsfModel::LensMotion && motion_len > 0.0 {
+                        rot_cos = m[0] / motion_len;
+                        rot_sin = m[1] / motion_len;
+                    }
+                    let (i, cl) = db_m.lookup([coc, motion_len]);
+                    (i + offset, cl)
                 }
-                out.push(SplatRecord {
-                    center_x: cx,
-                    center_y: cy,
-                    ..*r
-                });
+                (Some(t), None) => t.lookup([coc, 0.0]),
+                (None, None) => (0, false),
+            };
+            (path_of(all, idx), idx, cl)
+        }
+        _ => (SplatPath::Copy, 0, false),
+    };
+    Lookup {
+        path,
+        psf_index,
+        clamped,
+        rot_cos,
+        rot_sin,
+    }
+}
+
+/// The layers a fragment at layer coordinate `u` (0 at the far edge, `n_layers` at the near
+/// edge) goes to, with their weights, and how many (1 or 2). With a soft band (layer units),
+/// a fragment near the boundary between two layer centres is split between them.
+fn layer_targets(u: f32, n_layers: usize, band: Option<f32>) -> ([(usize, f32); 2], usize) {
+    let mut targets = [(0usize, 0.0f32); 2];
+    match band {
+        Some(band) if band > 0.0 && n_layers > 1 => {
+            let t = (u - 0.5).clamp(0.0, (n_layers - 1) as f32);
+            let a = (t.floor() as usize).min(n_layers - 2);
+            let f = t - a as f32;
+            let near = ((f - 0.5) / band + 0.5).clamp(0.0, 1.0);
+            if near <= 0.0 {
+                targets[0] = (a, 1.0);
+                (targets, 1)
+            } else if near >= 1.0 {
+                targets[0] = (a + 1, 1.0);
+                (targets, 1)
+            } else {
+                ([(a, 1.0 - near), (a + 1, near)], 2)
             }
         }
+        _ => {
+            targets[0] = ((u.floor() as usize).min(n_layers - 1), 1.0);
+            (targets, 1)
+        }
     }
-    out
 }
 
 fn path_of(db: &PsfDatabase, idx: u32) -> SplatPath {
@@ -778,223 +784,6 @@ fn path_of(db: &PsfDatabase, idx: u32) -> SplatPath {
     } else {
         SplatPath::Sparse
     }
-}
-
-/// The background hidden behind the silhouette of a sharper, nearer occluder, continued from
-/// the visible background next to it.
-///
-/// A pinhole image holds no pixels of what an occluder hides, but a lens sees past the
-/// occluder's edge: where the background is blurred more than the occluder, its layer would
-/// otherwise lose the light of its hidden pixels and darken in a band along the silhouette.
-/// As at the frame's edges, the background is taken to continue as it is: each background
-/// pixel next to a nearer, sharper pixel is repeated into the occluder along that direction
-/// (left, right, up, down), as far as its own blur reaches, under the occluder (which hides the
-/// copies wherever it is opaque). A hidden pixel filled from several sides gets the mean of
-/// them. `own(i)` is pixel `i`'s own fragment.
-fn hidden_background(
-    g: &GBuffer,
-    was_split: &[bool],
-    signed_coc: &dyn Fn(f32) -> f32,
-    depth_at: &dyn Fn(usize) -> f32,
-    own: &dyn Fn(usize) -> Fragment,
-) -> Vec<Fragment> {
-    let (w, h) = (g.width as i32, g.height as i32);
-    const DIRECTIONS: [(i32, i32); 4] = [(1, 0), (-1, 0), (0, 1), (0, -1)];
-    // The walks: (background pixel, direction, steps), and how many walks reach each pixel.
-    let mut walks: Vec<(usize, (i32, i32), i32)> = Vec::new();
-    let mut fills = vec![0u16; (w * h) as usize];
-    for y in 0..h {
-        for x in 0..w {
-            let b = (y * w + x) as usize;
-            if was_split[b] || g.color[b] == [0.0; 4] {
-                continue;
-            }
-            let (db, coc_b) = (depth_at(b), signed_coc(depth_at(b)));
-            let reach = coc_b.abs().ceil() as i32;
-            if reach < 2 {
-                continue;
-            }
-            for d in DIRECTIONS {
-                // Hidden: nearer than the background and sharper by more than a pixel. The
-                // first step may be the silhouette's anti-aliased pixel, which carries the
-                // background's depth.
-                let hidden = |k: i32| -> bool {
-                    let (qx, qy) = (x + d.0 * k, y + d.1 * k);
-                    if qx < 0 || qy < 0 || qx >= w || qy >= h {
-                        return false;
-                    }
-                    let q = (qy * w + qx) as usize;
-                    let dq = depth_at(q);
-                    dq < db && signed_coc(dq).abs() + 1.0 < coc_b.abs()
-                };
-                let first = if hidden(1) {
-                    1
-                } else if was_split
-                    [((y + d.1).clamp(0, h - 1) * w + (x + d.0).clamp(0, w - 1)) as usize]
-                    && hidden(2)
-                {
-                    2
-                } else {
-                    continue;
-                };
-                let mut steps = 0;
-                for k in first..=reach {
-                    if !hidden(k) {
-                        break;
-                    }
-                    let q = ((y + d.1 * k) * w + x + d.0 * k) as usize;
-                    fills[q] = fills[q].saturating_add(1);
-                    steps = k;
-                }
-                if steps >= first {
-                    walks.push((b, d, steps));
-                }
-            }
-        }
-    }
-    let mut out = Vec::new();
-    for (b, d, steps) in walks {
-        let base = own(b);
-        let (bx, by) = ((b as i32) % w, (b as i32) / w);
-        for k in 1..=steps {
-            let (qx, qy) = (bx + d.0 * k, by + d.1 * k);
-            let q = (qy * w + qx) as usize;
-            if fills[q] == 0 {
-                continue;
-            }
-            out.push(Fragment {
-                x: base.x + d.0 * k,
-                y: base.y + d.1 * k,
-                weight: 1.0 / f32::from(fills[q]),
-                ..base
-            });
-        }
-    }
-    out
-}
-
-/// How an anti-aliased edge pixel divides between a nearer foreground and its background.
-#[derive(Clone, Copy, Debug, PartialEq)]
-struct EdgeSplit {
-    /// Foreground coverage of the pixel, in (0, 1].
-    alpha: f32,
-    /// The foreground neighbour whose depth and motion the foreground part takes.
-    foreground: usize,
-    /// The background neighbour whose depth and motion the background part takes.
-    background: usize,
-    /// The foreground part's colour (premultiplied, before `alpha`).
-    foreground_color: [f32; 4],
-    /// The background part's colour (before `1 - alpha`).
-    background_color: [f32; 4],
-}
-
-/// Splits the pixel at `(x, y)` when a neighbour whose CoC differs by more than a pixel lies
-/// nearer the viewer and its colour explains part of this pixel's: the pixel's colour `c` is
-/// taken as `alpha f + (1 - alpha) b`, with `b` the background seen on the far side of the
-/// pixel and `alpha` the projection of `c` onto the segment from `b` to the foreground's
-/// colour. The foreground part carries `c - (1 - alpha) b` and the background part `b`, so the
-/// two add up to `c` and none of the foreground's light is blurred as background (a bright
-/// emitter's anti-aliased rim would otherwise glow with the background's blur). Neighbours two
-/// pixels away count too when they are brighter than `hdr_threshold`: a renderer's pixel
-/// filter spreads an HDR highlight's light that far.
-fn edge_split(
-    g: &GBuffer,
-    x: usize,
-    y: usize,
-    signed_coc: &dyn Fn(f32) -> f32,
-    depth_at: &dyn Fn(usize) -> f32,
-    hdr_threshold: f32,
-) -> Option<EdgeSplit> {
-    let (w, h) = (g.width as i32, g.height as i32);
-    let (xi, yi) = (x as i32, y as i32);
-    let index = |px: i32, py: i32| -> Option<usize> {
-        (px >= 0 && py >= 0 && px < w && py < h).then(|| py as usize * w as usize + px as usize)
-    };
-    let i = index(xi, yi)?;
-    let d = depth_at(i);
-    let bright = |c: [f32; 4]| c[..3].iter().any(|&v| v > hdr_threshold);
-    // The nearest neighbour in the 3x3 window, or a bright one in the 5x5 window.
-    let mut best: Option<(usize, i32, i32, f32)> = None;
-    for dy in -2i32..=2 {
-        for dx in -2i32..=2 {
-            if dx == 0 && dy == 0 {
-                continue;
-            }
-            let Some(j) = index(xi + dx, yi + dy) else {
-                continue;
-            };
-            let outer = dx.abs() == 2 || dy.abs() == 2;
-            if outer && !bright(g.color[j]) {
-                continue;
-            }
-            let dj = depth_at(j);
-            if dj < best.map_or(d, |b| b.3) {
-                best = Some((j, dx, dy, dj));
-            }
-        }
-    }
-    let (j, dx, dy, dj) = best?;
-    let coc_gap = (signed_coc(dj) - signed_coc(d)).abs();
-    // Only where the depth step is visible as a difference in blur (or, for a pinhole with
-    // motion, a large relative depth step).
-    if coc_gap < 1.0 && !(signed_coc(d) == 0.0 && dj < 0.8 * d) {
-        return None;
-    }
-    // Background: on the far side of the pixel from the foreground, one or two pixels away,
-    // whichever lies farther from the foreground's colour (the nearer one may still carry
-    // some of a bright foreground's light); only background-like depths count.
-    let (sx, sy) = (dx.signum(), dy.signum());
-    let cf = g.color[j];
-    let distance_to_foreground =
-        |c: [f32; 4]| -> f32 { (0..3).map(|k| (c[k] - cf[k]) * (c[k] - cf[k])).sum() };
-    let mut background: Option<usize> = None;
-    for step in 1..=2 {
-        let Some(o) = index(xi - sx * step, yi - sy * step) else {
-            break;
-        };
-        if (signed_coc(depth_at(o)) - signed_coc(d)).abs() > 0.5 * coc_gap.max(1.0) {
-            break;
-        }
-        if background
-            .is_none_or(|b| distance_to_foreground(g.color[o]) > distance_to_foreground(g.color[b]))
-        {
-            background = Some(o);
-        }
-    }
-    let o = background?;
-    let (cp, cb) = (g.color[i], g.color[o]);
-    let mut num = 0.0f32;
-    let mut den = 0.0f32;
-    for c in 0..3 {
-        let a = cf[c] - cb[c];
-        num += (cp[c] - cb[c]) * a;
-        den += a * a;
-    }
-    // A colour difference too small to tell the parts apart: leave the pixel whole.
-    let scale = cf[..3]
-        .iter()
-        .chain(&cb[..3])
-        .fold(0.0f32, |m, v| m.max(v.abs()));
-    if den <= (0.05 * scale).powi(2) || den <= 1e-12 {
-        return None;
-    }
-    let alpha = (num / den).clamp(0.0, 1.0);
-    // Too little foreground light to matter: 2 % of the brighter of display white and the
-    // background.
-    let foreground_peak = cf[..3].iter().fold(0.0f32, |m, &v| m.max(v));
-    let background_peak = cb[..3].iter().fold(1.0f32, |m, &v| m.max(v));
-    if alpha <= 0.0 || alpha * foreground_peak < 0.02 * background_peak {
-        return None;
-    }
-    let foreground_color =
-        std::array::from_fn(|k| ((cp[k] - (1.0 - alpha) * cb[k]) / alpha).max(0.0));
-    Some(EdgeSplit {
-        alpha,
-        foreground: j,
-        background: o,
-        foreground_color,
-        background_color: cb,
-    })
 }
 
 #[cfg(test)]
