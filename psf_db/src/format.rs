@@ -25,12 +25,13 @@
 use std::path::Path;
 
 use bytemuck::{Pod, Zeroable};
-use serde::{Deserialize, Serialize};
 
 use crate::error::DbError;
+pub use crate::header::{Aperture, BuildInfo, DbHeader, Dispersion, LensPrescription, PsfStats};
 use crate::model::PsfModel;
-use crate::shard::ShardRange;
 use crate::space::ParamSpace;
+
+pub use crate::builder::DatabaseBuilder;
 
 /// The first 8 bytes of every database file.
 pub const MAGIC: [u8; 8] = *b"SPRDLT\0\x01";
@@ -44,172 +45,6 @@ pub const MAX_HEADER_BYTES: u64 = 64 << 20;
 const PREAMBLE: usize = 20;
 const COUNTS: usize = 40;
 const CRC: usize = 4;
-
-/// Aperture shape of the lens models.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Aperture {
-    /// Number of diaphragm blades; 0 = circular aperture.
-    pub blades: u32,
-    /// Rotation of the polygon, radians (counter-clockwise on the image, y down).
-    pub rotation_rad: f32,
-}
-
-impl Default for Aperture {
-    fn default() -> Self {
-        Aperture {
-            blades: 0,
-            rotation_rad: 0.0,
-        }
-    }
-}
-
-/// Wavelength dependence of the glass's refractive index, wavelength in micrometres.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub enum Dispersion {
-    /// `n(l) = a + b / l^2`, `b` in um^2.
-    Cauchy {
-        /// Constant term.
-        a: f64,
-        /// Coefficient of `1 / l^2`, um^2.
-        b_um2: f64,
-    },
-    /// `n^2(l) = 1 + sum_i b_i l^2 / (l^2 - c_i)`, `c_i` in um^2 (BK7: b = 1.0396, 0.2318, 1.0105;
-    /// c = 0.0060, 0.0200, 103.56).
-    Sellmeier {
-        /// The three `B` coefficients.
-        b: [f64; 3],
-        /// The three `C` coefficients, um^2.
-        c_um2: [f64; 3],
-    },
-}
-
-/// The physical lens a `physical-lens` database was traced through (filled by the precompute).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct LensPrescription {
-    /// Signed radius of curvature of the front surface, mm (positive: centre behind the surface).
-    pub radius_front_mm: f64,
-    /// Signed radius of curvature of the back surface, mm (biconvex: negative).
-    pub radius_back_mm: f64,
-    /// Centre thickness of the lens, mm.
-    pub thickness_mm: f64,
-    /// Clear diameter of the lens, mm.
-    pub lens_diameter_mm: f64,
-    /// Diameter of the aperture stop, mm.
-    pub stop_diameter_mm: f64,
-    /// Position of the stop along the axis relative to the front vertex, mm (negative: in front).
-    pub stop_position_mm: f64,
-    /// Glass name (e.g. "N-BK7").
-    pub glass: String,
-    /// The glass's dispersion formula.
-    pub dispersion: Dispersion,
-    /// Distance in focus, scene units.
-    pub focus_distance: f64,
-    /// Millimetres per scene unit.
-    pub scene_unit_mm: f64,
-    /// Paraxial focal length, mm.
-    pub focal_length_mm: f64,
-    /// Distance from the back vertex to the sensor, mm (set by focusing).
-    pub sensor_distance_mm: f64,
-    /// Sensor width, mm.
-    pub sensor_width_mm: f64,
-    /// Image width, pixels (pixels per mm = image_width_px / sensor_width_mm).
-    pub image_width_px: u32,
-}
-
-/// Per-PSF statistics recorded by the precompute.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct PsfStats {
-    /// The PSF's representative parameters (physical units; second entry 0 in 1D spaces).
-    pub coords: [f32; 2],
-    /// Number of spreadlets (0 for a dense PSF).
-    pub spreadlets: u32,
-    /// Number of pixels of the dense PSF's support.
-    pub dense_support: u32,
-    /// L1 error of the integrated spreadlets against the pre-filtered PSF.
-    pub l1: f32,
-    /// SSIM of the integrated spreadlets against the pre-filtered PSF (`metrics::ssim_plane`).
-    pub ssim: f32,
-    /// Largest distance of the PSF's support from its centre, pixels.
-    pub extent_px: f32,
-}
-
-/// How a database was built (informational).
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct BuildInfo {
-    /// Profile name ("quick", "paper", ...).
-    pub profile: String,
-    /// Wall-clock build time, seconds. Leave `None` for byte-reproducible files.
-    pub build_seconds: Option<f64>,
-    /// Tool and version that wrote the file.
-    pub tool: String,
-    /// Free-form key/value notes.
-    pub notes: Vec<(String, String)>,
-}
-
-/// The database header (bincode-encoded in the file).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct DbHeader {
-    /// PSF model; callers check it against the model they expect.
-    pub model: PsfModel,
-    /// Parameter space (ranges, betas, nested grid: `space.grid()`).
-    pub space: ParamSpace,
-    /// Channels per spreadlet value and dense pixel (= `model.channels()`).
-    pub channels: u32,
-    /// PSF image resolution used for tracing, px (square); every offset lies within +-this.
-    pub psf_resolution: u32,
-    /// Light-tracing samples per PSF.
-    pub rays_per_psf: u64,
-    /// Random seed of the build.
-    pub seed: u64,
-    /// Spreadlet density knob (1.0 = default).
-    pub spreadlet_budget: f32,
-    /// Whether PSFs were pre-filtered over their cell's box.
-    pub prefilter: bool,
-    /// Aperture shape.
-    pub aperture: Aperture,
-    /// Lens prescription (`physical-lens` only).
-    pub lens: Option<LensPrescription>,
-    /// Per-PSF statistics, in PSF order (empty or `psf_count` entries).
-    pub stats: Vec<PsfStats>,
-    /// Build information.
-    pub build: BuildInfo,
-    /// `Some` for a partial file of a sharded build (`precompute --shard K/N`): it stores only
-    /// the PSFs of its range, and [`crate::merge_shards`] joins the parts into the database.
-    pub shard: Option<ShardRange>,
-}
-
-impl DbHeader {
-    /// Number of PSFs the file stores: the shard's range, else every PSF of the space.
-    pub fn stored_psf_count(&self) -> usize {
-        match &self.shard {
-            Some(r) => r.len as usize,
-            None => self.space.psf_count() as usize,
-        }
-    }
-}
-
-impl DbHeader {
-    /// A header with defaults for everything but model, space and PSF resolution: channels from
-    /// the model, no rays, seed 0, budget 1.0, pre-filtering on, circular aperture, no lens,
-    /// no stats.
-    pub fn new(model: PsfModel, space: ParamSpace, psf_resolution: u32) -> Self {
-        DbHeader {
-            model,
-            space,
-            channels: model.channels() as u32,
-            psf_resolution,
-            rays_per_psf: 0,
-            seed: 0,
-            spreadlet_budget: 1.0,
-            prefilter: true,
-            aperture: Aperture::default(),
-            lens: None,
-            stats: Vec::new(),
-            build: BuildInfo::default(),
-            shard: None,
-        }
-    }
-}
 
 /// Where a dense (fast-track) PSF image lies in `dense_data`; the GPU struct (12 bytes).
 #[repr(C)]
@@ -253,14 +88,14 @@ impl DenseView<'_> {
 /// A loaded (or freshly built) PSF database.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PsfDatabase {
-    header: DbHeader,
-    cumulative: Vec<u32>,
-    positions: Vec<[i16; 2]>,
-    values: Vec<f32>,
-    dense_slot: Vec<u32>,
-    dense: Vec<DenseEntry>,
-    dense_data: Vec<f32>,
-    max_extent_px: u32,
+    pub(crate) header: DbHeader,
+    pub(crate) cumulative: Vec<u32>,
+    pub(crate) positions: Vec<[i16; 2]>,
+    pub(crate) values: Vec<f32>,
+    pub(crate) dense_slot: Vec<u32>,
+    pub(crate) dense: Vec<DenseEntry>,
+    pub(crate) dense_data: Vec<f32>,
+    pub(crate) max_extent_px: u32,
 }
 
 impl PsfDatabase {
@@ -700,7 +535,7 @@ impl PsfDatabase {
     }
 
     /// Checks every count, index, offset and position, and computes `max_extent_px`.
-    fn validate(&mut self) -> Result<(), DbError> {
+    pub(crate) fn validate(&mut self) -> Result<(), DbError> {
         let oob = |what: String| Err(DbError::OutOfBounds { what });
         let h = &self.header;
         if let Some(r) = &h.shard {
@@ -812,143 +647,6 @@ impl PsfDatabase {
         }
         self.max_extent_px = (max_sq as f64).sqrt().ceil() as u32;
         Ok(())
-    }
-}
-
-/// Builds a database PSF by PSF, in index order.
-#[derive(Clone, Debug)]
-pub struct DatabaseBuilder {
-    db: PsfDatabase,
-}
-
-impl DatabaseBuilder {
-    /// A builder for `header` (its stats may be filled any time before [`Self::finish`]).
-    pub fn new(header: DbHeader) -> Self {
-        let n = header.stored_psf_count();
-        DatabaseBuilder {
-            db: PsfDatabase {
-                header,
-                cumulative: {
-                    let mut c = Vec::with_capacity(n + 1);
-                    c.push(0);
-                    c
-                },
-                positions: Vec::new(),
-                values: Vec::new(),
-                dense_slot: Vec::with_capacity(n),
-                dense: Vec::new(),
-                dense_data: Vec::new(),
-                max_extent_px: 0,
-            },
-        }
-    }
-
-    /// The header, to fill stats or build info while pushing.
-    pub fn header_mut(&mut self) -> &mut DbHeader {
-        &mut self.db.header
-    }
-
-    /// Number of PSFs pushed so far (= index of the next one).
-    pub fn pushed(&self) -> usize {
-        self.db.dense_slot.len()
-    }
-
-    fn check_room(&self) -> Result<(), DbError> {
-        if self.pushed() >= self.db.header.stored_psf_count() {
-            return Err(DbError::Invalid(format!(
-                "more PSFs pushed than the {} the header stores",
-                self.db.header.stored_psf_count()
-            )));
-        }
-        Ok(())
-    }
-
-    /// Appends the next PSF as spreadlets: offsets (px) and `channels` values per offset.
-    /// Returns its index.
-    pub fn push_sparse(&mut self, positions: &[[i16; 2]], values: &[f32]) -> Result<u32, DbError> {
-        self.check_room()?;
-        let ch = self.db.header.channels as usize;
-        if values.len() != positions.len() * ch {
-            return Err(DbError::Invalid(format!(
-                "{} values for {} spreadlets x {ch} channels",
-                values.len(),
-                positions.len()
-            )));
-        }
-        let total = self.db.positions.len() + positions.len();
-        let total = u32::try_from(total)
-            .map_err(|_| DbError::Invalid("more than u32::MAX spreadlets".into()))?;
-        self.db.positions.extend_from_slice(positions);
-        self.db.values.extend_from_slice(values);
-        self.db.cumulative.push(total);
-        self.db.dense_slot.push(SPARSE_SLOT);
-        Ok(self.pushed() as u32 - 1)
-    }
-
-    /// Appends the next PSF as a dense image of `width x height` pixels (row-major,
-    /// channel-interleaved primal values) whose top-left pixel is at `origin` (px from the
-    /// centre). Returns its index.
-    pub fn push_dense(
-        &mut self,
-        origin: [i16; 2],
-        width: u16,
-        height: u16,
-        data: &[f32],
-    ) -> Result<u32, DbError> {
-        self.check_room()?;
-        let ch = self.db.header.channels as usize;
-        if data.len() != width as usize * height as usize * ch {
-            return Err(DbError::Invalid(format!(
-                "{} dense values for {width}x{height} px x {ch} channels",
-                data.len()
-            )));
-        }
-        let offset = u32::try_from(self.db.dense_data.len())
-            .map_err(|_| DbError::Invalid("dense data beyond u32 offsets".into()))?;
-        let slot = self.db.dense.len() as u32;
-        self.db.dense.push(DenseEntry {
-            offset,
-            width,
-            height,
-            origin_x: origin[0],
-            origin_y: origin[1],
-        });
-        self.db.dense_data.extend_from_slice(data);
-        let last = *self.db.cumulative.last().unwrap_or(&0);
-        self.db.cumulative.push(last);
-        self.db.dense_slot.push(slot);
-        Ok(self.pushed() as u32 - 1)
-    }
-
-    /// Appends PSF `index` of `db` as it is stored there (sparse or dense; same channel count).
-    /// Returns its index here.
-    pub fn push_copy(&mut self, db: &PsfDatabase, index: usize) -> Result<u32, DbError> {
-        match db.dense(index) {
-            Some(d) => self.push_dense(
-                [d.origin[0] as i16, d.origin[1] as i16],
-                d.width as u16,
-                d.height as u16,
-                d.data,
-            ),
-            None => {
-                let (positions, values) = db.spreadlets(index);
-                self.push_sparse(positions, values)
-            }
-        }
-    }
-
-    /// Checks that every PSF was pushed and everything is in bounds, and returns the database.
-    pub fn finish(self) -> Result<PsfDatabase, DbError> {
-        let n = self.db.header.stored_psf_count();
-        if self.pushed() != n {
-            return Err(DbError::Invalid(format!(
-                "{} PSFs pushed, the space has {n}",
-                self.pushed()
-            )));
-        }
-        let mut db = self.db;
-        db.validate()?;
-        Ok(db)
     }
 }
 

@@ -17,9 +17,11 @@
 //! assert!(!clamped && (psf as usize) < back.psf_count());
 //! ```
 
+pub mod builder;
 pub mod error;
 pub mod format;
 pub mod grid;
+pub mod header;
 pub mod model;
 pub mod shard;
 pub mod space;

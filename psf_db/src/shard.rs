@@ -5,80 +5,9 @@
 //! PSF keeps the seed it has in a single build, so the merged file is byte-identical to a
 //! single-machine build of the same settings.
 
-use serde::{Deserialize, Serialize};
-
 use crate::error::DbError;
 use crate::format::{DatabaseBuilder, DbHeader, PsfDatabase};
-
-/// The range of PSFs one part of a sharded build holds.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-pub struct ShardRange {
-    /// This part's index, `0..count`.
-    pub index: u32,
-    /// Number of parts the build is split into.
-    pub count: u32,
-    /// Index of the first PSF of the part in the whole database.
-    pub first_psf: u32,
-    /// Number of PSFs in the part (may be 0 when there are more parts than PSFs).
-    pub len: u32,
-}
-
-impl ShardRange {
-    /// Part `index` of `count` of a database of `psf_total` PSFs.
-    pub fn of(index: u32, count: u32, psf_total: u32) -> Result<Self, DbError> {
-        if count == 0 || index >= count {
-            return Err(DbError::Invalid(format!(
-                "shard {index}/{count}: the index must be below the count, and the count at least 1"
-            )));
-        }
-        let start = |k: u32| (u64::from(psf_total) * u64::from(k) / u64::from(count)) as u32;
-        let first_psf = start(index);
-        Ok(ShardRange {
-            index,
-            count,
-            first_psf,
-            len: start(index + 1) - first_psf,
-        })
-    }
-
-    /// Parses `"K/N"` (0-based K) into `(K, N)`.
-    pub fn parse_spec(spec: &str) -> Result<(u32, u32), DbError> {
-        let bad = || {
-            DbError::Invalid(format!(
-                "shard {spec:?}: expected K/N with 0 <= K < N, e.g. 0/4"
-            ))
-        };
-        let (k, n) = spec.split_once('/').ok_or_else(bad)?;
-        let k: u32 = k.trim().parse().map_err(|_| bad())?;
-        let n: u32 = n.trim().parse().map_err(|_| bad())?;
-        if n == 0 || k >= n {
-            return Err(bad());
-        }
-        Ok((k, n))
-    }
-
-    /// The PSF indices of the part.
-    pub fn indices(&self) -> std::ops::Range<u32> {
-        self.first_psf..self.first_psf + self.len
-    }
-
-    /// Checks the range against a space of `psf_total` PSFs: it must be exactly the range
-    /// [`ShardRange::of`] gives, so that parts of one build always tile the same way.
-    pub(crate) fn validate(&self, psf_total: u32) -> Result<(), DbError> {
-        match ShardRange::of(self.index, self.count, psf_total) {
-            Ok(expected) if expected == *self => Ok(()),
-            _ => Err(DbError::OutOfBounds {
-                what: format!(
-                    "shard {}/{} claims PSFs {}..{} of {psf_total}, which is not that part's range",
-                    self.index,
-                    self.count,
-                    self.first_psf,
-                    u64::from(self.first_psf) + u64::from(self.len)
-                ),
-            }),
-        }
-    }
-}
+pub use crate::header::ShardRange;
 
 /// The header with the per-part fields cleared, for comparing parts. The PSF resolution is
 /// the largest PSF image of the part, so the whole database's is the largest over the parts.

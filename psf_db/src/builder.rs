@@ -1,0 +1,141 @@
+//! [`DatabaseBuilder`]: a database assembled PSF by PSF, in index order, checked as it grows.
+
+use crate::error::DbError;
+use crate::format::{DbHeader, DenseEntry, PsfDatabase, SPARSE_SLOT};
+
+/// Builds a database PSF by PSF, in index order.
+#[derive(Clone, Debug)]
+pub struct DatabaseBuilder {
+    db: PsfDatabase,
+}
+
+impl DatabaseBuilder {
+    /// A builder for `header` (its stats may be filled any time before [`Self::finish`]).
+    pub fn new(header: DbHeader) -> Self {
+        let n = header.stored_psf_count();
+        DatabaseBuilder {
+            db: PsfDatabase {
+                header,
+                cumulative: {
+                    let mut c = Vec::with_capacity(n + 1);
+                    c.push(0);
+                    c
+                },
+                positions: Vec::new(),
+                values: Vec::new(),
+                dense_slot: Vec::with_capacity(n),
+                dense: Vec::new(),
+                dense_data: Vec::new(),
+                max_extent_px: 0,
+            },
+        }
+    }
+
+    /// The header, to fill stats or build info while pushing.
+    pub fn header_mut(&mut self) -> &mut DbHeader {
+        &mut self.db.header
+    }
+
+    /// Number of PSFs pushed so far (= index of the next one).
+    pub fn pushed(&self) -> usize {
+        self.db.dense_slot.len()
+    }
+
+    fn check_room(&self) -> Result<(), DbError> {
+        if self.pushed() >= self.db.header.stored_psf_count() {
+            return Err(DbError::Invalid(format!(
+                "more PSFs pushed than the {} the header stores",
+                self.db.header.stored_psf_count()
+            )));
+        }
+        Ok(())
+    }
+
+    /// Appends the next PSF as spreadlets: offsets (px) and `channels` values per offset.
+    /// Returns its index.
+    pub fn push_sparse(&mut self, positions: &[[i16; 2]], values: &[f32]) -> Result<u32, DbError> {
+        self.check_room()?;
+        let ch = self.db.header.channels as usize;
+        if values.len() != positions.len() * ch {
+            return Err(DbError::Invalid(format!(
+                "{} values for {} spreadlets x {ch} channels",
+                values.len(),
+                positions.len()
+            )));
+        }
+        let total = self.db.positions.len() + positions.len();
+        let total = u32::try_from(total)
+            .map_err(|_| DbError::Invalid("more than u32::MAX spreadlets".into()))?;
+        self.db.positions.extend_from_slice(positions);
+        self.db.values.extend_from_slice(values);
+        self.db.cumulative.push(total);
+        self.db.dense_slot.push(SPARSE_SLOT);
+        Ok(self.pushed() as u32 - 1)
+    }
+
+    /// Appends the next PSF as a dense image of `width x height` pixels (row-major,
+    /// channel-interleaved primal values) whose top-left pixel is at `origin` (px from the
+    /// centre). Returns its index.
+    pub fn push_dense(
+        &mut self,
+        origin: [i16; 2],
+        width: u16,
+        height: u16,
+        data: &[f32],
+    ) -> Result<u32, DbError> {
+        self.check_room()?;
+        let ch = self.db.header.channels as usize;
+        if data.len() != width as usize * height as usize * ch {
+            return Err(DbError::Invalid(format!(
+                "{} dense values for {width}x{height} px x {ch} channels",
+                data.len()
+            )));
+        }
+        let offset = u32::try_from(self.db.dense_data.len())
+            .map_err(|_| DbError::Invalid("dense data beyond u32 offsets".into()))?;
+        let slot = self.db.dense.len() as u32;
+        self.db.dense.push(DenseEntry {
+            offset,
+            width,
+            height,
+            origin_x: origin[0],
+            origin_y: origin[1],
+        });
+        self.db.dense_data.extend_from_slice(data);
+        let last = *self.db.cumulative.last().unwrap_or(&0);
+        self.db.cumulative.push(last);
+        self.db.dense_slot.push(slot);
+        Ok(self.pushed() as u32 - 1)
+    }
+
+    /// Appends PSF `index` of `db` as it is stored there (sparse or dense; same channel count).
+    /// Returns its index here.
+    pub fn push_copy(&mut self, db: &PsfDatabase, index: usize) -> Result<u32, DbError> {
+        match db.dense(index) {
+            Some(d) => self.push_dense(
+                [d.origin[0] as i16, d.origin[1] as i16],
+                d.width as u16,
+                d.height as u16,
+                d.data,
+            ),
+            None => {
+                let (positions, values) = db.spreadlets(index);
+                self.push_sparse(positions, values)
+            }
+        }
+    }
+
+    /// Checks that every PSF was pushed and everything is in bounds, and returns the database.
+    pub fn finish(self) -> Result<PsfDatabase, DbError> {
+        let n = self.db.header.stored_psf_count();
+        if self.pushed() != n {
+            return Err(DbError::Invalid(format!(
+                "{} PSFs pushed, the space has {n}",
+                self.pushed()
+            )));
+        }
+        let mut db = self.db;
+        db.validate()?;
+        Ok(db)
+    }
+}
