@@ -87,3 +87,100 @@ pub fn shader_sources_for_validation() -> Vec<(&'static str, String)> {
         ("filter", filter()),
     ]
 }
+
+/// How a stage's shader reads one binding of its bind group (group 0).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Binding {
+    /// `var<uniform>`.
+    Uniform,
+    /// `var<storage, read>`.
+    Read,
+    /// `var<storage, read_write>`.
+    ReadWrite,
+}
+
+/// The bindings of each stage, as its WGSL declares them: the host builds its bind group
+/// layout from these tables, and a test checks each table against the shader's own
+/// declarations (naga's reflection).
+pub mod bindings {
+    use super::Binding::{self, Read, ReadWrite, Uniform};
+
+    /// The global-atomic splat (`splat.wgsl`, `splat_global.wgsl`, `dense.wgsl`, `atomic_*`).
+    pub const SPLAT: &[(u32, Binding)] = &[
+        (0, Uniform),
+        (1, Uniform),
+        (2, Read),
+        (3, Read),
+        (4, Read),
+        (5, Read),
+        (6, Read),
+        (7, Read),
+        (8, ReadWrite),
+        (9, ReadWrite),
+    ];
+
+    /// The tiled splat and its global-atomic rest (`bin.wgsl`, `splat_tiled.wgsl`): the
+    /// splat's bindings plus the tile grid, the footprints, the tiles' state and the entries.
+    pub const TILED_SPLAT: &[(u32, Binding)] = &[
+        (0, Uniform),
+        (1, Uniform),
+        (2, Read),
+        (3, Read),
+        (4, Read),
+        (5, Read),
+        (6, Read),
+        (7, Read),
+        (8, ReadWrite),
+        (9, ReadWrite),
+        (10, Uniform),
+        (11, Read),
+        (12, ReadWrite),
+        (13, ReadWrite),
+    ];
+
+    /// The convolution pyramid (`pyramid.wgsl`).
+    pub const PYRAMID: &[(u32, Binding)] =
+        &[(0, Uniform), (1, ReadWrite), (2, ReadWrite), (3, ReadWrite)];
+
+    /// The composite (`composite.wgsl`).
+    pub const COMPOSITE: &[(u32, Binding)] =
+        &[(0, Uniform), (1, Read), (2, ReadWrite), (3, ReadWrite)];
+
+    /// The filter baseline (`filter.wgsl`).
+    pub const FILTER: &[(u32, Binding)] = &[
+        (0, Uniform),
+        (1, Read),
+        (2, Read),
+        (3, Read),
+        (4, Read),
+        (5, ReadWrite),
+    ];
+
+    /// The device's micro-benchmarks (`microbench.wgsl` with the accumulation scheme).
+    pub const MICROBENCH: &[(u32, Binding)] = &[
+        (0, Uniform),
+        (1, Read),
+        (2, ReadWrite),
+        (8, ReadWrite),
+        (9, ReadWrite),
+    ];
+}
+
+/// Every stage's full source (each atomic variant), named, with its bindings table.
+pub fn shader_sources_with_bindings() -> Vec<(&'static str, String, &'static [(u32, Binding)])> {
+    use bindings::*;
+    shader_sources_for_validation()
+        .into_iter()
+        .map(|(name, source)| {
+            let table = match name {
+                "pyramid" => PYRAMID,
+                "composite" => COMPOSITE,
+                "filter" => FILTER,
+                n if n.starts_with("microbench") => MICROBENCH,
+                n if n.starts_with("splat (tiled") || n.starts_with("splat (rest") => TILED_SPLAT,
+                _ => SPLAT,
+            };
+            (name, source, table)
+        })
+        .collect()
+}

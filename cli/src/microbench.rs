@@ -12,7 +12,7 @@
 use std::time::Instant;
 
 use spreadlet::gpu::layout::MicroParams;
-use spreadlet::gpu::util::{compute_pipelines, map_read_bytes, storage_entry, uniform_entry};
+use spreadlet::gpu::util::{compute_pipelines, layout_entries, map_read_bytes};
 use spreadlet::gpu::{GpuContext, GpuError};
 
 /// Sizes of the micro-benchmarks.
@@ -143,13 +143,7 @@ pub fn run_microbenchmarks(
         .device
         .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("microbench"),
-            entries: &[
-                uniform_entry(0),
-                storage_entry(1, true),
-                storage_entry(2, false),
-                storage_entry(8, false),
-                storage_entry(9, false),
-            ],
+            entries: &layout_entries(shaders::bindings::MICROBENCH),
         });
     let mut pipelines = compute_pipelines(
         ctx,

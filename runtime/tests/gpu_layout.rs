@@ -151,3 +151,36 @@ fn every_stage_shader_parses_and_validates() {
         .unwrap_or_else(|e| panic!("{name}: {e:?}"));
     }
 }
+
+#[test]
+fn every_stage_declares_the_bindings_its_host_binds() {
+    use shaders::Binding;
+    for (name, src, table) in shaders::shader_sources_with_bindings() {
+        let module = naga::front::wgsl::parse_str(&src)
+            .unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(&src)));
+        let mut declared: Vec<(u32, Binding)> = module
+            .global_variables
+            .iter()
+            .filter_map(|(_, var)| {
+                let binding = var.binding.as_ref()?;
+                assert_eq!(binding.group, 0, "{name}: every stage binds group 0");
+                let kind = match var.space {
+                    naga::AddressSpace::Uniform => Binding::Uniform,
+                    naga::AddressSpace::Storage { access }
+                        if access.contains(naga::StorageAccess::STORE) =>
+                    {
+                        Binding::ReadWrite
+                    }
+                    naga::AddressSpace::Storage { .. } => Binding::Read,
+                    other => panic!("{name}: binding {} in {other:?}", binding.binding),
+                };
+                Some((binding.binding, kind))
+            })
+            .collect();
+        declared.sort_by_key(|&(b, _)| b);
+        assert_eq!(
+            declared, table,
+            "{name}: the shader's bindings (left) differ from its host's table (right)"
+        );
+    }
+}

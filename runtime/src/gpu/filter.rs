@@ -7,8 +7,8 @@ use std::time::Instant;
 use super::layout::{FilterParams, FilterPixel, KernelEntry, NO_KERNEL};
 use super::shaders;
 use super::util::{
-    bind_group, compute_pipelines, read_f32, storage_entry, storage_init, storage_zeroed,
-    uniform_entry, uniform_init,
+    bind_group, compute_pipelines, layout_entries, read_f32, storage_init, storage_zeroed,
+    uniform_init,
 };
 use super::{GpuContext, GpuError};
 use crate::baseline::{filter_plan, DenseKernels, FilterOptions, FilterStats, PixelPsf};
@@ -63,14 +63,7 @@ impl GpuFilter {
             .device
             .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                 label: Some("filter"),
-                entries: &[
-                    uniform_entry(0),
-                    storage_entry(1, true),
-                    storage_entry(2, true),
-                    storage_entry(3, true),
-                    storage_entry(4, true),
-                    storage_entry(5, false),
-                ],
+                entries: &layout_entries(shaders::bindings::FILTER),
             });
         let pipeline = compute_pipelines(
             ctx,

@@ -6,8 +6,7 @@ use poisson::Plane;
 
 use super::layout::{PassParams, PlaneSet};
 use super::util::{
-    bind_group, compute_pipelines, read_f32, storage_entry, storage_zeroed, uniform_entry,
-    uniform_init,
+    bind_group, compute_pipelines, layout_entries, read_f32, storage_zeroed, uniform_init,
 };
 use super::{shaders, GpuContext, GpuError};
 
@@ -29,12 +28,7 @@ impl PyramidPipelines {
             .device
             .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                 label: Some("pyramid"),
-                entries: &[
-                    uniform_entry(0),
-                    storage_entry(1, false),
-                    storage_entry(2, false),
-                    storage_entry(3, false),
-                ],
+                entries: &layout_entries(shaders::bindings::PYRAMID),
             });
         let names = ["h1_0", "h1_1", "h1_2", "h1_3", "h1_4"];
         let names2 = ["h2_0", "h2_1", "h2_2", "h2_3", "h2_4"];

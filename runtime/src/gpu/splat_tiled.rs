@@ -3,7 +3,7 @@
 //! atomic pass for the records that span too many tiles. Its CPU mirror is [`super::tiles`].
 
 use super::tiles;
-use super::util::{compute_pipelines, storage_entry, uniform_entry};
+use super::util::{compute_pipelines, layout_entries};
 use super::{shaders, GpuContext, GpuError};
 
 /// The tiled splat: binning (count, scan, scatter) and the per-tile sums.
@@ -33,12 +33,7 @@ impl TiledPipelines {
         {
             return Ok(None);
         }
-        let mut entries: Vec<wgpu::BindGroupLayoutEntry> = vec![uniform_entry(0), uniform_entry(1)];
-        entries.extend((2..=9).map(|b| storage_entry(b, b < 8)));
-        entries.push(uniform_entry(10));
-        entries.push(storage_entry(11, true));
-        entries.push(storage_entry(12, false));
-        entries.push(storage_entry(13, false));
+        let entries = layout_entries(shaders::bindings::TILED_SPLAT);
         let layout = ctx
             .device
             .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {

@@ -19,7 +19,7 @@ use super::frame::{Chunk, FrameBuffers, QUERIES_PER_CHUNK};
 use super::pyramid::PyramidPipelines;
 use super::splat_tiled::TiledPipelines;
 use super::tiles::{self, TILE_META_WORDS};
-use super::util::{compute_pipelines, map_read, map_read_bytes, storage_entry, uniform_entry};
+use super::util::{compute_pipelines, layout_entries, map_read, map_read_bytes};
 use super::{shaders, GpuContext, GpuError};
 use crate::pipeline::composite::CompositeOptions;
 use crate::pipeline::integrate::Integrator;
@@ -207,18 +207,7 @@ impl GpuSynthesizer {
             .device
             .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                 label: Some("splat"),
-                entries: &[
-                    uniform_entry(0),
-                    uniform_entry(1),
-                    storage_entry(2, true),
-                    storage_entry(3, true),
-                    storage_entry(4, true),
-                    storage_entry(5, true),
-                    storage_entry(6, true),
-                    storage_entry(7, true),
-                    storage_entry(8, false),
-                    storage_entry(9, false),
-                ],
+                entries: &layout_entries(shaders::bindings::SPLAT),
             });
         let splat = compute_pipelines(
             ctx,
@@ -237,12 +226,7 @@ impl GpuSynthesizer {
             ctx.device
                 .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                     label: Some("composite"),
-                    entries: &[
-                        uniform_entry(0),
-                        storage_entry(1, true),
-                        storage_entry(2, false),
-                        storage_entry(3, false),
-                    ],
+                    entries: &layout_entries(shaders::bindings::COMPOSITE),
                 });
         let composite = compute_pipelines(
             ctx,

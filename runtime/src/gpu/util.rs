@@ -55,6 +55,18 @@ pub fn uniform_init(ctx: &GpuContext, label: &str, data: &[u8]) -> wgpu::Buffer 
         })
 }
 
+/// The layout entries of a stage's bindings table (`shaders::bindings`).
+pub fn layout_entries(table: &[(u32, shaders::Binding)]) -> Vec<wgpu::BindGroupLayoutEntry> {
+    table
+        .iter()
+        .map(|&(b, kind)| match kind {
+            shaders::Binding::Uniform => uniform_entry(b),
+            shaders::Binding::Read => storage_entry(b, true),
+            shaders::Binding::ReadWrite => storage_entry(b, false),
+        })
+        .collect()
+}
+
 /// Layout entry: binding `b`, a uniform buffer.
 pub fn uniform_entry(b: u32) -> wgpu::BindGroupLayoutEntry {
     wgpu::BindGroupLayoutEntry {
