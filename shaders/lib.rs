@@ -166,8 +166,11 @@ pub mod bindings {
     ];
 }
 
+/// A stage's bindings: `(binding, how the shader reads it)`, in binding order.
+pub type BindingTable = &'static [(u32, Binding)];
+
 /// Every stage's full source (each atomic variant), named, with its bindings table.
-pub fn shader_sources_with_bindings() -> Vec<(&'static str, String, &'static [(u32, Binding)])> {
+pub fn shader_sources_with_bindings() -> Vec<(&'static str, String, BindingTable)> {
     use bindings::*;
     shader_sources_for_validation()
         .into_iter()
