@@ -6,6 +6,7 @@
 //! pixels), motion directions turning across the frame (lens-motion), and `layers` depth layers.
 //! Classification is not timed (it is CPU work shared by both backends).
 
+use spreadlet::synth::ms_since;
 use std::fmt::Write as _;
 use std::time::Instant;
 
@@ -216,10 +217,6 @@ fn median(mut v: Vec<f64>) -> f64 {
     metrics::median(&mut v)
 }
 
-fn ms(t: Instant) -> f64 {
-    t.elapsed().as_secs_f64() * 1e3
-}
-
 /// Times of the CPU path on `frame`, one entry per run: (splat, integrate, composite, total).
 fn time_cpu(db: &PsfDatabase, frame: &Classified, config: &BenchConfig) -> Vec<[f64; 4]> {
     (0..config.runs)
@@ -233,16 +230,16 @@ fn time_cpu(db: &PsfDatabase, frame: &Classified, config: &BenchConfig) -> Vec<[
                     rotation: config.rotation,
                 },
             );
-            let s = ms(t);
+            let s = ms_since(t);
             let t = Instant::now();
             let layers = integrate(&stack, config.integrator);
-            let i = ms(t);
+            let i = ms_since(t);
             drop(stack);
             let t = Instant::now();
             let image = composite(&layers, &CompositeOptions::default());
-            let c = ms(t);
+            let c = ms_since(t);
             std::hint::black_box(image);
-            [s, i, c, ms(t0)]
+            [s, i, c, ms_since(t0)]
         })
         .collect()
 }

@@ -6,6 +6,7 @@
 //! plain per-pixel averages of 1 and 16 spp against the reference (SSIM as the project defines
 //! it). Writes the images (EXR), a side-by-side PNG, `summary.json` and prints a table.
 
+use spreadlet::synth::ms_since;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -93,19 +94,8 @@ pub fn cached_dbs(
     )?)
 }
 
-fn to_runtime(image: &scene::RgbaImage) -> RgbaImage {
-    RgbaImage {
-        width: image.width,
-        height: image.height,
-        pixels: image.pixels.clone(),
-    }
-}
-
 fn score(result: &RgbaImage, reference: &RgbaImage, ms: f64, what: &str) -> Result<DemoStep> {
-    let flat = |i: &RgbaImage| -> Vec<f32> { i.pixels.iter().flatten().copied().collect() };
-    let (a, b) = (flat(result), flat(reference));
-    let (scores, _) = metrics::score_rgb(&a, &b, result.width, result.height)
-        .context("scoring the demo images")?;
+    let scores = crate::score_images(result, reference).context("scoring the demo images")?;
     Ok(DemoStep {
         ssim: scores.ssim,
         psnr: scores.psnr_db.unwrap_or(f64::INFINITY),
@@ -168,11 +158,7 @@ pub fn run(options: &DemoOptions) -> Result<Vec<(String, DemoStep)>> {
     ));
     let g = scene::render_gbuffer(&scene, 16, &render)?;
     let frames = scene::render_stochastic(&scene, options.stochastic_spp.max(1), &render)?;
-    let reference = to_runtime(&scene::render_reference(
-        &scene,
-        options.reference_spp,
-        &render,
-    )?);
+    let reference = scene::render_reference(&scene, options.reference_spp, &render)?;
     g.write_exr(&out.join("gbuffer.exr"))?;
     reference.write_exr(&out.join("reference.exr"))?;
     std::fs::write(out.join("camera.json"), scene.camera_json())?;
@@ -205,7 +191,7 @@ pub fn run(options: &DemoOptions) -> Result<Vec<(String, DemoStep)>> {
     let mut steps = Vec::new();
     let t = Instant::now();
     let (synthesis, _) = synthesize(&gbuffer, &camera, &dbs, &synth_options)?;
-    let ms = t.elapsed().as_secs_f64() * 1e3;
+    let ms = ms_since(t);
     synthesis.write_exr(&out.join("synthesis.exr"))?;
     steps.push((
         "synthesis".to_string(),
@@ -219,7 +205,7 @@ pub fn run(options: &DemoOptions) -> Result<Vec<(String, DemoStep)>> {
 
     let t = Instant::now();
     let (recon, _) = reconstruct(&one_spp, &camera, &dbs, &synth_options)?;
-    let ms = t.elapsed().as_secs_f64() * 1e3;
+    let ms = ms_since(t);
     recon.write_exr(&out.join("reconstruct_1spp.exr"))?;
     steps.push((
         "reconstruct_1spp".to_string(),
@@ -232,15 +218,15 @@ pub fn run(options: &DemoOptions) -> Result<Vec<(String, DemoStep)>> {
     ));
 
     let t = Instant::now();
-    let avg1 = to_runtime(&one_spp.average());
-    let ms = t.elapsed().as_secs_f64() * 1e3;
+    let avg1 = one_spp.average();
+    let ms = ms_since(t);
     steps.push((
         "average_1spp".to_string(),
         score(&avg1, &reference, ms, "per-pixel average of 1 spp")?,
     ));
     let t = Instant::now();
-    let avg_n = to_runtime(&frames.average());
-    let ms = t.elapsed().as_secs_f64() * 1e3;
+    let avg_n = frames.average();
+    let ms = ms_since(t);
     let name = format!("average_{}spp", frames.spp);
     steps.push((
         name.clone(),
@@ -252,7 +238,7 @@ pub fn run(options: &DemoOptions) -> Result<Vec<(String, DemoStep)>> {
         )?,
     ));
 
-    let pinhole = to_runtime(&g.color_image());
+    let pinhole = g.color_image();
     write_strip(
         &out.join("side_by_side.png"),
         &[&pinhole, &synthesis, &recon, &avg1, &avg_n, &reference],

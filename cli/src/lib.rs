@@ -54,6 +54,17 @@ pub fn cached_dbs_with(
     spreadlet::databases::load(&request, &mut on_event).map(|loaded| loaded.set)
 }
 
+/// The scores of `image` against `reference` as the project reports them (SSIM, PSNR, FLIP,
+/// the frame edges' brightness; `DEVELOPERS.md`): the one scoring of images in the harness.
+pub fn score_images(
+    image: &formats::RgbaImage,
+    reference: &formats::RgbaImage,
+) -> Result<metrics::Scores, metrics::MetricsError> {
+    let a: &[f32] = bytemuck::cast_slice(&image.pixels);
+    let b: &[f32] = bytemuck::cast_slice(&reference.pixels);
+    Ok(metrics::score_rgb(a, b, image.width, image.height)?.0)
+}
+
 /// Prints what the database cache does (builds, rebuilds) on stderr.
 pub fn print_cache_event(event: spreadlet::dbcache::CacheEvent) {
     eprintln!("{event}");

@@ -9,6 +9,7 @@
 //! around a submission (which includes submission overhead: say which in reports). The
 //! benchmarks are interleaved (A B C A B C ...) and medians reported with their spread.
 
+use spreadlet::synth::ms_since;
 use std::time::Instant;
 
 use spreadlet::gpu::layout::MicroParams;
@@ -413,7 +414,7 @@ impl Timer {
         let t = Instant::now();
         ctx.queue.submit([enc.finish()]);
         ctx.wait("microbench")?;
-        let wall = t.elapsed().as_secs_f64() * 1e3;
+        let wall = ms_since(t);
         match queries {
             Some((_, _, staging)) => {
                 let raw = map_read_bytes(ctx, "micro timestamps", staging, 16)?;

@@ -8,6 +8,7 @@
 //! caller allows it, and then names what was ignored in [`PeerRun::ignored`]: the CLI errors
 //! by default (`--allow-unhandled-effects` runs it anyway), the study runs it and flags the row.
 
+use spreadlet::synth::ms_since;
 use std::time::Instant;
 
 use peers::{GBufferView, InputKind, PeerInput, PeerMethod, SampleView};
@@ -183,7 +184,7 @@ pub fn reconstruct_peer(
     };
     let t = Instant::now();
     let pixels = method.run(&PeerInput::Samples(view))?;
-    let ms = t.elapsed().as_secs_f64() * 1e3;
+    let ms = ms_since(t);
     Ok(PeerRun {
         image: RgbaImage {
             width: frames.width,

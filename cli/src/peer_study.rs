@@ -332,16 +332,9 @@ fn add_scene(
     Ok(())
 }
 
-fn flat(image: &RgbaImage) -> Vec<f32> {
-    image.pixels.iter().flatten().copied().collect()
-}
-
 /// The scores of `image` against `reference`.
 fn score(image: &RgbaImage, reference: &RgbaImage) -> Result<metrics::Scores> {
-    let (a, b) = (flat(image), flat(reference));
-    Ok(metrics::score_rgb(&a, &b, image.width, image.height)
-        .context("scoring")?
-        .0)
+    crate::score_images(image, reference).context("scoring")
 }
 
 /// Collects rows and their images for one scene.
@@ -407,14 +400,6 @@ fn first_samples(frames: &StochasticFrames, spp: usize) -> StochasticFrames {
     }
 }
 
-fn from_scene_image(image: &scene::RgbaImage) -> RgbaImage {
-    RgbaImage {
-        width: image.width,
-        height: image.height,
-        pixels: image.pixels.clone(),
-    }
-}
-
 type SceneResult = (Vec<StudyRow>, Vec<RgbaImage>, RgbaImage);
 
 /// Renders one built-in scene and runs every method on it.
@@ -433,11 +418,7 @@ fn study_scene(
     };
     let g = scene::render_gbuffer(&scene, 16, &render)?;
     let frames = scene::render_stochastic(&scene, config.max_spp(), &render)?;
-    let reference = from_scene_image(&scene::render_reference(
-        &scene,
-        config.reference_spp,
-        &render,
-    )?);
+    let reference = scene::render_reference(&scene, config.reference_spp, &render)?;
     let gbuffer = crate::gbuffer_of(&g)?;
 
     let mut acc = SceneRows {
@@ -485,7 +466,7 @@ fn study_scene(
     for spp in baselines {
         let sub = first_samples(&frames, spp);
         let t = Instant::now();
-        let image = from_scene_image(&sub.average());
+        let image = sub.average();
         let ms = ms_since(t);
         acc.push(
             "average",

@@ -477,9 +477,7 @@ fn median(mut v: Vec<f64>) -> f64 {
 }
 
 fn score(image: &RgbaImage, reference: &RgbaImage) -> Result<metrics::Scores> {
-    let a: &[f32] = bytemuck::cast_slice(&image.pixels);
-    let b: &[f32] = bytemuck::cast_slice(&reference.pixels);
-    Ok(metrics::score_rgb(a, b, image.width, image.height)?.0)
+    Ok(crate::score_images(image, reference)?)
 }
 
 /// Per-run times: total, classify, splat, integrate, composite (ms).

@@ -9,8 +9,7 @@
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
-/// Largest accepted image edge, pixels (guards against absurd allocations).
-pub const MAX_IMAGE_EDGE: u32 = 32_768;
+pub use crate::limits::MAX_IMAGE_EDGE;
 
 /// Errors of camera parsing and validation.
 #[derive(Debug, thiserror::Error)]

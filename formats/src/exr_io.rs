@@ -9,9 +9,7 @@ use exr::prelude::*;
 
 use crate::error::{Error, Result};
 
-/// Largest number of samples per channel a reader accepts (2^28 = 16384 x 16384, 1 GiB of f32):
-/// a small compressed file cannot make the reader allocate without bound.
-pub const MAX_CHANNEL_SAMPLES: usize = 1 << 28;
+pub use crate::limits::MAX_CHANNEL_SAMPLES;
 
 /// Channels read from a file: name to row-major samples (row 0 at the top).
 #[derive(Clone, Debug, Default, PartialEq)]

@@ -16,13 +16,7 @@
 
 use std::path::Path;
 
-/// Largest accepted pixel count (width x height): 8192 x 8192.
-pub const MAX_PIXELS: usize = 8192 * 8192;
-
-/// Largest accepted number of samples a file may declare (pixels x channels, over all its
-/// parts): 16 channels of the largest image. Bounds what the decoder allocates (4 GiB of f32)
-/// whatever a small file claims.
-pub const MAX_SAMPLES: usize = 16 * MAX_PIXELS;
+pub use crate::limits::{MAX_PIXELS, MAX_SAMPLES};
 
 /// Errors of reading G-buffers.
 #[derive(Debug, thiserror::Error)]

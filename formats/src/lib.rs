@@ -12,6 +12,7 @@
 //! - [`exr_io`]: named f32 channels in and out, with the header's size checked against the
 //!   file's before any pixel is decoded.
 //! - [`srgb_encode`]: the one sRGB transfer function (IEC 61966-2-1).
+//! - [`limits`]: every reader's size limits, in one place.
 //! - [`write_atomically`]: every output appears complete or not at all, with the permissions
 //!   any new file gets (0666 less the umask).
 
@@ -21,6 +22,7 @@ pub mod error;
 pub mod exr_io;
 pub mod gbuffer;
 pub mod image;
+pub mod limits;
 pub mod srgb;
 pub mod stochastic;
 

@@ -13,6 +13,7 @@
 
 pub mod error;
 pub mod exact;
+pub mod fft;
 pub mod plane;
 pub mod pyramid;
 pub mod stencil;

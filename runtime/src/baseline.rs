@@ -19,6 +19,7 @@
 //! spreadlets); with a dense database ([`cached_dense_dbs`]) every kernel is the pre-filtered
 //! PSF itself.
 
+use crate::synth::ms_since;
 use std::time::Instant;
 
 use poisson::{ExactIntegrator, Plane};
@@ -342,7 +343,7 @@ pub fn filter_plan(
     }
     stats.filtered = per_pixel.iter().filter(|p| p.is_some()).count();
     stats.copied = w * h - stats.filtered;
-    stats.classify_ms = t.elapsed().as_secs_f64() * 1e3;
+    stats.classify_ms = ms_since(t);
     Ok((per_pixel, stats))
 }
 
@@ -386,8 +387,8 @@ pub fn filter(
                 *px = px.map(|v| v.max(0.0));
             }
         });
-    stats.filter_ms = t.elapsed().as_secs_f64() * 1e3;
-    stats.total_ms = total.elapsed().as_secs_f64() * 1e3;
+    stats.filter_ms = ms_since(t);
+    stats.total_ms = ms_since(total);
     Ok((out, stats))
 }
 

@@ -4,6 +4,7 @@
 //! which device runs and which databases serve which effect, whoever calls it: the `spreadlet`
 //! command, the Python module or the Blender add-on.
 
+use crate::synth::ms_since;
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Instant;
@@ -345,7 +346,7 @@ impl Renderer {
             set,
             used: loaded.used,
             conditioning: loaded.conditioning,
-            ms: started.elapsed().as_secs_f64() * 1e3,
+            ms: ms_since(started),
         })
     }
 

@@ -1,6 +1,7 @@
 //! `spreadlet synth`: depth of field and motion blur from a pinhole G-buffer, one frame or a
 //! sequence, through [`spreadlet::Renderer`].
 
+use spreadlet::synth::ms_since;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -187,7 +188,7 @@ pub(crate) fn run(args: SynthArgs) -> Result<()> {
         let t = Instant::now();
         synth_frame(&args, job, &mut renderer)
             .with_context(|| format!("frame {}", job.input.display()))?;
-        frame_ms.push(t.elapsed().as_secs_f64() * 1e3);
+        frame_ms.push(ms_since(t));
     }
     if jobs.len() > 1 && !args.quiet {
         let first = frame_ms.first().copied().unwrap_or(0.0);
@@ -208,7 +209,7 @@ fn synth_frame(args: &SynthArgs, job: &FrameJob, renderer: &mut Renderer) -> Res
     let camera = load_camera(job.camera.as_deref(), &args.camera_flags)?;
     let t = Instant::now();
     let gbuffer = GBuffer::read_exr(&job.input, &args.channel_options()?)?;
-    let read_ms = t.elapsed().as_secs_f64() * 1e3;
+    let read_ms = ms_since(t);
     let options = args.synth_options();
     options.validate()?;
     if !METHODS.contains(&args.method.as_str()) {
@@ -228,7 +229,7 @@ fn synth_frame(args: &SynthArgs, job: &FrameJob, renderer: &mut Renderer) -> Res
         if let Some(p) = &job.preview {
             image.write_png(p)?;
         }
-        let write_ms = t.elapsed().as_secs_f64() * 1e3;
+        let write_ms = ms_since(t);
         if !args.quiet {
             eprintln!(
                 "{}x{} ({}{}): {} sparse, {} dense, {} copied, {} dropped; {} of {} layers; \
@@ -274,7 +275,7 @@ fn synth_frame(args: &SynthArgs, job: &FrameJob, renderer: &mut Renderer) -> Res
                     "read_input": read_ms,
                     "database": frame.database_ms,
                     "write_output": write_ms,
-                    "wall": started.elapsed().as_secs_f64() * 1e3,
+                    "wall": ms_since(started),
                 },
             });
             write_json(p, &json)?;
@@ -307,7 +308,7 @@ fn peer_frame(
 ) -> Result<()> {
     let t = Instant::now();
     let image = spreadlet_cli::peer::synthesize_peer(&args.method, &gbuffer.frame_only(), camera)?;
-    let ms = t.elapsed().as_secs_f64() * 1e3;
+    let ms = ms_since(t);
     image.write_exr(&job.out)?;
     if let Some(p) = &job.preview {
         image.write_png(p)?;

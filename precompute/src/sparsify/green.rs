@@ -16,62 +16,11 @@
 use std::f64::consts::PI;
 use std::sync::Arc;
 
+use poisson::fft::Fft2;
 use rustfft::num_complex::Complex64;
-use rustfft::{Fft, FftPlanner};
 
 /// Padding of the torus around the PSF image, pixels on each side.
 pub const PAD_PX: usize = 8;
-
-/// A 2D FFT of a fixed size (row-major, `w x h`).
-struct Fft2 {
-    w: usize,
-    h: usize,
-    row_fwd: Arc<dyn Fft<f64>>,
-    row_inv: Arc<dyn Fft<f64>>,
-    col_fwd: Arc<dyn Fft<f64>>,
-    col_inv: Arc<dyn Fft<f64>>,
-}
-
-impl Fft2 {
-    fn new(w: usize, h: usize) -> Self {
-        let mut p = FftPlanner::new();
-        Fft2 {
-            w,
-            h,
-            row_fwd: p.plan_fft_forward(w),
-            row_inv: p.plan_fft_inverse(w),
-            col_fwd: p.plan_fft_forward(h),
-            col_inv: p.plan_fft_inverse(h),
-        }
-    }
-
-    /// In-place transform; the inverse is scaled by 1 / (w h).
-    fn run(&self, data: &mut [Complex64], inverse: bool) {
-        let (w, h) = (self.w, self.h);
-        let (row, col) = if inverse {
-            (&self.row_inv, &self.col_inv)
-        } else {
-            (&self.row_fwd, &self.col_fwd)
-        };
-        row.process(data);
-        let mut column = vec![Complex64::new(0.0, 0.0); h];
-        for x in 0..w {
-            for y in 0..h {
-                column[y] = data[y * w + x];
-            }
-            col.process(&mut column);
-            for y in 0..h {
-                data[y * w + x] = column[y];
-            }
-        }
-        if inverse {
-            let s = 1.0 / (w * h) as f64;
-            for v in data.iter_mut() {
-                *v *= s;
-            }
-        }
-    }
-}
 
 /// `1 / lambda(k)` of the 5-point stencil on a `w x h` torus, 0 at k = 0.
 fn inverse_symbol(w: usize, h: usize) -> Vec<f64> {

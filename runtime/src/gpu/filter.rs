@@ -2,6 +2,7 @@
 //! [`crate::baseline::filter`]: the same per-pixel kernels ([`filter_plan`], on the CPU), then
 //! one invocation per output pixel gathers the input.
 
+use crate::synth::ms_since;
 use std::time::Instant;
 
 use super::layout::{FilterParams, FilterPixel, KernelEntry, NO_KERNEL};
@@ -174,7 +175,7 @@ impl GpuFilter {
         for (px, v) in image.pixels.iter_mut().zip(values.chunks_exact(4)) {
             *px = [v[0], v[1], v[2], v[3]];
         }
-        Ok((image, t.elapsed().as_secs_f64() * 1e3))
+        Ok((image, ms_since(t)))
     }
 }
 
@@ -198,6 +199,6 @@ pub fn filter_gpu(
         options.rotation,
     )?;
     stats.filter_ms = ms;
-    stats.total_ms = total.elapsed().as_secs_f64() * 1e3;
+    stats.total_ms = ms_since(total);
     Ok((image, stats))
 }

@@ -2,6 +2,7 @@
 //! the CPU (the same records both paths consume), then splat, integrate and composite on the
 //! GPU, with the same [`SynthStats`].
 
+use crate::synth::ms_since;
 use std::time::Instant;
 
 use super::{GpuContext, GpuError, GpuStageTimes, GpuSynthOptions, GpuSynthesizer};
@@ -40,7 +41,7 @@ pub fn synthesize_gpu(
         .map_err(|e| GpuError::Input(e.to_string()))?;
     let classified = match prepared {
         Prepared::PassThrough(image) => {
-            stats.times.total_ms = total.elapsed().as_secs_f64() * 1e3;
+            stats.times.total_ms = ms_since(total);
             return Ok((image, stats, GpuStageTimes::default()));
         }
         Prepared::Classified(classified) => classified,
@@ -49,7 +50,7 @@ pub fn synthesize_gpu(
     stats.times.splat_ms = gpu_times.splat_ms;
     stats.times.integrate_ms = gpu_times.integrate_ms;
     stats.times.composite_ms = gpu_times.composite_ms;
-    stats.times.total_ms = total.elapsed().as_secs_f64() * 1e3;
+    stats.times.total_ms = ms_since(total);
     Ok((image, stats, gpu_times))
 }
 
@@ -80,7 +81,7 @@ pub fn reconstruct_gpu(
     stats.times.splat_ms = gpu_times.splat_ms;
     stats.times.integrate_ms = gpu_times.integrate_ms;
     stats.times.composite_ms = gpu_times.composite_ms;
-    stats.times.total_ms = total.elapsed().as_secs_f64() * 1e3;
+    stats.times.total_ms = ms_since(total);
     Ok((image, stats, gpu_times))
 }
 

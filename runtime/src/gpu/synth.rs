@@ -8,6 +8,7 @@
 //! Frame buffers (records, Laplacian and direct planes, pyramid levels, output, staging) are
 //! created for the first frame of a size and reused by every later frame of that size.
 
+use crate::synth::ms_since;
 use std::time::Instant;
 
 use poisson::pyramid::PAD;
@@ -350,8 +351,8 @@ impl GpuSynthesizer {
         if times.gpu_timestamps {
             self.read_timestamps(&mut times)?;
         }
-        times.readback_ms = ms(t);
-        times.total_ms = ms(t0);
+        times.readback_ms = ms_since(t);
+        times.total_ms = ms_since(t0);
         Ok((
             RgbaImage {
                 width: w,
@@ -488,7 +489,7 @@ impl GpuSynthesizer {
                 .write_buffer(&fb.records, 0, bytemuck::cast_slice(records));
         }
         let mut times = GpuStageTimes {
-            upload_ms: ms(t_upload),
+            upload_ms: ms_since(t_upload),
             ..Default::default()
         };
         // GPU timestamps only when every stage runs in one submission.
@@ -508,7 +509,7 @@ impl GpuSynthesizer {
             |enc: wgpu::CommandEncoder, stage: &'static str, t: Instant| -> Result<f64, GpuError> {
                 ctx.queue.submit([enc.finish()]);
                 ctx.wait(stage)?;
-                Ok(ms(t))
+                Ok(ms_since(t))
             };
         let mut enc = new_encoder();
         for (k, chunk) in fb.chunks.iter().enumerate() {
@@ -589,8 +590,4 @@ impl GpuSynthesizer {
         times.composite_ms = span(2);
         Ok(())
     }
-}
-
-fn ms(t: Instant) -> f64 {
-    t.elapsed().as_secs_f64() * 1e3
 }
