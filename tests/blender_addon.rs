@@ -27,7 +27,13 @@ fn the_addon_adds_depth_of_field_and_motion_blur_in_blender() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let out = tempfile::tempdir().expect("temp dir");
     let run = Command::new(&blender)
-        .args(["-b", "--factory-startup", "--python-exit-code", "1", "--python"])
+        .args([
+            "-b",
+            "--factory-startup",
+            "--python-exit-code",
+            "1",
+            "--python",
+        ])
         .arg(root.join("blender/tests/test_addon.py"))
         .arg("--")
         .arg(out.path())

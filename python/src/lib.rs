@@ -1,0 +1,346 @@
+//! The `spreadlet` Python module: the renderer with numpy arrays in and out (float32, linear
+//! premultiplied RGBA, shape (height, width, channels)). Every error the library reports is a
+//! `ValueError` with its message; nothing panics across the boundary. Long calls release the
+//! GIL.
+
+use std::path::PathBuf;
+
+use numpy::{
+    PyArray2, PyArray3, PyArrayMethods, PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods,
+};
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+fn value_error(e: impl std::fmt::Display) -> PyErr {
+    PyValueError::new_err(e.to_string())
+}
+
+/// The lens and shutter (`camera.json`): millimetres for the lens and sensor, scene units for
+/// the focus distance, frames for the shutter.
+#[pyclass(name = "Camera", module = "spreadlet")]
+#[derive(Clone)]
+struct PyCamera {
+    inner: renderer::Camera,
+}
+
+#[pymethods]
+impl PyCamera {
+    #[new]
+    #[pyo3(signature = (width, height, focal_length_mm, sensor_width_mm, f_stop=None, focus_distance=None, aperture_blades=0, shutter_frames=0.0, scene_unit_mm=1000.0))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        width: u32,
+        height: u32,
+        focal_length_mm: f64,
+        sensor_width_mm: f64,
+        f_stop: Option<f64>,
+        focus_distance: Option<f64>,
+        aperture_blades: u32,
+        shutter_frames: f64,
+        scene_unit_mm: f64,
+    ) -> PyResult<Self> {
+        let inner = renderer::Camera {
+            width,
+            height,
+            focal_length_mm,
+            sensor_width_mm,
+            f_stop,
+            focus_distance,
+            aperture_blades,
+            shutter_frames,
+            scene_unit_mm,
+        };
+        inner.validate().map_err(value_error)?;
+        Ok(Self { inner })
+    }
+
+    /// Reads and validates a `camera.json`.
+    #[staticmethod]
+    fn from_json(path: PathBuf) -> PyResult<Self> {
+        let inner = renderer::Camera::from_json_file(&path).map_err(value_error)?;
+        Ok(Self { inner })
+    }
+
+    #[getter]
+    fn width(&self) -> u32 {
+        self.inner.width
+    }
+    #[getter]
+    fn height(&self) -> u32 {
+        self.inner.height
+    }
+    #[getter]
+    fn focal_length_mm(&self) -> f64 {
+        self.inner.focal_length_mm
+    }
+    #[getter]
+    fn sensor_width_mm(&self) -> f64 {
+        self.inner.sensor_width_mm
+    }
+    #[getter]
+    fn f_stop(&self) -> Option<f64> {
+        self.inner.f_stop
+    }
+    #[getter]
+    fn focus_distance(&self) -> Option<f64> {
+        self.inner.focus_distance
+    }
+    #[getter]
+    fn aperture_blades(&self) -> u32 {
+        self.inner.aperture_blades
+    }
+    #[getter]
+    fn shutter_frames(&self) -> f64 {
+        self.inner.shutter_frames
+    }
+
+    /// The signed circle-of-confusion radius in pixels at planar `depth` (scene units); 0 for
+    /// a pinhole.
+    fn signed_coc_px(&self, depth: f64) -> f64 {
+        self.inner
+            .thin_lens()
+            .map_or(0.0, |l| l.signed_coc_px(depth))
+    }
+
+    fn __repr__(&self) -> String {
+        format!("{:?}", self.inner)
+    }
+}
+
+/// A G-buffer read from an EXR: `color` (h, w, 4), `depth` (h, w) or None, `motion` (h, w, 2)
+/// forward, pixels per frame, x right, y down, or None.
+#[pyclass(name = "GBuffer", module = "spreadlet")]
+struct PyGBuffer {
+    #[pyo3(get)]
+    color: Py<PyArray3<f32>>,
+    #[pyo3(get)]
+    depth: Option<Py<PyArray2<f32>>>,
+    #[pyo3(get)]
+    motion: Option<Py<PyArray3<f32>>>,
+}
+
+fn rgba_array<'py>(py: Python<'py>, image: &formats::RgbaImage) -> Bound<'py, PyArray3<f32>> {
+    let flat: Vec<f32> = image.pixels.iter().flatten().copied().collect();
+    numpy::PyArray1::from_vec(py, flat)
+        .reshape([image.height, image.width, 4])
+        .expect("the pixels fill the shape")
+}
+
+/// Reads a pinhole G-buffer (Blender multilayer or plain channels) or any RGBA EXR.
+#[pyfunction]
+fn read_gbuffer(py: Python<'_>, path: PathBuf) -> PyResult<PyGBuffer> {
+    let g = py
+        .allow_threads(|| renderer::GBuffer::read_exr(&path, &Default::default()))
+        .map_err(value_error)?;
+    let g = if g.overscan.is_none() {
+        g
+    } else {
+        g.frame_only()
+    };
+    let (w, h) = (g.width, g.height);
+    let color = rgba_array(
+        py,
+        &formats::RgbaImage {
+            width: w,
+            height: h,
+            pixels: g.color.clone(),
+        },
+    );
+    let depth = g.depth.as_ref().map(|d| {
+        numpy::PyArray1::from_vec(py, d.clone())
+            .reshape([h, w])
+            .expect("shape")
+            .unbind()
+    });
+    let motion = g.motion.as_ref().map(|m| {
+        let flat: Vec<f32> = m.iter().flatten().copied().collect();
+        numpy::PyArray1::from_vec(py, flat)
+            .reshape([h, w, 2])
+            .expect("shape")
+            .unbind()
+    });
+    Ok(PyGBuffer {
+        color: color.unbind(),
+        depth,
+        motion,
+    })
+}
+
+/// The renderer: keeps its databases and GPU pipelines between calls.
+#[pyclass(name = "Renderer", module = "spreadlet", unsendable)]
+struct PyRenderer {
+    inner: renderer::Renderer,
+}
+
+fn backend_of(name: &str) -> PyResult<renderer::Backend> {
+    match name {
+        "auto" => Ok(renderer::Backend::Auto),
+        "gpu" => Ok(renderer::Backend::Gpu),
+        "cpu" => Ok(renderer::Backend::Cpu),
+        other => Err(value_error(format!(
+            "backend must be auto, gpu or cpu, not {other:?}"
+        ))),
+    }
+}
+
+#[pymethods]
+impl PyRenderer {
+    /// `backend`: auto, gpu or cpu. Databases come from `db` (a file) or from the cache
+    /// (`$SPREADLET_CACHE`, else `~/.cache/spreadlet`), built with `db_profile` when missing.
+    #[new]
+    #[pyo3(signature = (backend="auto", db=None, db_profile="quick"))]
+    fn new(backend: &str, db: Option<PathBuf>, db_profile: &str) -> PyResult<Self> {
+        let databases = match db {
+            Some(path) => renderer::DbSource::File(path),
+            None => renderer::DbSource::Cache {
+                dir: renderer::dbcache::cache_dir(),
+                profile: db_profile
+                    .parse::<precompute::Profile>()
+                    .map_err(value_error)?,
+            },
+        };
+        let inner = renderer::Renderer::new(renderer::RendererOptions {
+            backend: backend_of(backend)?,
+            databases,
+            ..Default::default()
+        })
+        .map_err(value_error)?;
+        Ok(Self { inner })
+    }
+
+    /// How many times databases were loaded (a second frame with the same needs loads none).
+    #[getter]
+    fn database_loads(&self) -> usize {
+        self.inner.database_loads()
+    }
+
+    /// Depth of field and motion blur from a pinhole G-buffer: `color` (h, w, 4) float32,
+    /// `depth` (h, w) planar, scene units, `motion` (h, w, 2) forward, pixels per frame, x
+    /// right, y down (or None for a still frame). Returns the image (h, w, 4), and with
+    /// `stats=True` also a dict of what was done.
+    #[pyo3(signature = (color, depth, motion, camera, stats=false))]
+    fn synthesize<'py>(
+        &mut self,
+        py: Python<'py>,
+        color: PyReadonlyArray3<'py, f32>,
+        depth: Option<PyReadonlyArray2<'py, f32>>,
+        motion: Option<PyReadonlyArray3<'py, f32>>,
+        camera: &PyCamera,
+        stats: bool,
+    ) -> PyResult<PyObject> {
+        let shape = color.shape();
+        let (h, w) = (shape[0], shape[1]);
+        if shape[2] != 4 {
+            return Err(value_error(format!(
+                "color must have shape (height, width, 4), got {shape:?}"
+            )));
+        }
+        let pixels: Vec<[f32; 4]> = color
+            .as_array()
+            .as_standard_layout()
+            .as_slice()
+            .ok_or_else(|| value_error("color is not contiguous"))?
+            .chunks_exact(4)
+            .map(|c| [c[0], c[1], c[2], c[3]])
+            .collect();
+        let depth = match depth {
+            Some(d) => {
+                if d.shape() != [h, w] {
+                    return Err(value_error(format!(
+                        "depth must have shape ({h}, {w}), got {:?}",
+                        d.shape()
+                    )));
+                }
+                Some(d.as_array().iter().copied().collect::<Vec<f32>>())
+            }
+            None => None,
+        };
+        let motion = match motion {
+            Some(m) => {
+                if m.shape() != [h, w, 2] {
+                    return Err(value_error(format!(
+                        "motion must have shape ({h}, {w}, 2), got {:?}",
+                        m.shape()
+                    )));
+                }
+                let flat: Vec<f32> = m.as_array().iter().copied().collect();
+                Some(
+                    flat.chunks_exact(2)
+                        .map(|c| [c[0], c[1]])
+                        .collect::<Vec<[f32; 2]>>(),
+                )
+            }
+            None => None,
+        };
+        let gbuffer =
+            renderer::GBuffer::from_planes(w, h, pixels, depth, motion).map_err(value_error)?;
+        let camera = camera.inner.clone();
+        let renderer = &mut self.inner;
+        let frame = py
+            .allow_threads(|| {
+                renderer.synthesize(&gbuffer, &camera, &renderer::SynthOptions::default())
+            })
+            .map_err(value_error)?;
+        let image = rgba_array(py, &frame.image);
+        if !stats {
+            return Ok(image.into_any().unbind());
+        }
+        let d = PyDict::new(py);
+        d.set_item("device", &frame.device)?;
+        d.set_item("defocus", frame.stats.defocus)?;
+        d.set_item("motion", frame.stats.motion)?;
+        d.set_item("layers_used", frame.stats.layers_used)?;
+        d.set_item("sparse", frame.stats.counts.sparse)?;
+        d.set_item("dense", frame.stats.counts.dense)?;
+        d.set_item("copied", frame.stats.counts.copied)?;
+        d.set_item("total_ms", frame.stats.times.total_ms)?;
+        d.set_item("databases_loaded", frame.databases.len())?;
+        Ok((image, d).into_pyobject(py)?.into_any().unbind())
+    }
+}
+
+/// SSIM, PSNR (dB, None when identical), FLIP mean and 99th percentile of `a` against
+/// `reference`, both (h, w, 4) or (h, w, 3) float32 linear, as the project reports them.
+#[pyfunction]
+fn compare<'py>(
+    py: Python<'py>,
+    a: PyReadonlyArray3<'py, f32>,
+    reference: PyReadonlyArray3<'py, f32>,
+) -> PyResult<Bound<'py, PyDict>> {
+    if a.shape() != reference.shape() {
+        return Err(value_error(format!(
+            "the images differ in shape: {:?} and {:?}",
+            a.shape(),
+            reference.shape()
+        )));
+    }
+    let (h, w, c) = (a.shape()[0], a.shape()[1], a.shape()[2]);
+    if c != 4 {
+        return Err(value_error(format!(
+            "images must have shape (height, width, 4), got {:?}",
+            a.shape()
+        )));
+    }
+    let fa: Vec<f32> = a.as_array().iter().copied().collect();
+    let fb: Vec<f32> = reference.as_array().iter().copied().collect();
+    let (scores, _) = py
+        .allow_threads(|| metrics::score_rgb(&fa, &fb, w, h))
+        .map_err(value_error)?;
+    let d = PyDict::new(py);
+    d.set_item("ssim", scores.ssim)?;
+    d.set_item("psnr_db", scores.psnr_db)?;
+    d.set_item("flip_mean", scores.flip_mean)?;
+    d.set_item("flip_p99", scores.flip_p99)?;
+    Ok(d)
+}
+
+#[pymodule]
+fn spreadlet(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PyCamera>()?;
+    m.add_class::<PyGBuffer>()?;
+    m.add_class::<PyRenderer>()?;
+    m.add_function(wrap_pyfunction!(read_gbuffer, m)?)?;
+    m.add_function(wrap_pyfunction!(compare, m)?)?;
+    Ok(())
+}

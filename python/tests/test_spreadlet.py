@@ -1,0 +1,85 @@
+"""The Python module against the command line and against bad input.
+
+Run from the repository root after `pip install ./python`:
+    SPREADLET_BIN=target/release/spreadlet SPREADLET_SCENE_BIN=target/release/spreadlet-scene \
+        python -m pytest python/tests
+"""
+
+import os
+import subprocess
+
+import numpy as np
+import pytest
+
+import spreadlet
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+
+def binary(env, name):
+    path = os.environ.get(env) or os.path.join(ROOT, "target", "release", name)
+    if not os.path.exists(path):
+        pytest.fail(f"{name} not found at {path}: set {env} or build it")
+    return path
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory):
+    """A built-in scene with depth of field and motion blur, as a G-buffer and its camera."""
+    d = tmp_path_factory.mktemp("scene")
+    g, cam = str(d / "g.exr"), str(d / "camera.json")
+    subprocess.run([binary("SPREADLET_SCENE_BIN", "spreadlet-scene"), "render", "crossing",
+                    "--width", "64", "--gbuffer", g, "--aa", "4", "--camera-out", cam, "--quiet"],
+                   check=True)
+    return d, g, cam
+
+
+def test_the_module_writes_what_the_cli_writes(scene):
+    d, g, cam = scene
+    out = str(d / "cli.exr")
+    subprocess.run([binary("SPREADLET_BIN", "spreadlet"), "synth", "--input", g, "--camera", cam,
+                    "--out", out, "--backend", "cpu", "-q"], check=True)
+    gbuffer = spreadlet.read_gbuffer(g)
+    camera = spreadlet.Camera.from_json(cam)
+    r = spreadlet.Renderer(backend="cpu")
+    image = r.synthesize(gbuffer.color, gbuffer.depth, gbuffer.motion, camera)
+    cli = spreadlet.read_gbuffer(out).color
+    assert image.dtype == np.float32 and image.shape == (camera.height, camera.width, 4)
+    assert np.array_equal(image, cli), "the module and the CLI differ"
+    assert not np.array_equal(image, gbuffer.color), "nothing was blurred"
+
+
+def test_a_second_call_reuses_the_databases(scene):
+    _, g, cam = scene
+    gbuffer = spreadlet.read_gbuffer(g)
+    camera = spreadlet.Camera.from_json(cam)
+    r = spreadlet.Renderer(backend="cpu")
+    first, stats1 = r.synthesize(gbuffer.color, gbuffer.depth, gbuffer.motion, camera, stats=True)
+    second, stats2 = r.synthesize(gbuffer.color, gbuffer.depth, gbuffer.motion, camera, stats=True)
+    assert stats1["databases_loaded"] > 0 and stats2["databases_loaded"] == 0
+    assert r.database_loads == 1
+    assert stats1["defocus"] and stats1["motion"]
+    assert np.array_equal(first, second)
+    scores = spreadlet.compare(first, second)
+    assert scores["ssim"] == pytest.approx(1.0) and scores["psnr_db"] is None
+
+
+def test_bad_input_raises_value_error(scene):
+    _, g, cam = scene
+    gbuffer = spreadlet.read_gbuffer(g)
+    camera = spreadlet.Camera.from_json(cam)
+    r = spreadlet.Renderer(backend="cpu")
+    with pytest.raises(ValueError, match="shape"):
+        r.synthesize(gbuffer.color[:, :, :3].copy(), gbuffer.depth, gbuffer.motion, camera)
+    with pytest.raises(ValueError, match="depth"):
+        r.synthesize(gbuffer.color, gbuffer.depth[:-1].copy(), gbuffer.motion, camera)
+    bad = gbuffer.depth.copy()
+    bad[3, 5] = np.nan
+    with pytest.raises(ValueError, match="(?i)depth"):
+        r.synthesize(gbuffer.color, bad, gbuffer.motion, camera)
+    with pytest.raises(ValueError, match="f_stop"):
+        spreadlet.Camera(64, 64, 50.0, 36.0, f_stop=-1.0, focus_distance=1.0)
+    with pytest.raises(ValueError, match="backend"):
+        spreadlet.Renderer(backend="quantum")
+    with pytest.raises(ValueError):
+        spreadlet.read_gbuffer(os.path.join(ROOT, "no-such-file.exr"))
