@@ -458,14 +458,15 @@ impl Renderer {
         camera: &Camera,
         options: &baseline::FilterOptions,
     ) -> Result<FilterFrame, Error> {
-        let effects = Effects::of(camera, &gbuffer.frame_only());
+        // The filter knows no overscan: it sees the frame alone.
+        let frame_only = gbuffer.frame_only();
+        let effects = Effects::of(camera, &frame_only);
         let selected = self.databases_for(effects, camera)?;
         let (dbs, databases) = (selected.set, selected.used);
         let kernels = match &dbs.combined {
             Some(db) => baseline::DenseKernels::from_db(db),
             None => baseline::DenseKernels::default(),
         };
-        let frame_only = gbuffer.frame_only();
         match self.device()? {
             #[cfg(feature = "gpu")]
             Device::Gpu(gpu) => {
