@@ -710,7 +710,7 @@ pub fn run_to_folder(
             &cfg,
             &spreadlet::dbcache::cache_dir(),
             true,
-            &mut crate::print_cache_event,
+            &crate::print_cache_event,
         )?;
         // As `DbSet` hands it to the pipeline: spreadlets in row order.
         Ok(db.into_spreadlets_in_row_order())

@@ -46,12 +46,13 @@ pub fn cached_dbs_with(
         transform: keep_sparse.then_some(&strip as &dyn Fn(_) -> _),
         progress,
     };
-    let mut on_event = |e: dbcache::CacheEvent| {
-        if progress {
+    let on_event = |e: dbcache::CacheEvent| {
+        // The builder's own bar shows progress.
+        if progress && e.fraction().is_none() {
             eprintln!("{e}");
         }
     };
-    spreadlet::databases::load(&request, &mut on_event).map(|loaded| loaded.set)
+    spreadlet::databases::load(&request, &on_event).map(|loaded| loaded.set)
 }
 
 /// The scores of `image` against `reference` as the project reports them (SSIM, PSNR, FLIP,
@@ -65,9 +66,12 @@ pub fn score_images(
     Ok(metrics::score_rgb(a, b, image.width, image.height)?.0)
 }
 
-/// Prints what the database cache does (builds, rebuilds) on stderr.
+/// Prints what the database cache does (builds, rebuilds) on stderr; a build's progress is
+/// the builder's own bar.
 pub fn print_cache_event(event: spreadlet::dbcache::CacheEvent) {
-    eprintln!("{event}");
+    if event.fraction().is_none() {
+        eprintln!("{event}");
+    }
 }
 
 /// The renderer's G-buffer of what the scene renderer made (colour, planar depth, forward

@@ -38,7 +38,8 @@ pub struct Sample {
 }
 
 impl Sample {
-    fn to_channels(self) -> [f32; 12] {
+    /// The sample as its channels, in [`CHANNELS`] order.
+    pub fn to_channels(self) -> [f32; 12] {
         [
             self.color[0],
             self.color[1],
@@ -55,7 +56,8 @@ impl Sample {
         ]
     }
 
-    fn from_channels(c: [f32; 12]) -> Self {
+    /// A sample from its channels, in [`CHANNELS`] order.
+    pub fn from_channels(c: [f32; 12]) -> Self {
         Self {
             color: [c[0], c[1], c[2], c[3]],
             depth: c[4],

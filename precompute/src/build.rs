@@ -372,6 +372,22 @@ pub fn build_database(
     build_database_part(cfg, None, progress)
 }
 
+/// Told how many of a build's PSFs are done: `(done, total)`, called from the worker threads
+/// whenever `done` reaches another percent of `total` (and at `total`). Calls may come from
+/// several threads at once, so two may arrive out of order.
+pub type PsfProgress<'a> = &'a (dyn Fn(u32, u32) + Sync);
+
+/// [`build_database_part`] that also reports its progress to `on_psf` (for callers that show
+/// progress their own way: a GUI, a Python callback).
+pub fn build_database_reporting(
+    cfg: &BuildConfig,
+    shard: Option<(u32, u32)>,
+    progress: bool,
+    on_psf: Option<PsfProgress<'_>>,
+) -> Result<(PsfDatabase, BuildReport), PrecomputeError> {
+    build_database_impl(cfg, shard, progress, on_psf)
+}
+
 /// Builds part `k` of `n` of the database `cfg` describes (`shard = Some((k, n))`), or the
 /// whole database (`None`). A part holds the contiguous PSF range of [`psf_db::ShardRange`],
 /// each PSF traced with the seed it has in a whole build, so [`psf_db::merge_shards`] of all
@@ -380,6 +396,15 @@ pub fn build_database_part(
     cfg: &BuildConfig,
     shard: Option<(u32, u32)>,
     progress: bool,
+) -> Result<(PsfDatabase, BuildReport), PrecomputeError> {
+    build_database_impl(cfg, shard, progress, None)
+}
+
+fn build_database_impl(
+    cfg: &BuildConfig,
+    shard: Option<(u32, u32)>,
+    progress: bool,
+    on_psf: Option<PsfProgress<'_>>,
 ) -> Result<(PsfDatabase, BuildReport), PrecomputeError> {
     let start = Instant::now();
     let plan = BuildPlan::new(cfg)?;
@@ -401,11 +426,20 @@ pub fn build_database_part(
     } else {
         ProgressBar::hidden()
     };
+    let done = std::sync::atomic::AtomicU32::new(0);
+    // Report at every percent, not every PSF: a callback may cost a lock or an interpreter.
+    let step = (n / 100).max(1);
     let results: Vec<Result<ProcessedPsf, PrecomputeError>> = indices
         .into_par_iter()
         .map(|i| {
             let r = plan.process(i);
             bar.inc(1);
+            let finished = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+            if let Some(report) = on_psf {
+                if finished.is_multiple_of(step) || finished == n {
+                    report(finished, n);
+                }
+            }
             r
         })
         .collect();

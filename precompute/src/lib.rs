@@ -26,7 +26,7 @@ pub mod sampler;
 pub mod sparsify;
 pub mod trace;
 
-pub use build::{build_database, BuildPlan, ProcessedPsf};
+pub use build::{build_database, build_database_reporting, BuildPlan, ProcessedPsf, PsfProgress};
 pub use config::{BuildConfig, LensOptions, Profile, ProfileSpec};
 pub use error::PrecomputeError;
 pub use image::PsfImage;

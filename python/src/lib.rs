@@ -1,12 +1,14 @@
 //! The `spreadlet` Python module: the renderer with numpy arrays in and out (float32, linear
 //! premultiplied RGBA, shape (height, width, channels)). Every error the library reports is a
 //! `ValueError` with its message; nothing panics across the boundary. Long calls release the
-//! GIL.
+//! GIL and tell an optional `progress(message, fraction)` callback what they are doing.
 
 use std::path::PathBuf;
+use std::sync::{Arc, Mutex};
 
 use numpy::{
-    PyArray2, PyArray3, PyArrayMethods, PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods,
+    PyArray2, PyArray3, PyArray4, PyArrayMethods, PyReadonlyArray2, PyReadonlyArray3,
+    PyReadonlyArray4, PyUntypedArrayMethods,
 };
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -171,6 +173,69 @@ fn read_gbuffer(py: Python<'_>, path: PathBuf) -> PyResult<PyGBuffer> {
 #[pyclass(name = "Renderer", module = "spreadlet", unsendable)]
 struct PyRenderer {
     inner: renderer::Renderer,
+    progress: Arc<ProgressSlot>,
+}
+
+/// The progress callback of the call in flight, and the first exception it raised. Locked only
+/// while the GIL is held (the GIL first, then the lock), so the builder's threads and the
+/// caller cannot deadlock.
+#[derive(Default)]
+struct ProgressSlot {
+    callback: Mutex<Option<Py<PyAny>>>,
+    raised: Mutex<Option<PyErr>>,
+}
+
+impl ProgressSlot {
+    /// Tells the callback of `event`: `(message, fraction)`, the fraction in [0, 1] for a
+    /// database build's progress and None for other news.
+    fn tell(&self, event: &renderer::Event) {
+        Python::with_gil(|py| {
+            let callback = match self.callback.lock() {
+                Ok(slot) => slot.as_ref().map(|c| c.clone_ref(py)),
+                Err(_) => None,
+            };
+            let Some(callback) = callback else { return };
+            let fraction = match event {
+                renderer::Event::Cache(c) => c.fraction(),
+                _ => None,
+            };
+            if let Err(err) = callback.call1(py, (event.to_string(), fraction)) {
+                if let Ok(mut raised) = self.raised.lock() {
+                    raised.get_or_insert(err);
+                }
+            }
+        });
+    }
+
+    /// Runs `work` with the GIL released and `callback` told of its events; an exception the
+    /// callback raised is raised after `work` ends.
+    fn around<T: Send>(
+        &self,
+        py: Python<'_>,
+        callback: Option<Py<PyAny>>,
+        work: impl FnOnce() -> Result<T, renderer::Error> + Send,
+    ) -> PyResult<T> {
+        if let Some(c) = &callback {
+            if !c.bind(py).is_callable() {
+                return Err(value_error("progress must be callable"));
+            }
+        }
+        set(&self.callback, callback);
+        set(&self.raised, None);
+        let result = py.allow_threads(work);
+        set(&self.callback, None);
+        if let Some(err) = self.raised.lock().ok().and_then(|mut r| r.take()) {
+            return Err(err);
+        }
+        result.map_err(value_error)
+    }
+}
+
+fn set<T>(slot: &Mutex<Option<T>>, value: Option<T>) {
+    match slot.lock() {
+        Ok(mut guard) => *guard = value,
+        Err(poisoned) => *poisoned.into_inner() = value,
+    }
 }
 
 fn backend_of(name: &str) -> PyResult<renderer::Backend> {
@@ -186,27 +251,36 @@ fn backend_of(name: &str) -> PyResult<renderer::Backend> {
 
 #[pymethods]
 impl PyRenderer {
-    /// `backend`: auto, gpu or cpu. Databases come from `db` (a file) or from the cache
-    /// (`$SPREADLET_CACHE`, else `~/.cache/spreadlet`), built with `db_profile` when missing.
+    /// `backend`: auto, gpu or cpu. Databases come from `db` (a file) or from the cache folder
+    /// `cache_dir` (default `$SPREADLET_CACHE`, else `~/.cache/spreadlet`), built with
+    /// `db_profile` when missing.
     #[new]
-    #[pyo3(signature = (backend="auto", db=None, db_profile="quick"))]
-    fn new(backend: &str, db: Option<PathBuf>, db_profile: &str) -> PyResult<Self> {
+    #[pyo3(signature = (backend="auto", db=None, db_profile="quick", cache_dir=None))]
+    fn new(
+        backend: &str,
+        db: Option<PathBuf>,
+        db_profile: &str,
+        cache_dir: Option<PathBuf>,
+    ) -> PyResult<Self> {
         let databases = match db {
             Some(path) => renderer::DbSource::File(path),
             None => renderer::DbSource::Cache {
-                dir: renderer::dbcache::cache_dir(),
+                dir: cache_dir.unwrap_or_else(renderer::dbcache::cache_dir),
                 profile: db_profile
                     .parse::<precompute::Profile>()
                     .map_err(value_error)?,
             },
         };
+        let progress = Arc::new(ProgressSlot::default());
+        let sink = progress.clone();
         let inner = renderer::Renderer::new(renderer::RendererOptions {
             backend: backend_of(backend)?,
             databases,
+            on_event: Some(Arc::new(move |e: &renderer::Event| sink.tell(e))),
             ..Default::default()
         })
         .map_err(value_error)?;
-        Ok(Self { inner })
+        Ok(Self { inner, progress })
     }
 
     /// How many times databases were loaded (a second frame with the same needs loads none).
@@ -218,8 +292,10 @@ impl PyRenderer {
     /// Depth of field and motion blur from a pinhole G-buffer: `color` (h, w, 4) float32,
     /// `depth` (h, w) planar, scene units, `motion` (h, w, 2) forward, pixels per frame, x
     /// right, y down (or None for a still frame). Returns the image (h, w, 4), and with
-    /// `stats=True` also a dict of what was done.
-    #[pyo3(signature = (color, depth, motion, camera, stats=false))]
+    /// `stats=True` also a dict of what was done. `progress(message, fraction)` hears of
+    /// database builds (fraction in [0, 1]) and fallbacks (fraction None).
+    #[pyo3(signature = (color, depth, motion, camera, stats=false, progress=None))]
+    #[allow(clippy::too_many_arguments)]
     fn synthesize<'py>(
         &mut self,
         py: Python<'py>,
@@ -228,6 +304,7 @@ impl PyRenderer {
         motion: Option<PyReadonlyArray3<'py, f32>>,
         camera: &PyCamera,
         stats: bool,
+        progress: Option<Py<PyAny>>,
     ) -> PyResult<PyObject> {
         let shape = color.shape();
         let (h, w) = (shape[0], shape[1]);
@@ -277,27 +354,122 @@ impl PyRenderer {
             renderer::GBuffer::from_planes(w, h, pixels, depth, motion).map_err(value_error)?;
         let camera = camera.inner.clone();
         let renderer = &mut self.inner;
-        let frame = py
-            .allow_threads(|| {
-                renderer.synthesize(&gbuffer, &camera, &renderer::SynthOptions::default())
-            })
-            .map_err(value_error)?;
-        let image = rgba_array(py, &frame.image);
-        if !stats {
-            return Ok(image.into_any().unbind());
-        }
-        let d = PyDict::new(py);
-        d.set_item("device", &frame.device)?;
-        d.set_item("defocus", frame.stats.defocus)?;
-        d.set_item("motion", frame.stats.motion)?;
-        d.set_item("layers_used", frame.stats.layers_used)?;
-        d.set_item("sparse", frame.stats.counts.sparse)?;
-        d.set_item("dense", frame.stats.counts.dense)?;
-        d.set_item("copied", frame.stats.counts.copied)?;
-        d.set_item("total_ms", frame.stats.times.total_ms)?;
-        d.set_item("databases_loaded", frame.databases.len())?;
-        Ok((image, d).into_pyobject(py)?.into_any().unbind())
+        let frame = self.progress.around(py, progress, || {
+            renderer.synthesize(&gbuffer, &camera, &renderer::SynthOptions::default())
+        })?;
+        frame_result(py, &frame, stats)
     }
+
+    /// Depth of field and motion blur reconstructed from stochastic frames
+    /// (`docs/STOCHASTIC.md`): `frames` is an array (h, w, spp, 12) float32 whose last axis
+    /// holds a sample's channels in `spreadlet.SAMPLE_CHANNELS` order (what `read_frames`
+    /// returns), or the path of a stochastic-frames EXR. Returns as `synthesize` does.
+    #[pyo3(signature = (frames, camera, stats=false, progress=None))]
+    fn reconstruct<'py>(
+        &mut self,
+        py: Python<'py>,
+        frames: &Bound<'py, PyAny>,
+        camera: &PyCamera,
+        stats: bool,
+        progress: Option<Py<PyAny>>,
+    ) -> PyResult<PyObject> {
+        let frames = if let Ok(array) = frames.extract::<PyReadonlyArray4<'py, f32>>() {
+            frames_of_array(&array)?
+        } else if let Ok(path) = frames.extract::<PathBuf>() {
+            py.allow_threads(|| renderer::StochasticFrames::read_exr(&path))
+                .map_err(value_error)?
+        } else {
+            return Err(value_error(
+                "frames must be a float32 array (height, width, spp, 12) or a path",
+            ));
+        };
+        if (frames.width, frames.height)
+            != (camera.inner.width as usize, camera.inner.height as usize)
+        {
+            return Err(value_error(format!(
+                "the frames are {}x{} pixels but the camera is {}x{}",
+                frames.width, frames.height, camera.inner.width, camera.inner.height
+            )));
+        }
+        let camera = camera.inner.clone();
+        let renderer = &mut self.inner;
+        let frame = self.progress.around(py, progress, || {
+            renderer.reconstruct(&frames, &camera, &renderer::SynthOptions::default())
+        })?;
+        frame_result(py, &frame, stats)
+    }
+}
+
+/// Stochastic frames from an array (h, w, spp, 12) of samples' channels.
+fn frames_of_array(array: &PyReadonlyArray4<'_, f32>) -> PyResult<renderer::StochasticFrames> {
+    let shape = array.shape();
+    let (height, width, spp) = (shape[0], shape[1], shape[2]);
+    if shape[3] != formats::stochastic::CHANNELS.len() || height == 0 || width == 0 || spp == 0 {
+        return Err(value_error(format!(
+            "frames must have shape (height, width, spp, {}), got {shape:?}",
+            formats::stochastic::CHANNELS.len()
+        )));
+    }
+    let view = array.as_array();
+    let standard = view.as_standard_layout();
+    let flat = standard
+        .as_slice()
+        .ok_or_else(|| value_error("frames is not contiguous"))?;
+    let samples = flat
+        .chunks_exact(formats::stochastic::CHANNELS.len())
+        .map(|c| renderer::Sample::from_channels(std::array::from_fn(|i| c[i])))
+        .collect();
+    Ok(renderer::StochasticFrames {
+        width,
+        height,
+        spp,
+        samples,
+    })
+}
+
+/// The image of `frame`, with its statistics as a dict when `stats`.
+fn frame_result(py: Python<'_>, frame: &renderer::Frame, stats: bool) -> PyResult<PyObject> {
+    let image = rgba_array(py, &frame.image);
+    if !stats {
+        return Ok(image.into_any().unbind());
+    }
+    let d = PyDict::new(py);
+    d.set_item("device", &frame.device)?;
+    d.set_item("defocus", frame.stats.defocus)?;
+    d.set_item("motion", frame.stats.motion)?;
+    d.set_item("layers_used", frame.stats.layers_used)?;
+    d.set_item("sparse", frame.stats.counts.sparse)?;
+    d.set_item("dense", frame.stats.counts.dense)?;
+    d.set_item("copied", frame.stats.counts.copied)?;
+    d.set_item("total_ms", frame.stats.times.total_ms)?;
+    d.set_item("databases_loaded", frame.databases.len())?;
+    d.set_item(
+        "databases_built",
+        frame.databases.iter().filter(|u| u.built_now).count(),
+    )?;
+    Ok((image, d).into_pyobject(py)?.into_any().unbind())
+}
+
+/// Reads a stochastic-frames EXR (`docs/STOCHASTIC.md`) as an array (h, w, spp, 12) float32,
+/// the last axis a sample's channels in `SAMPLE_CHANNELS` order.
+#[pyfunction]
+fn read_frames<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyArray4<f32>>> {
+    let frames = py
+        .allow_threads(|| renderer::StochasticFrames::read_exr(&path))
+        .map_err(value_error)?;
+    let flat: Vec<f32> = frames
+        .samples
+        .iter()
+        .flat_map(|s| s.to_channels())
+        .collect();
+    Ok(numpy::PyArray1::from_vec(py, flat)
+        .reshape([
+            frames.height,
+            frames.width,
+            frames.spp,
+            formats::stochastic::CHANNELS.len(),
+        ])
+        .expect("the samples fill the shape"))
 }
 
 /// SSIM, PSNR (dB, None when identical), FLIP mean and 99th percentile of `a` against
@@ -342,5 +514,7 @@ fn spreadlet(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyRenderer>()?;
     m.add_function(wrap_pyfunction!(read_gbuffer, m)?)?;
     m.add_function(wrap_pyfunction!(compare, m)?)?;
+    m.add_function(wrap_pyfunction!(read_frames, m)?)?;
+    m.add("SAMPLE_CHANNELS", formats::stochastic::CHANNELS.to_vec())?;
     Ok(())
 }

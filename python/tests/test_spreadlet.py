@@ -29,7 +29,8 @@ def scene(tmp_path_factory):
     d = tmp_path_factory.mktemp("scene")
     g, cam = str(d / "g.exr"), str(d / "camera.json")
     subprocess.run([binary("SPREADLET_SCENE_BIN", "spreadlet-scene"), "render", "crossing",
-                    "--width", "64", "--gbuffer", g, "--aa", "4", "--camera-out", cam, "--quiet"],
+                    "--width", "64", "--gbuffer", g, "--aa", "4", "--stochastic",
+                    str(d / "frames.exr"), "--spp", "2", "--camera-out", cam, "--quiet"],
                    check=True)
     return d, g, cam
 
@@ -83,3 +84,64 @@ def test_bad_input_raises_value_error(scene):
         spreadlet.Renderer(backend="quantum")
     with pytest.raises(ValueError):
         spreadlet.read_gbuffer(os.path.join(ROOT, "no-such-file.exr"))
+
+
+def test_reconstruct_writes_what_the_cli_writes(scene):
+    d, _, cam = scene
+    frames_path, out = str(d / "frames.exr"), str(d / "cli-reconstruct.exr")
+    subprocess.run([binary("SPREADLET_BIN", "spreadlet"), "reconstruct", "--input", frames_path,
+                    "--camera", cam, "--out", out, "--backend", "cpu", "-q"], check=True)
+    camera = spreadlet.Camera.from_json(cam)
+    frames = spreadlet.read_frames(frames_path)
+    assert frames.shape == (camera.height, camera.width, 2, len(spreadlet.SAMPLE_CHANNELS))
+    assert frames.dtype == np.float32
+    r = spreadlet.Renderer(backend="cpu")
+    from_array, stats = r.reconstruct(frames, camera, stats=True)
+    from_path = r.reconstruct(frames_path, camera)
+    cli = spreadlet.read_gbuffer(out).color
+    assert np.array_equal(from_array, cli), "the module and the CLI differ"
+    assert np.array_equal(from_path, cli)
+    assert stats["defocus"] and stats["motion"]
+    # The plain average of the samples is not what comes back.
+    average = frames[:, :, :, :4].mean(axis=2)
+    assert not np.allclose(from_array, average, atol=1e-3)
+    with pytest.raises(ValueError, match="shape"):
+        r.reconstruct(frames[:, :, :, :11].copy(), camera)
+    with pytest.raises(ValueError, match="camera"):
+        r.reconstruct(frames[:32].copy(), camera)
+
+
+def test_progress_reaches_the_callback_while_a_database_is_built(scene, tmp_path):
+    _, g, cam = scene
+    gbuffer = spreadlet.read_gbuffer(g)
+    camera = spreadlet.Camera.from_json(cam)
+    # An empty cache folder: the first call builds its databases (the small test profile).
+    r = spreadlet.Renderer(backend="cpu", db_profile="test", cache_dir=str(tmp_path))
+    heard = []
+    _, stats = r.synthesize(gbuffer.color, gbuffer.depth, gbuffer.motion, camera, stats=True,
+                            progress=lambda message, fraction: heard.append((message, fraction)))
+    assert stats["databases_built"] == stats["databases_loaded"] > 0
+    fractions = [f for _, f in heard if f is not None]
+    assert any("building" in m for m, f in heard if f is None), heard
+    assert fractions and max(fractions) == 1.0 and all(0.0 < f <= 1.0 for f in fractions)
+    # Built once: a second renderer on the same folder builds nothing and hears nothing.
+    again = []
+    _, stats = spreadlet.Renderer(backend="cpu", db_profile="test", cache_dir=str(tmp_path)) \
+        .synthesize(gbuffer.color, gbuffer.depth, gbuffer.motion, camera, stats=True,
+                    progress=lambda m, f: again.append(m))
+    assert stats["databases_built"] == 0 and again == []
+
+
+def test_an_exception_in_the_progress_callback_is_raised(scene, tmp_path):
+    _, g, cam = scene
+    gbuffer = spreadlet.read_gbuffer(g)
+    camera = spreadlet.Camera.from_json(cam)
+    r = spreadlet.Renderer(backend="cpu", db_profile="test", cache_dir=str(tmp_path))
+
+    def cancel(message, fraction):
+        raise KeyError("stop")
+
+    with pytest.raises(KeyError, match="stop"):
+        r.synthesize(gbuffer.color, gbuffer.depth, gbuffer.motion, camera, progress=cancel)
+    with pytest.raises(ValueError, match="callable"):
+        r.synthesize(gbuffer.color, gbuffer.depth, gbuffer.motion, camera, progress=3)

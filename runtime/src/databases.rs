@@ -102,7 +102,7 @@ pub fn models_for(needed: PsfModel) -> Vec<PsfModel> {
 /// Loads the databases `request` asks for; `on_event` hears of every database built.
 pub fn load(
     request: &Request,
-    on_event: &mut dyn FnMut(dbcache::CacheEvent),
+    on_event: &(dyn Fn(dbcache::CacheEvent) + Sync),
 ) -> Result<Loaded, Error> {
     let Some(needed) = request.needed else {
         return Ok(Loaded {

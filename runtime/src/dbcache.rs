@@ -5,7 +5,7 @@
 
 use std::path::{Path, PathBuf};
 
-use precompute::{build_database, BuildConfig, Profile};
+use precompute::{build_database_reporting, BuildConfig, Profile};
 use psf_db::{PsfDatabase, PsfModel};
 
 /// Environment variable naming the cache folder.
@@ -99,6 +99,28 @@ pub enum CacheEvent {
         /// The file it goes to.
         path: PathBuf,
     },
+    /// A database being built has `done` of its `total` PSFs traced and sparsified (sent at
+    /// every percent; from the builder's worker threads, so two may arrive out of order).
+    Progress {
+        /// The model's name.
+        model: &'static str,
+        /// PSFs done.
+        done: u32,
+        /// PSFs in the database.
+        total: u32,
+    },
+}
+
+impl CacheEvent {
+    /// How far a build is, in [0, 1], for a progress event; `None` for the others.
+    pub fn fraction(&self) -> Option<f64> {
+        match self {
+            CacheEvent::Progress { done, total, .. } => {
+                Some(f64::from(*done) / f64::from((*total).max(1)))
+            }
+            _ => None,
+        }
+    }
 }
 
 impl std::fmt::Display for CacheEvent {
@@ -120,6 +142,9 @@ impl std::fmt::Display for CacheEvent {
                 "building the {model} database ({profile} profile) into {}",
                 path.display()
             ),
+            CacheEvent::Progress { model, done, total } => {
+                write!(f, "building the {model} database: {done} of {total} PSFs")
+            }
         }
     }
 }
@@ -178,7 +203,7 @@ pub fn cached_database(
     cfg: &BuildConfig,
     dir: &Path,
     progress: bool,
-    on_event: &mut dyn FnMut(CacheEvent),
+    on_event: &(dyn Fn(CacheEvent) + Sync),
 ) -> Result<(PsfDatabase, DbSource), CacheError> {
     let path = dir.join(cache_file_name(cfg));
     if path.exists() {
@@ -198,10 +223,15 @@ pub fn cached_database(
         profile: cfg.profile.name(),
         path: path.clone(),
     });
-    let (db, _report) = build_database(cfg, progress).map_err(|source| CacheError::Build {
-        model: cfg.model.name(),
-        source,
-    })?;
+    let model = cfg.model.name();
+    let on_psf = |done, total| on_event(CacheEvent::Progress { model, done, total });
+    let (db, _report) =
+        build_database_reporting(cfg, None, progress, Some(&on_psf)).map_err(|source| {
+            CacheError::Build {
+                model: cfg.model.name(),
+                source,
+            }
+        })?;
     db.write_atomic(&path)?;
     Ok((db, DbSource { path, built: true }))
 }

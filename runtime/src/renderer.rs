@@ -290,7 +290,7 @@ impl Renderer {
             }
         }
         let sink = self.options.on_event.clone();
-        let mut on_cache = |e: CacheEvent| {
+        let on_cache = |e: CacheEvent| {
             if let Some(sink) = &sink {
                 sink(&Event::Cache(e));
             }
@@ -330,7 +330,7 @@ impl Renderer {
             transform: (method == Method::Dense && is_file).then_some(&densify as &dyn Fn(_) -> _),
             progress: self.options.progress,
         };
-        let loaded = databases::load(&request, &mut on_cache)?;
+        let loaded = databases::load(&request, &on_cache)?;
         let set = Arc::new(loaded.set);
         self.databases = Some(HeldDatabases {
             model: needed,

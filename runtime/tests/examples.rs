@@ -43,9 +43,7 @@ fn run(scene: &str, min_ssim: f64) {
         } else {
             Path::new(env!("CARGO_MANIFEST_DIR")).join("../.spreadlet-cache")
         };
-        let db = cached_database(&cfg, &dir, true, &mut |_| {})
-            .expect("db")
-            .0;
+        let db = cached_database(&cfg, &dir, true, &|_| {}).expect("db").0;
         spreadlet::condition::condition(&db).expect("condition").0
     };
     let main = (effects.cheapest_model() == Some(PsfModel::LensMotion))

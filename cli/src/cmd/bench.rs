@@ -67,7 +67,7 @@ pub(crate) fn run(args: BenchArgs) -> Result<()> {
                 cfg,
                 &dbcache::cache_dir(),
                 true,
-                &mut spreadlet_cli::print_cache_event,
+                &spreadlet_cli::print_cache_event,
             )?;
             Ok(spreadlet::condition::condition(&db)?.0)
         };
@@ -105,7 +105,7 @@ pub(crate) fn run(args: BenchArgs) -> Result<()> {
         &cfg,
         &dbcache::cache_dir(),
         true,
-        &mut spreadlet_cli::print_cache_event,
+        &spreadlet_cli::print_cache_event,
     )?;
     let config = spreadlet_cli::bench::BenchConfig {
         sizes: args.sizes,

@@ -45,7 +45,12 @@ pub(crate) fn renderer_options(
     let on_event: Option<spreadlet::renderer::EventSink> = if quiet {
         None
     } else {
-        Some(Arc::new(|e: &Event| eprintln!("{e}")))
+        // The builder's own bar shows a build's progress.
+        Some(Arc::new(|e: &Event| {
+            if !matches!(e, Event::Cache(c) if c.fraction().is_some()) {
+                eprintln!("{e}")
+            }
+        }))
     };
     Ok(RendererOptions {
         backend,
