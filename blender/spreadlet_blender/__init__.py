@@ -3,6 +3,7 @@
 Renders the scene as a pinhole (depth of field and motion blur off, Depth and Vector passes
 on), hands the render with the active camera's lens and shutter to the `spreadlet` command,
 and loads what it returns into the image "Spreadlet Result" (and, if asked, an EXR file).
+With "Every rendered frame" on, animation renders do the same for every frame they write.
 It calls the `spreadlet` binary rather than a compiled Python module: Blender ships its own
 Python (3.10 in Blender 3.4, 3.11 in 4.x), and a module built for another Python does not
 import there; the binary works with every Blender and keeps the GPU work out of Blender's
@@ -34,6 +35,7 @@ else:
     from . import camera
 
 import bpy
+from bpy.app.handlers import persistent
 
 RESULT_IMAGE = "Spreadlet Result"
 #: What the last run did: paths and the camera it read (for scripts and tests).
@@ -53,83 +55,204 @@ def spreadlet_binary(context):
     return path
 
 
+#: The image settings the add-on changes to write 32-bit multilayer EXR (Blender 5 has a
+#: media type beside the file format).
+IMAGE_SETTINGS = ("media_type", "file_format", "color_depth", "exr_codec")
+
+
+def use_multilayer_exr(settings):
+    """Sets `settings` to 32-bit, ZIP-compressed multilayer OpenEXR, in any Blender."""
+    if hasattr(settings, "media_type"):  # Blender 5.0 and later: the media type comes first
+        settings.media_type = 'MULTI_LAYER_IMAGE'
+    settings.file_format = 'OPEN_EXR_MULTILAYER'
+    settings.color_depth = '32'
+    settings.exr_codec = 'ZIP'
+
+
 class PinholeRender:
-    """Renders `scene` as a pinhole with the passes spreadlet needs, restoring every setting
-    it changed afterwards, and saves the render result as a multilayer EXR."""
+    """Switches `scene` to a pinhole render with the passes spreadlet needs, written as 32-bit
+    multilayer EXR, and restores every setting it changed on exit. `lens_on` and `blur_on`
+    keep the camera's and the render's own switches for reading the lens."""
 
     def __init__(self, scene):
         self.scene = scene
 
     def __enter__(self):
         s = self.scene
-        layer = bpy.context.view_layer
+        layer = getattr(bpy.context, "view_layer", None) or s.view_layers[0]
         settings = s.render.image_settings
         self.saved = dict(
             use_dof=s.camera.data.dof.use_dof,
             use_motion_blur=s.render.use_motion_blur,
             use_pass_z=layer.use_pass_z,
             use_pass_vector=layer.use_pass_vector,
-            file_format=settings.file_format,
-            color_depth=settings.color_depth,
-            exr_codec=settings.exr_codec,
+            filepath=s.render.filepath,
         )
-        self.layer = layer
+        self.saved_image = {k: getattr(settings, k) for k in IMAGE_SETTINGS if hasattr(settings, k)}
+        self.layer, self.camera_data = layer, s.camera.data
+        self.lens_on, self.blur_on = self.saved["use_dof"], self.saved["use_motion_blur"]
         s.camera.data.dof.use_dof = False
         # Blender writes no Vector pass while it renders motion blur itself.
         s.render.use_motion_blur = False
         layer.use_pass_z = True
         layer.use_pass_vector = True
+        use_multilayer_exr(settings)
         return self
 
     def render_to(self, path):
         bpy.ops.render.render()
-        settings = self.scene.render.image_settings
-        settings.file_format = 'OPEN_EXR_MULTILAYER'
-        settings.color_depth = '32'
-        settings.exr_codec = 'ZIP'
         bpy.data.images['Render Result'].save_render(path, scene=self.scene)
 
     def __exit__(self, *exc):
         s, v, settings = self.scene, self.saved, self.scene.render.image_settings
-        s.camera.data.dof.use_dof = v["use_dof"]
+        self.camera_data.dof.use_dof = v["use_dof"]
         s.render.use_motion_blur = v["use_motion_blur"]
         self.layer.use_pass_z = v["use_pass_z"]
         self.layer.use_pass_vector = v["use_pass_vector"]
-        settings.file_format = v["file_format"]
-        settings.color_depth = v["color_depth"]
-        settings.exr_codec = v["exr_codec"]
+        s.render.filepath = v["filepath"]
+        for key, value in self.saved_image.items():
+            setattr(settings, key, value)
         return False
 
 
-def run_spreadlet(context, folder):
-    """Renders the pinhole input into `folder`, runs spreadlet on it, loads the result."""
-    scene = context.scene
-    props = scene.spreadlet
-    cam = camera.camera_dict(scene)
-    cam_path = os.path.join(folder, "camera.json")
+def synth(context, input_path, cam, out_path, folder, props, tag=""):
+    """Runs `spreadlet synth` on `input_path` with the lens `cam` (a camera.json dict),
+    keeping `camera{tag}.json` and `stats{tag}.json` in `folder`."""
+    cam_path = os.path.join(folder, f"camera{tag}.json")
     with open(cam_path, "w") as f:
         json.dump(cam, f, indent=1)
-    input_path = os.path.join(folder, "input.exr")
-    with PinholeRender(scene) as pinhole:
-        pinhole.render_to(input_path)
-    out_path = bpy.path.abspath(props.output_path) if props.output_path else os.path.join(
-        folder, "spreadlet.exr")
-    stats_path = os.path.join(folder, "stats.json")
-    command = [spreadlet_binary(context), "synth", "--input", input_path, "--camera", cam_path,
-               "--out", out_path, "--stats", stats_path, "--backend", props.backend,
+    stats_path = os.path.join(folder, f"stats{tag}.json")
+    command = [spreadlet_binary(context), "synth", "--input", input_path, "--camera",
+               cam_path, "--out", out_path, "--stats", stats_path, "--backend", props.backend,
                "--db-profile", props.db_profile, "--quiet"]
     done = subprocess.run(command, capture_output=True, text=True)
     if done.returncode != 0:
         raise RuntimeError(done.stderr.strip() or f"spreadlet exited with {done.returncode}")
+    return cam_path, stats_path
+
+
+def load_result(path):
+    """Loads `path` as the image "Spreadlet Result", replacing the previous one."""
     old = bpy.data.images.get(RESULT_IMAGE)
     if old is not None:
         bpy.data.images.remove(old)
-    image = bpy.data.images.load(out_path, check_existing=False)
+    image = bpy.data.images.load(path, check_existing=False)
     image.name = RESULT_IMAGE
+    return image
+
+
+def run_spreadlet(context, folder):
+    """Renders the pinhole input into `folder`, runs spreadlet on it, loads the result."""
+    global _operator_running
+    scene = context.scene
+    props = scene.spreadlet
+    cam = camera.camera_dict(scene)
+    input_path = os.path.join(folder, "input.exr")
+    _operator_running = True
+    try:
+        with PinholeRender(scene) as pinhole:
+            pinhole.render_to(input_path)
+    finally:
+        _operator_running = False
+    out_path = bpy.path.abspath(props.output_path) if props.output_path else os.path.join(
+        folder, "spreadlet.exr")
+    cam_path, stats_path = synth(context, input_path, cam, out_path, folder, props)
+    image = load_result(out_path)
     last_run.clear()
     last_run.update(camera=cam, camera_path=cam_path, input=input_path, output=out_path,
                     stats=stats_path, image=image.name)
     return out_path
+
+
+# --- every render ------------------------------------------------------------------------
+# With "Every render" on, a render (F12, Render Animation, `blender -b -a`) renders pinhole
+# frames with the passes. Frames the render writes go to the work folder, and after each is
+# written spreadlet writes the finished frame where the render would have put it (as EXR); a
+# still render that writes nothing ends with its result in the image "Spreadlet Result".
+
+_operator_running = False
+#: The animation render being followed: its pinhole switch, the outputs, what went wrong.
+animation = {}
+
+
+def _work_folder(scene):
+    folder = bpy.path.abspath(scene.spreadlet.work_folder) if scene.spreadlet.work_folder \
+        else tempfile.mkdtemp(prefix="spreadlet-")
+    os.makedirs(folder, exist_ok=True)
+    return folder
+
+
+@persistent
+def _on_render_init(scene, *args):
+    if _operator_running or animation or not scene.spreadlet.every_render:
+        return
+    pinhole = PinholeRender(scene).__enter__()
+    render = scene.render
+    # Where the render would have written each frame, now that the format is EXR.
+    frames = range(scene.frame_start, scene.frame_end + 1, max(1, scene.frame_step))
+    outputs = {f: render.frame_path(frame=f) for f in frames}
+    folder = _work_folder(scene)
+    render.filepath = os.path.join(folder, "pinhole_####")
+    animation.update(pinhole=pinhole, outputs=outputs, folder=folder, written=[], errors=[])
+
+
+@persistent
+def _on_render_write(scene, *args):
+    if not animation:
+        return
+    frame = scene.frame_current
+    pinhole = animation["pinhole"]
+    try:
+        cam = camera.camera_dict(scene, use_dof=pinhole.lens_on, use_motion_blur=pinhole.blur_on)
+        out = animation["outputs"].get(frame) or scene.render.frame_path(frame=frame)
+        os.makedirs(os.path.dirname(out) or ".", exist_ok=True)
+        synth(bpy.context, scene.render.frame_path(frame=frame), cam, out, animation["folder"],
+              scene.spreadlet, tag=f"_{frame:04d}")
+        animation["written"].append(out)
+        print(f"Spreadlet: frame {frame} -> {out}")
+    except (RuntimeError, ValueError, OSError) as e:
+        animation["errors"].append(f"frame {frame}: {e}")
+        print(f"Spreadlet: frame {frame} failed: {e}")
+
+
+@persistent
+def _on_render_done(scene, *args):
+    if not animation:
+        return
+    pinhole = animation["pinhole"]
+    if not animation["written"] and not animation["errors"] and args[-1:] != ("cancel",):
+        # A still render that wrote no file: its result is in the Render Result.
+        try:
+            cam = camera.camera_dict(scene, use_dof=pinhole.lens_on,
+                                     use_motion_blur=pinhole.blur_on)
+            folder = animation["folder"]
+            input_path = os.path.join(folder, "input.exr")
+            bpy.data.images['Render Result'].save_render(input_path, scene=scene)
+            out = os.path.join(folder, "spreadlet.exr")
+            synth(bpy.context, input_path, cam, out, folder, scene.spreadlet)
+            load_result(out)
+            animation["written"].append(out)
+        except (RuntimeError, ValueError, OSError, KeyError) as e:
+            animation["errors"].append(f"still render: {e}")
+            print(f"Spreadlet: the still render failed: {e}")
+    pinhole.__exit__(None, None, None)
+    last_animation.clear()
+    last_animation.update(written=list(animation["written"]), errors=list(animation["errors"]),
+                          folder=animation["folder"])
+    animation.clear()
+
+
+#: What the last animation render did: the frames written and the errors (for scripts, tests).
+last_animation = {}
+
+
+@persistent
+def _on_render_cancel(scene, *args):
+    _on_render_done(scene, "cancel")
+
+
+HANDLERS = (("render_init", _on_render_init), ("render_write", _on_render_write),
+            ("render_complete", _on_render_done), ("render_cancel", _on_render_cancel))
 
 
 class SPREADLET_OT_render(bpy.types.Operator):
@@ -170,6 +293,12 @@ class SpreadletSettings(bpy.types.PropertyGroup):
         name="Work folder", subtype='DIR_PATH',
         description="Where the pinhole input, camera.json and statistics go (empty: a "
         "temporary folder)")
+    every_render: bpy.props.BoolProperty(
+        name="Every render",
+        description="Apply to every render: F12 leaves the result in the image \"Spreadlet "
+        "Result\"; an animation render writes its pinhole frames to the work folder and "
+        "spreadlet writes each finished frame, as EXR, where the output path puts it",
+        default=False)
 
 
 class SpreadletPreferences(bpy.types.AddonPreferences):
@@ -197,6 +326,7 @@ class SPREADLET_PT_render(bpy.types.Panel):
         col.prop(props, "db_profile")
         col.prop(props, "output_path")
         col.prop(props, "work_folder")
+        col.prop(props, "every_render")
         col.operator(SPREADLET_OT_render.bl_idname, icon='RENDER_STILL')
 
 
@@ -207,9 +337,15 @@ def register():
     for cls in CLASSES:
         bpy.utils.register_class(cls)
     bpy.types.Scene.spreadlet = bpy.props.PointerProperty(type=SpreadletSettings)
+    for name, handler in HANDLERS:
+        getattr(bpy.app.handlers, name).append(handler)
 
 
 def unregister():
+    for name, handler in HANDLERS:
+        handlers = getattr(bpy.app.handlers, name)
+        if handler in handlers:
+            handlers.remove(handler)
     del bpy.types.Scene.spreadlet
     for cls in reversed(CLASSES):
         bpy.utils.unregister_class(cls)

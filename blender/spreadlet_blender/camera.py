@@ -45,8 +45,12 @@ def render_size(scene):
     return int(r.resolution_x * scale), int(r.resolution_y * scale)
 
 
-def camera_dict(scene, camera_object=None):
-    """spreadlet's camera.json for `scene` seen by `camera_object` (the active camera)."""
+def camera_dict(scene, camera_object=None, use_dof=None, use_motion_blur=None):
+    """spreadlet's camera.json for `scene` seen by `camera_object` (the active camera).
+
+    `use_dof` and `use_motion_blur` stand for the camera's and the render's own switches when
+    those are off for the pinhole render (None: read them from the scene).
+    """
     obj = camera_object or scene.camera
     if obj is None or obj.type != 'CAMERA':
         raise ValueError("the scene has no active camera")
@@ -55,8 +59,9 @@ def camera_dict(scene, camera_object=None):
         raise ValueError(f"camera {obj.name!r} is {cam.type}; spreadlet models perspective lenses")
     width, height = render_size(scene)
     dof = cam.dof
-    lens = dof.use_dof
-    shutter = scene.render.motion_blur_shutter if scene.render.use_motion_blur else 0.0
+    lens = dof.use_dof if use_dof is None else use_dof
+    blur = scene.render.use_motion_blur if use_motion_blur is None else use_motion_blur
+    shutter = scene.render.motion_blur_shutter if blur else 0.0
     return {
         "width": width,
         "height": height,

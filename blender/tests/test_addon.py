@@ -9,7 +9,15 @@ across at 0.6 m, a camera at f/2 focused on the wall, the render's motion blur s
 through the add-on's operator, renders Cycles' own depth of field and motion blur of the same
 scene as the reference, and checks: the camera values the add-on read are the ones set here,
 and the add-on's result is clearly closer to the reference (SSIM, `spreadlet compare`) than the
-pinhole input it started from.
+pinhole input it started from. Then "Every render": an animation render of frames 1-2 writes
+both finished frames where the output path puts them (frame 1 equal to the operator's), a
+still render leaves its result in "Spreadlet Result", and the scene's settings come back.
+Last, the add-on's camera reading against `../shared/examples/*/camera.json`, with the scenes
+built by the script that made those (`../shared/tools/blender_refs.py`), where it exists.
+
+Runs in Blender (3.4 and later) and in the `bpy` module (`pip install bpy`; 4.x, 5.x):
+
+    SPREADLET_BIN=target/release/spreadlet python blender/tests/test_addon.py -- OUT_FOLDER
 """
 
 import json
@@ -31,7 +39,8 @@ SIZE = 128
 
 def material(name, color, checker=0.0):
     m = bpy.data.materials.new(name)
-    m.use_nodes = True
+    if bpy.app.version < (5, 0, 0):  # node materials are the only kind from 5.0 on
+        m.use_nodes = True
     bsdf = m.node_tree.nodes["Principled BSDF"]
     if checker:
         tex = m.node_tree.nodes.new("ShaderNodeTexChecker")
@@ -69,13 +78,13 @@ def build_scene():
     bpy.ops.mesh.primitive_cube_add(size=0.08, location=(0.08, 0.6, -0.05))
     cube = bpy.context.object
     cube.data.materials.append(material("cube", (0.9, 0.2, 0.1)))
-    for frame, x in [(0, 0.04), (2, 0.12)]:
+    # Linear keys, set the way that works in every Blender (4.4 and later keep f-curves in
+    # action slots, not on the action).
+    bpy.context.preferences.edit.keyframe_new_interpolation_type = 'LINEAR'
+    for frame, x in [(0, 0.04), (3, 0.16)]:
         scene.frame_set(frame)
         cube.location.x = x
         cube.keyframe_insert("location", index=0)
-    for fc in cube.animation_data.action.fcurves:
-        for k in fc.keyframe_points:
-            k.interpolation = 'LINEAR'
     scene.frame_set(1)
     bpy.ops.object.light_add(type='SUN', rotation=(math.radians(50), 0, math.radians(30)))
     bpy.context.object.data.energy = 4.0
@@ -139,7 +148,102 @@ def main():
           f"spreadlet {ours['ssim']:.4f}; FLIP {pinhole['flip_mean']:.4f} -> {ours['flip_mean']:.4f}")
     assert ours["ssim"] > pinhole["ssim"] + 0.015, report
     assert ours["flip_mean"] < pinhole["flip_mean"], report
+    check_every_render(binary, scene, run["output"])
+    check_shared_cameras()
     spreadlet_blender.unregister()
+
+
+def check_every_render(binary, scene, operator_output):
+    """Animation and still renders with "Every render" on."""
+    scene.cycles.samples = 32
+    scene.spreadlet.every_render = True
+    scene.spreadlet.work_folder = os.path.join(OUT, "every-render")
+    scene.render.filepath = os.path.join(OUT, "animation", "shot_")
+    scene.render.image_settings.file_format = 'PNG'
+    scene.frame_start, scene.frame_end = 1, 2
+    bpy.ops.render.render(animation=True)
+    done = spreadlet_blender.last_animation
+    expected = [os.path.join(OUT, "animation", f"shot_{f:04d}.exr") for f in (1, 2)]
+    assert done["errors"] == [] and done["written"] == expected, done
+    for path in expected:
+        assert os.path.getsize(path) > 0, path
+    # Frame 1 is the frame the operator rendered, with the same samples.
+    same = compare(binary, expected[0], operator_output)
+    assert same["ssim"] > 0.999, same
+    moved = compare(binary, expected[1], expected[0])
+    assert moved["ssim"] < 0.999, "frame 2 should differ from frame 1 (the cube moves)"
+    # The render's own settings are back.
+    assert scene.render.image_settings.file_format == 'PNG'
+    assert scene.render.filepath == os.path.join(OUT, "animation", "shot_")
+    assert scene.camera.data.dof.use_dof and scene.render.use_motion_blur
+    # A still render that writes no file.
+    bpy.data.images.remove(bpy.data.images["Spreadlet Result"])
+    scene.frame_set(1)
+    bpy.ops.render.render()
+    done = spreadlet_blender.last_animation
+    assert done["errors"] == [] and len(done["written"]) == 1, done
+    assert "Spreadlet Result" in bpy.data.images
+    still = compare(binary, done["written"][0], operator_output)
+    assert still["ssim"] > 0.999, still
+    scene.spreadlet.every_render = False
+    print(f"Every render: frames {expected}; frame 1 against the operator's SSIM "
+          f"{same['ssim']:.5f}; the still render's {still['ssim']:.5f}")
+
+
+def shared_folder():
+    for d in (os.environ.get("SPREADLET_SHARED", ""), "/work/shared",
+              os.path.join(os.path.dirname(os.path.dirname(HERE)), "..", "shared")):
+        if d and os.path.exists(os.path.join(d, "tools", "blender_refs.py")):
+            return d
+    return None
+
+
+def check_shared_cameras():
+    """The add-on reads the lens of the scenes that made `../shared/examples` as their
+    camera.json says: the script's scene builders run here, as that script runs them."""
+    shared = shared_folder()
+    if shared is None:
+        assert os.environ.get("SPREADLET_REQUIRE_SHARED") != "1", "no ../shared/tools"
+        print("no ../shared/tools/blender_refs.py: the shared cameras are not checked")
+        return
+    source = open(os.path.join(shared, "tools", "blender_refs.py")).read()
+    # Its definitions only: the render loop at the end is what this replaces.
+    definitions = source[:source.index("\nfor name in (WANT")]
+    refs = {"__name__": "blender_refs"}
+    saved_argv = sys.argv
+    sys.argv = ["blender_refs", "--", os.path.join(OUT, "refs")]
+    try:
+        exec(compile(definitions, "blender_refs.py", "exec"), refs)
+    finally:
+        sys.argv = saved_argv
+    # Materials and animation do not touch the lens, and the script's use Blender 3.4's API
+    # (socket names, f-curves on the action).
+    refs["mat"] = lambda name, *args, **kwargs: bpy.data.materials.new(name)
+    refs["animate"] = lambda *args, **kwargs: None
+    from spreadlet_blender import camera as addon_camera
+    checked = []
+    for name, build in refs["SCENES"].items():
+        path = os.path.join(shared, "examples", name, "camera.json")
+        if not os.path.exists(path):
+            continue
+        scn = refs["reset"]()
+        cam, effects = build(scn)
+        # As the script's loop does: the miniature scale, then the reference's switches.
+        cam.location = cam.location * refs["SCALE"]
+        cam.data.dof.focus_distance *= refs["SCALE"]
+        cam.data.dof.use_dof = effects["dof"]
+        scn.render.use_motion_blur = effects["motion"]
+        scn.render.motion_blur_shutter = 1.0
+        got = addon_camera.camera_dict(scn)
+        want = json.load(open(path))
+        for key in ("width", "height", "focal_length_mm", "sensor_width_mm", "f_stop",
+                    "focus_distance", "aperture_blades", "shutter_frames"):
+            a, b = got[key], want[key]
+            ok = a == b if a is None or b is None else abs(a - b) <= 1e-5 * max(1.0, abs(b))
+            assert ok, f"{name}: the add-on reads {key} = {a}, camera.json says {b}"
+        checked.append(name)
+    assert checked, f"no camera.json in {shared}/examples"
+    print(f"The add-on's camera reading matches camera.json of {', '.join(checked)}")
 
 
 main()

@@ -296,25 +296,26 @@ impl GBuffer {
             .no_deep_data()
             .largest_resolution_level()
             .all_channels()
-            .first_valid_layer()
+            .all_layers()
             .all_attributes()
             .from_buffered(open().map_err(|e| exr_err(e.into()))?)
             .map_err(exr_err)?;
-        let layer = image.layer_data;
-        let (width, height) = (layer.size.width(), layer.size.height());
+        let first = image
+            .layer_data
+            .first()
+            .ok_or_else(|| GBufferError::Layout {
+                path: name.clone(),
+                message: "the file has no image part".into(),
+            })?;
+        let (width, height) = (first.size.width(), first.size.height());
         check_size(&name, width, height)?;
         let overscan = overscan_of(
             &name,
-            layer.attributes.layer_position,
-            layer.size,
+            first.attributes.layer_position,
+            first.size,
             image.attributes.display_window,
         )?;
-        let channels: Vec<(String, Vec<f32>)> = layer
-            .channel_data
-            .list
-            .iter()
-            .map(|c| (c.name.to_string(), c.sample_data.values_as_f32().collect()))
-            .collect();
+        let channels = merged_channels(&name, &image.layer_data)?;
         let names: Vec<String> = channels.iter().map(|(n, _)| n.clone()).collect();
         let n = width * height;
         let (rgba, depth, motion) = select_planes(&name, &channels, options)?;
@@ -407,6 +408,58 @@ impl GBuffer {
         }
         Ok(())
     }
+}
+
+/// The channels of every part of a decoded file, by full name. Multi-part files (Blender 5
+/// writes one part per pass: `ViewLayer.Combined`, `ViewLayer.Depth`, ...) must have every
+/// part on the same data window; a channel named without its part's name (`Z` in the part
+/// `ViewLayer.Depth`) gets it as a prefix, so both spellings read alike.
+fn merged_channels(
+    name: &str,
+    layers: &[exr::image::Layer<exr::image::AnyChannels<exr::image::FlatSamples>>],
+) -> Result<Vec<(String, Vec<f32>)>, GBufferError> {
+    let Some(first) = layers.first() else {
+        return Ok(Vec::new());
+    };
+    let mut channels: Vec<(String, Vec<f32>)> = Vec::new();
+    for layer in layers {
+        let part = layer.attributes.layer_name.as_ref().map(|t| t.to_string());
+        if layer.size != first.size
+            || layer.attributes.layer_position != first.attributes.layer_position
+        {
+            return Err(GBufferError::Layout {
+                path: name.to_string(),
+                message: format!(
+                    "part {:?} is {}x{} pixels at {:?}, the first part {}x{} at {:?}: every \
+                     part must cover the same pixels",
+                    part.as_deref().unwrap_or(""),
+                    layer.size.width(),
+                    layer.size.height(),
+                    layer.attributes.layer_position,
+                    first.size.width(),
+                    first.size.height(),
+                    first.attributes.layer_position
+                ),
+            });
+        }
+        for c in &layer.channel_data.list {
+            let short = c.name.to_string();
+            let full = match &part {
+                Some(p) if layers.len() > 1 && !short.starts_with(&format!("{p}.")) => {
+                    format!("{p}.{short}")
+                }
+                _ => short,
+            };
+            if channels.iter().any(|(n, _)| *n == full) {
+                return Err(GBufferError::Layout {
+                    path: name.to_string(),
+                    message: format!("channel {full} is in two parts"),
+                });
+            }
+            channels.push((full, c.sample_data.values_as_f32().collect()));
+        }
+    }
+    Ok(channels)
 }
 
 /// Borrowed planes of a decoded file: colour (R, G, B, optional A), depth, forward motion.
@@ -620,5 +673,79 @@ mod tests {
         assert!(GBuffer::from_planes(2, 1, color.clone(), Some(vec![0.0, 1.0]), None).is_err());
         assert!(GBuffer::from_planes(2, 1, color, Some(vec![f32::INFINITY, 1.0]), None).is_ok());
         assert!(GBuffer::from_planes(0, 1, vec![], None, None).is_err());
+    }
+
+    /// A Blender-style G-buffer as EXR bytes: one part holding every channel, or (as Blender 5
+    /// writes it) one part per pass named `ViewLayer.<Pass>`; `short_names` writes the
+    /// channels of a part without the part's name (`Z` in `ViewLayer.Depth`).
+    fn blender_exr(parts: bool, short_names: bool, depth_size: (usize, usize)) -> Vec<u8> {
+        use exr::prelude::*;
+        let (w, h) = (4usize, 3usize);
+        let plane = |seed: f32, n: usize| -> Vec<f32> { (0..n).map(|i| seed + i as f32).collect() };
+        let pass = |name: &str, chans: &[&str], size: (usize, usize)| {
+            let list: SmallVec<[AnyChannel<FlatSamples>; 4]> = chans
+                .iter()
+                .enumerate()
+                .map(|(k, c)| {
+                    let full = if short_names { c.to_string() } else { format!("{name}.{c}") };
+                    AnyChannel::new(
+                        Text::from(full.as_str()),
+                        FlatSamples::F32(plane(1.0 + k as f32, size.0 * size.1)),
+                    )
+                })
+                .collect();
+            let attributes = LayerAttributes::named(Text::from(name));
+            Layer::new(size, attributes, Encoding::UNCOMPRESSED, AnyChannels::sort(list))
+        };
+        let combined = ["R", "G", "B", "A"];
+        let layers = if parts {
+            vec![
+                pass("ViewLayer.Combined", &combined, (w, h)),
+                pass("ViewLayer.Depth", &["Z"], depth_size),
+            ]
+        } else {
+            let mut list: SmallVec<[AnyChannel<FlatSamples>; 4]> = SmallVec::new();
+            for (k, c) in combined.iter().enumerate() {
+                list.push(AnyChannel::new(
+                    Text::from(format!("ViewLayer.Combined.{c}").as_str()),
+                    FlatSamples::F32(plane(1.0 + k as f32, w * h)),
+                ));
+            }
+            list.push(AnyChannel::new(
+                Text::from("ViewLayer.Depth.Z"),
+                FlatSamples::F32(plane(1.0, w * h)),
+            ));
+            vec![Layer::new(
+                (w, h),
+                LayerAttributes::default(),
+                Encoding::UNCOMPRESSED,
+                AnyChannels::sort(list),
+            )]
+        };
+        let image = Image::from_layers(
+            ImageAttributes::new(IntegerBounds::from_dimensions((w, h))),
+            SmallVec::<[_; 2]>::from_vec(layers),
+        );
+        let mut bytes = std::io::Cursor::new(Vec::new());
+        image.write().to_buffered(&mut bytes).expect("write");
+        bytes.into_inner()
+    }
+
+    #[test]
+    fn a_multi_part_file_reads_like_the_single_part_one() {
+        let options = ChannelOptions::default();
+        let single = GBuffer::read_exr_bytes(&blender_exr(false, false, (4, 3)), "one", &options)
+            .expect("one part");
+        for short_names in [false, true] {
+            let parts = blender_exr(true, short_names, (4, 3));
+            let multi = GBuffer::read_exr_bytes(&parts, "parts", &options).expect("parts");
+            assert_eq!(multi.color, single.color, "short names: {short_names}");
+            assert_eq!(multi.depth, single.depth, "short names: {short_names}");
+            assert!(multi.depth.is_some());
+        }
+        let err = GBuffer::read_exr_bytes(&blender_exr(true, false, (2, 3)), "bad", &options)
+            .expect_err("parts of different sizes");
+        assert!(err.to_string().contains("ViewLayer.Depth"), "{err}");
+        assert!(err.to_string().contains("same pixels"), "{err}");
     }
 }
