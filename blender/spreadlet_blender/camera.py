@@ -38,6 +38,14 @@ def focus_distance(camera_object):
     return dof.focus_distance
 
 
+def aperture_rotation_deg(dof):
+    """spreadlet's blade rotation for Cycles' (`dof.aperture_rotation`, radians): both turn
+    counter-clockwise on the image, but at rotation 0 Cycles has an edge facing right (its
+    polygon's corners lie half a blade off the x axis) where spreadlet has a vertex, so
+    spreadlet's angle is Cycles' plus half a blade (180 / blades degrees)."""
+    return math.degrees(dof.aperture_rotation) + 180.0 / dof.aperture_blades
+
+
 def render_size(scene):
     """The rendered image's size in pixels (resolution times its percentage)."""
     r = scene.render
@@ -62,6 +70,7 @@ def camera_dict(scene, camera_object=None, use_dof=None, use_motion_blur=None):
     lens = dof.use_dof if use_dof is None else use_dof
     blur = scene.render.use_motion_blur if use_motion_blur is None else use_motion_blur
     shutter = scene.render.motion_blur_shutter if blur else 0.0
+    blades = dof.aperture_blades if lens and dof.aperture_blades >= 3 else 0
     return {
         "width": width,
         "height": height,
@@ -69,7 +78,8 @@ def camera_dict(scene, camera_object=None, use_dof=None, use_motion_blur=None):
         "sensor_width_mm": sensor_width_mm(cam, width, height),
         "f_stop": dof.aperture_fstop if lens else None,
         "focus_distance": focus_distance(obj) if lens else None,
-        "aperture_blades": dof.aperture_blades if lens and dof.aperture_blades >= 3 else 0,
+        "aperture_blades": blades,
+        "aperture_rotation_deg": aperture_rotation_deg(dof) if blades else 0.0,
         "shutter_frames": shutter,
         # Cycles sizes the aperture as lens (mm) * 1e-3 scene units: a scene unit is a metre.
         "scene_unit_mm": 1000.0,

@@ -81,13 +81,13 @@ pub struct DemoStep {
 pub fn cached_dbs(
     effects: Effects,
     profile: precompute::Profile,
-    blades: u32,
+    aperture: psf_db::Aperture,
     progress: bool,
 ) -> Result<DbSet> {
     Ok(crate::cached_dbs_with(
         effects,
         profile,
-        blades,
+        aperture,
         progress,
         false,
         &|c| c,
@@ -179,7 +179,7 @@ pub fn run(options: &DemoOptions) -> Result<Vec<(String, DemoStep)>> {
     let dbs = cached_dbs(
         effects,
         options.profile,
-        camera.aperture_blades,
+        spreadlet::databases::aperture_of(&camera),
         options.progress,
     )?;
     // The command line's default integrator, so the demo scores what `spreadlet synth` makes.

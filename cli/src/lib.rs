@@ -28,7 +28,7 @@ use spreadlet::pipeline::Effects;
 pub fn cached_dbs_with(
     effects: Effects,
     profile: Profile,
-    blades: u32,
+    aperture: psf_db::Aperture,
     progress: bool,
     keep_sparse: bool,
     build: &dyn Fn(BuildConfig) -> BuildConfig,
@@ -40,7 +40,7 @@ pub fn cached_dbs_with(
     let request = spreadlet::databases::Request {
         source: spreadlet::databases::Source::Cache { dir: &dir, profile },
         needed: effects.cheapest_model(),
-        blades,
+        aperture,
         condition: true,
         adjust: Some(build),
         transform: keep_sparse.then_some(&strip as &dyn Fn(_) -> _),

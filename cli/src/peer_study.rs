@@ -240,18 +240,24 @@ pub fn run(options: &PeerStudyOptions) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Databases loaded once per (effects, aperture blades).
+/// Databases loaded once per (effects, aperture blades and rotation).
 struct DbCache {
     profile: precompute::Profile,
     progress: bool,
-    sets: HashMap<(bool, bool, u32), DbSet>,
+    sets: HashMap<(bool, bool, u32, u32), DbSet>,
 }
 
 impl DbCache {
-    fn get(&mut self, effects: Effects, blades: u32) -> Result<&DbSet> {
-        let key = (effects.defocus, effects.motion, blades);
+    fn get(&mut self, effects: Effects, camera: &Camera) -> Result<&DbSet> {
+        let aperture = spreadlet::databases::aperture_of(camera);
+        let key = (
+            effects.defocus,
+            effects.motion,
+            aperture.blades,
+            aperture.rotation_rad.to_bits(),
+        );
         if !self.sets.contains_key(&key) {
-            let set = cached_dbs(effects, self.profile, blades, self.progress)?;
+            let set = cached_dbs(effects, self.profile, aperture, self.progress)?;
             self.sets.insert(key, set);
         }
         self.sets
@@ -434,7 +440,7 @@ fn study_scene(
     for spp in config.our_spp() {
         let sub = first_samples(&frames, spp);
         let options = cli_synth_options();
-        let set = dbs.get(effects, camera.aperture_blades)?;
+        let set = dbs.get(effects, &camera)?;
         let t = Instant::now();
         let (image, _) = reconstruct(&sub, &camera, set, &options)?;
         let ms = ms_since(t);
@@ -489,7 +495,7 @@ fn gbuffer_rows(
     dbs: &mut DbCache,
 ) -> Result<()> {
     let effects = Effects::of(camera, gbuffer);
-    let set = dbs.get(effects, camera.aperture_blades)?;
+    let set = dbs.get(effects, camera)?;
     let t = Instant::now();
     let (image, _) = synthesize(gbuffer, camera, set, &cli_synth_options())?;
     let ms = ms_since(t);

@@ -824,7 +824,7 @@ pub fn run(options: &StudyOptions) -> Result<Vec<StudyRow>> {
 
     let configs = configurations(options, has_gpu);
     let runs = options.runs.max(1);
-    let blades = input.camera.aperture_blades;
+    let aperture = spreadlet::databases::aperture_of(&input.camera);
     let mut db_sets: HashMap<String, DbSet> = HashMap::new();
     let mut done: HashMap<String, StudyRow> = HashMap::new();
     let mut rows = Vec::with_capacity(configs.len());
@@ -850,7 +850,7 @@ pub fn run(options: &StudyOptions) -> Result<Vec<StudyRow>> {
                         cached_dbs_with(
                             effects,
                             options.profile,
-                            blades,
+                            aperture,
                             !options.quiet,
                             variant.sparse_only,
                             &|c| variant.apply(c),

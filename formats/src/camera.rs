@@ -89,6 +89,10 @@ pub struct Camera {
     /// Number of aperture blades; 0 for a circular aperture.
     #[serde(default)]
     pub aperture_blades: u32,
+    /// Rotation of the blade polygon, degrees, counter-clockwise as seen on the image; at 0 a
+    /// vertex points right (+x). Ignored for a circular aperture.
+    #[serde(default)]
+    pub aperture_rotation_deg: f64,
     /// Exposure as a fraction of the frame interval, centred on the frame; 0 = no motion blur.
     #[serde(default)]
     pub shutter_frames: f64,
@@ -145,6 +149,7 @@ impl Camera {
                 check_field::<Option<f64>>(obj, "f_stop")?;
                 check_field::<Option<f64>>(obj, "focus_distance")?;
                 check_field::<u32>(obj, "aperture_blades")?;
+                check_field::<f64>(obj, "aperture_rotation_deg")?;
                 check_field::<f64>(obj, "shutter_frames")?;
                 check_field::<f64>(obj, "scene_unit_mm")?;
                 return Err(CameraError::Text { source });
@@ -229,6 +234,12 @@ impl Camera {
                 ));
             }
         }
+        if !self.aperture_rotation_deg.is_finite() {
+            return bad(format!(
+                "aperture_rotation_deg must be a number of degrees, got {}",
+                self.aperture_rotation_deg
+            ));
+        }
         if self.aperture_blades == 1 || self.aperture_blades == 2 {
             return bad(format!(
                 "aperture_blades must be 0 (circular) or at least 3, got {}",
@@ -236,6 +247,17 @@ impl Camera {
             ));
         }
         Ok(())
+    }
+
+    /// The blade polygon's rotation in radians, counter-clockwise on the image, reduced to
+    /// one blade's turn `[0, 2 pi / blades)` (rotations a blade apart give the same aperture);
+    /// 0 for a circular aperture.
+    pub fn aperture_rotation_rad(&self) -> f64 {
+        if self.aperture_blades < 3 {
+            return 0.0;
+        }
+        let turn = std::f64::consts::TAU / f64::from(self.aperture_blades);
+        self.aperture_rotation_deg.to_radians().rem_euclid(turn)
     }
 
     /// Focal length in scene units.

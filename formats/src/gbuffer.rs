@@ -687,7 +687,11 @@ mod tests {
                 .iter()
                 .enumerate()
                 .map(|(k, c)| {
-                    let full = if short_names { c.to_string() } else { format!("{name}.{c}") };
+                    let full = if short_names {
+                        c.to_string()
+                    } else {
+                        format!("{name}.{c}")
+                    };
                     AnyChannel::new(
                         Text::from(full.as_str()),
                         FlatSamples::F32(plane(1.0 + k as f32, size.0 * size.1)),
@@ -695,7 +699,12 @@ mod tests {
                 })
                 .collect();
             let attributes = LayerAttributes::named(Text::from(name));
-            Layer::new(size, attributes, Encoding::UNCOMPRESSED, AnyChannels::sort(list))
+            Layer::new(
+                size,
+                attributes,
+                Encoding::UNCOMPRESSED,
+                AnyChannels::sort(list),
+            )
         };
         let combined = ["R", "G", "B", "A"];
         let layers = if parts {

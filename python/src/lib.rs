@@ -29,7 +29,7 @@ struct PyCamera {
 #[pymethods]
 impl PyCamera {
     #[new]
-    #[pyo3(signature = (width, height, focal_length_mm, sensor_width_mm, f_stop=None, focus_distance=None, aperture_blades=0, shutter_frames=0.0, scene_unit_mm=1000.0))]
+    #[pyo3(signature = (width, height, focal_length_mm, sensor_width_mm, f_stop=None, focus_distance=None, aperture_blades=0, shutter_frames=0.0, scene_unit_mm=1000.0, aperture_rotation_deg=0.0))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         width: u32,
@@ -41,6 +41,7 @@ impl PyCamera {
         aperture_blades: u32,
         shutter_frames: f64,
         scene_unit_mm: f64,
+        aperture_rotation_deg: f64,
     ) -> PyResult<Self> {
         let inner = renderer::Camera {
             width,
@@ -50,6 +51,7 @@ impl PyCamera {
             f_stop,
             focus_distance,
             aperture_blades,
+            aperture_rotation_deg,
             shutter_frames,
             scene_unit_mm,
         };
@@ -91,6 +93,10 @@ impl PyCamera {
     #[getter]
     fn aperture_blades(&self) -> u32 {
         self.inner.aperture_blades
+    }
+    #[getter]
+    fn aperture_rotation_deg(&self) -> f64 {
+        self.inner.aperture_rotation_deg
     }
     #[getter]
     fn shutter_frames(&self) -> f64 {

@@ -53,14 +53,24 @@ pub enum Source<'a> {
     File(&'a Path),
 }
 
+/// The aperture `camera`'s databases are traced with: its blades and their rotation (radians,
+/// counter-clockwise on the image, reduced to one blade's turn, so that rotations a blade
+/// apart share a database; 0 for a circle).
+pub fn aperture_of(camera: &crate::Camera) -> psf_db::Aperture {
+    psf_db::Aperture {
+        blades: camera.aperture_blades,
+        rotation_rad: camera.aperture_rotation_rad() as f32,
+    }
+}
+
 /// What one load needs.
 pub struct Request<'a> {
     /// Where the databases come from.
     pub source: Source<'a>,
     /// The cheapest model that reproduces the input's effects (`None`: nothing to simulate).
     pub needed: Option<PsfModel>,
-    /// Aperture blades (0 = circular).
-    pub blades: u32,
+    /// The aperture's blades (0 = circular) and their rotation ([`aperture_of`] a camera).
+    pub aperture: psf_db::Aperture,
     /// Conditioning (monopole removal, energy normalisation) before use.
     pub condition: bool,
     /// Changes the runtime's build settings before the cache is asked (the baselines store
@@ -141,7 +151,8 @@ pub fn load(
         Source::Cache { dir, profile } => {
             let mut loaded = Vec::new();
             for model in models_for(needed) {
-                let mut cfg = dbcache::build_config(model, profile, request.blades);
+                let mut cfg = dbcache::build_config(model, profile, request.aperture.blades);
+                cfg.blade_rotation_rad = request.aperture.rotation_rad;
                 if let Some(adjust) = request.adjust {
                     cfg = adjust(cfg);
                 }
@@ -162,4 +173,39 @@ pub fn load(
         used,
         conditioning,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn camera(blades: u32, rotation_deg: f64) -> crate::Camera {
+        let mut c = crate::Camera::from_json_str(
+            r#"{"width":64,"height":64,"focal_length_mm":50.0,"sensor_width_mm":36.0,
+                "f_stop":2.0,"focus_distance":1.0}"#,
+        )
+        .expect("camera");
+        c.aperture_blades = blades;
+        c.aperture_rotation_deg = rotation_deg;
+        c
+    }
+
+    #[test]
+    fn databases_key_on_the_blade_rotation_up_to_one_blade() {
+        let turned = aperture_of(&camera(5, 20.0));
+        assert!((f64::from(turned.rotation_rad) - 20f64.to_radians()).abs() < 1e-6);
+        // A blade further (72 degrees for five) or back is the same aperture.
+        assert_eq!(aperture_of(&camera(5, 92.0)), turned);
+        assert_eq!(aperture_of(&camera(5, -52.0)), turned);
+        assert_ne!(aperture_of(&camera(5, 0.0)), turned);
+        // A circle has no rotation.
+        assert_eq!(aperture_of(&camera(0, 33.0)), aperture_of(&camera(0, 0.0)));
+        // The cache file differs with the rotation.
+        let file = |a: psf_db::Aperture| {
+            let mut cfg = dbcache::build_config(PsfModel::ThinLens, Profile::Quick, a.blades);
+            cfg.blade_rotation_rad = a.rotation_rad;
+            dbcache::cache_file_name(&cfg)
+        };
+        assert_ne!(file(turned), file(aperture_of(&camera(5, 0.0))));
+    }
 }

@@ -178,7 +178,7 @@ pub struct Frame {
 /// The databases a renderer holds: what they were loaded for, and the set.
 struct HeldDatabases {
     model: Option<PsfModel>,
-    blades: u32,
+    aperture: psf_db::Aperture,
     set: Arc<DbSet>,
 }
 
@@ -280,7 +280,9 @@ impl Renderer {
         let started = Instant::now();
         let needed = effects.cheapest_model();
         if let Some(held) = &self.databases {
-            if held.blades == camera.aperture_blades && databases::serves(held.model, needed) {
+            if held.aperture == databases::aperture_of(camera)
+                && databases::serves(held.model, needed)
+            {
                 return Ok(Selected {
                     set: held.set.clone(),
                     used: Vec::new(),
@@ -323,7 +325,7 @@ impl Renderer {
         let request = databases::Request {
             source,
             needed,
-            blades: camera.aperture_blades,
+            aperture: databases::aperture_of(camera),
             condition: self.options.condition,
             // The baselines draw the pre-filtered PSFs the spreadlets were fitted to.
             adjust: (method != Method::Spreadlet && !is_file).then_some(&adjust as &dyn Fn(_) -> _),
@@ -334,7 +336,7 @@ impl Renderer {
         let set = Arc::new(loaded.set);
         self.databases = Some(HeldDatabases {
             model: needed,
-            blades: camera.aperture_blades,
+            aperture: databases::aperture_of(camera),
             set: set.clone(),
         });
         self.loads += 1;

@@ -198,7 +198,11 @@ impl Camera {
         let lens = if !self.spec.has_lens() {
             DVec2::ZERO
         } else {
-            sample_aperture(self.spec.aperture_blades, xi)
+            sample_aperture(
+                self.spec.aperture_blades,
+                self.spec.aperture_rotation_rad(),
+                xi,
+            )
         };
         (self.ray(pixel, lens, time), lens)
     }
@@ -237,6 +241,7 @@ mod tests {
             f_stop: Some(2.0),
             focus_distance: Some(1.0),
             aperture_blades: 0,
+            aperture_rotation_deg: 0.0,
             shutter_frames: 0.5,
             scene_unit_mm: 1000.0,
         }

@@ -41,9 +41,11 @@ pub fn uniform(rng: &mut ChaCha8Rng) -> f64 {
 
 /// Maps two uniform numbers in [0, 1) to the aperture in unit-radius lens coordinates (u right,
 /// v down): the unit disk (Shirley-Chiu concentric map) for fewer than 3 blades, else the
-/// regular polygon inscribed in the unit circle with vertex k at angle `2 pi k / blades`
-/// (measured from +u towards +v). Uniform in area either way.
-pub fn sample_aperture(blades: u32, xi: DVec2) -> DVec2 {
+/// regular polygon inscribed in the unit circle with vertex k at angle `2 pi k / blades -
+/// rotation_rad` measured from +u towards +v (v is down, so `rotation_rad` turns the polygon
+/// counter-clockwise as seen on the image, as the precompute's aperture does). Uniform in
+/// area either way.
+pub fn sample_aperture(blades: u32, rotation_rad: f64, xi: DVec2) -> DVec2 {
     if blades < 3 {
         return concentric_disk(xi);
     }
@@ -51,8 +53,8 @@ pub fn sample_aperture(blades: u32, xi: DVec2) -> DVec2 {
     let scaled = xi.x * n;
     let k = scaled.floor().min(n - 1.0);
     let xr = (scaled - k).clamp(0.0, 1.0);
-    let a0 = 2.0 * PI * k / n;
-    let a1 = 2.0 * PI * (k + 1.0) / n;
+    let a0 = 2.0 * PI * k / n - rotation_rad;
+    let a1 = 2.0 * PI * (k + 1.0) / n - rotation_rad;
     let v0 = DVec2::new(a0.cos(), a0.sin());
     let v1 = DVec2::new(a1.cos(), a1.sin());
     // Uniform in the triangle (centre, v0, v1): radial coordinate sqrt, then along the edge.
@@ -105,7 +107,11 @@ mod tests {
             let mut inside_half = 0usize;
             let mut mean = DVec2::ZERO;
             for _ in 0..n {
-                let p = sample_aperture(blades, DVec2::new(uniform(&mut rng), uniform(&mut rng)));
+                let p = sample_aperture(
+                    blades,
+                    0.0,
+                    DVec2::new(uniform(&mut rng), uniform(&mut rng)),
+                );
                 assert!(p.length() <= 1.0 + 1e-12);
                 if p.length() < 0.5 {
                     inside_half += 1;
@@ -130,9 +136,27 @@ mod tests {
     }
 
     #[test]
+    fn a_rotation_turns_the_polygon_counter_clockwise_on_the_image() {
+        // A triangle turned by 30 degrees has a vertex at 30 degrees counter-clockwise from +u
+        // as seen on the image, which is (cos 30, -sin 30) with v down; the unturned triangle's
+        // vertex at 0 degrees and the mirror image of the turned one are outside it.
+        let mut rng = pixel_rng(3, Stream::Reference, 0);
+        let turn = 30f64.to_radians();
+        let (mut near_vertex, mut near_mirror, mut near_unturned) = (0, 0, 0);
+        for _ in 0..20000 {
+            let p = sample_aperture(3, turn, DVec2::new(uniform(&mut rng), uniform(&mut rng)));
+            near_vertex += usize::from((p - DVec2::new(turn.cos(), -turn.sin())).length() < 0.1);
+            near_mirror += usize::from((p - DVec2::new(turn.cos(), turn.sin())).length() < 0.1);
+            near_unturned += usize::from((p - DVec2::new(1.0, 0.0)).length() < 0.1);
+        }
+        assert!(near_vertex > 0, "no sample near the turned vertex");
+        assert_eq!((near_mirror, near_unturned), (0, 0));
+    }
+
+    #[test]
     fn polygon_vertices_on_unit_circle() {
         // xi.x just below 1/6 with radial 1 and xi.y = 1 reaches vertex 1 of a hexagon.
-        let p = sample_aperture(6, DVec2::new(1.0 / 6.0 - 1e-12, 1.0));
+        let p = sample_aperture(6, 0.0, DVec2::new(1.0 / 6.0 - 1e-12, 1.0));
         let a = 2.0 * PI / 6.0;
         assert!((p - DVec2::new(a.cos(), a.sin())).length() < 1e-5);
     }

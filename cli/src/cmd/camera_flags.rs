@@ -30,6 +30,10 @@ pub(crate) struct CameraFlags {
     /// Aperture blades (0 = circular).
     #[arg(long)]
     pub(crate) aperture_blades: Option<u32>,
+    /// Rotation of the blade polygon, degrees, counter-clockwise on the image (0: a vertex
+    /// points right).
+    #[arg(long)]
+    pub(crate) aperture_rotation_deg: Option<f64>,
     /// Shutter as a fraction of the frame (0 = no motion blur).
     #[arg(long)]
     pub(crate) shutter_frames: Option<f64>,
@@ -64,6 +68,10 @@ pub(crate) fn load_camera(path: Option<&Path>, f: &CameraFlags) -> Result<Camera
     set("f_stop", f.f_stop.map(Into::into));
     set("focus_distance", f.focus_distance.map(Into::into));
     set("aperture_blades", f.aperture_blades.map(Into::into));
+    set(
+        "aperture_rotation_deg",
+        f.aperture_rotation_deg.map(Into::into),
+    );
     set("shutter_frames", f.shutter_frames.map(Into::into));
     set("scene_unit_mm", f.scene_unit_mm.map(Into::into));
     let camera = Camera::from_json_str(&value.to_string()).map_err(|e| match path {

@@ -799,6 +799,7 @@ mod tests {
             f_stop: lens.then_some(2.0),
             focus_distance: lens.then_some(1.0),
             aperture_blades: 0,
+            aperture_rotation_deg: 0.0,
             shutter_frames: shutter,
             scene_unit_mm: 1000.0,
         }
