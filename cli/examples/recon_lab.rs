@@ -58,7 +58,7 @@ fn main() -> anyhow::Result<()> {
     let dbs = spreadlet_cli::demo::cached_dbs(
         effects,
         precompute::Profile::Quick,
-        camera.aperture_blades,
+        spreadlet::databases::aperture_of(&camera),
         false,
     )?;
     let dbs = match std::env::var("LAB_DB") {

@@ -15,7 +15,7 @@ fn main() -> anyhow::Result<()> {
     let dbs = spreadlet_cli::demo::cached_dbs(
         effects,
         precompute::Profile::Quick,
-        cam.aperture_blades,
+        spreadlet::databases::aperture_of(&cam),
         false,
     )?;
     let c = spreadlet::pipeline::classify(&g, &cam, &dbs, &Default::default())?;
