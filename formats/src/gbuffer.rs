@@ -281,77 +281,28 @@ impl GBuffer {
         R: std::io::Read + std::io::Seek + Send,
         F: Fn() -> std::io::Result<R>,
     {
-        use exr::prelude::*;
-        let name = name.to_string();
-        let exr_err = |e: exr::error::Error| GBufferError::Exr {
-            path: name.clone(),
-            message: e.to_string(),
-        };
-        let meta =
-            exr::meta::MetaData::read_from_buffered(open().map_err(|e| exr_err(e.into()))?, false)
-                .map_err(exr_err)?;
-        check_header(&name, &meta, file_len)?;
+        let decoded = Decoded::read(name, file_len, open)?;
+        decoded.assemble(options)
+    }
 
-        let image = read()
-            .no_deep_data()
-            .largest_resolution_level()
-            .all_channels()
-            .all_layers()
-            .all_attributes()
-            .from_buffered(open().map_err(|e| exr_err(e.into()))?)
-            .map_err(exr_err)?;
-        let first = image
-            .layer_data
-            .first()
-            .ok_or_else(|| GBufferError::Layout {
+    /// Reads the view layers of a Blender multi-view-layer EXR (`<Layer>.Combined.RGBA`,
+    /// `<Layer>.Depth.Z`, `<Layer>.Vector.XYZW` per layer), decoding the file once: the layers
+    /// named in `wanted`, in that order, or every layer that has Combined and Depth, in the
+    /// file's (alphabetical) order (a file with one view layer: that layer). A file without
+    /// Blender layers gives one layer named "".
+    pub fn read_view_layers(
+        path: &Path,
+        wanted: Option<&[String]>,
+    ) -> Result<Vec<ViewLayer>, GBufferError> {
+        let name = path.display().to_string();
+        let file_len = std::fs::metadata(path)
+            .map_err(|e| GBufferError::Exr {
                 path: name.clone(),
-                message: "the file has no image part".into(),
-            })?;
-        let (width, height) = (first.size.width(), first.size.height());
-        check_size(&name, width, height)?;
-        let overscan = overscan_of(
-            &name,
-            first.attributes.layer_position,
-            first.size,
-            image.attributes.display_window,
-        )?;
-        let channels = merged_channels(&name, &image.layer_data)?;
-        let names: Vec<String> = channels.iter().map(|(n, _)| n.clone()).collect();
-        let n = width * height;
-        let (rgba, depth, motion) = select_planes(&name, &channels, options)?;
-        // Sub-sampled channels (EXR x/y sampling above 1) hold fewer values than pixels.
-        for plane in rgba.iter().flatten() {
-            if plane.len() != n {
-                return Err(GBufferError::Layout {
-                    path: name.clone(),
-                    message: format!(
-                        "a colour channel has {} values for {n} pixels (sub-sampled channels \
-                         are not supported)",
-                        plane.len()
-                    ),
-                });
-            }
-        }
-        let mut color = vec![[0.0f32, 0.0, 0.0, 1.0]; n];
-        for (c, plane) in rgba.iter().enumerate() {
-            if let Some(plane) = plane {
-                for (px, &v) in color.iter_mut().zip(plane.iter()) {
-                    px[c] = v;
-                }
-            }
-        }
-        let mut g = GBuffer {
-            width,
-            height,
-            overscan,
-            color,
-            depth: depth.cloned(),
-            motion,
-            dropped_pixels: 0,
-            channels_present: names,
-        };
-        g.sanitize(&name)?;
-        Ok(g)
+                message: e.to_string(),
+            })?
+            .len();
+        let open = || std::fs::File::open(path).map(std::io::BufReader::new);
+        Decoded::read(&name, file_len, open)?.view_layers(wanted)
     }
 
     /// Applies the bad-value policy (see the module documentation).
@@ -407,6 +358,208 @@ impl GBuffer {
             }
         }
         Ok(())
+    }
+}
+
+/// A decoded OpenEXR: every part's channels by full name, before any plane is chosen.
+struct Decoded {
+    name: String,
+    width: usize,
+    height: usize,
+    overscan: Overscan,
+    channels: Vec<(String, Vec<f32>)>,
+}
+
+impl Decoded {
+    fn read<R, F>(name: &str, file_len: u64, open: F) -> Result<Self, GBufferError>
+    where
+        R: std::io::Read + std::io::Seek + Send,
+        F: Fn() -> std::io::Result<R>,
+    {
+        use exr::prelude::*;
+        let name = name.to_string();
+        let exr_err = |e: exr::error::Error| GBufferError::Exr {
+            path: name.clone(),
+            message: e.to_string(),
+        };
+        let meta =
+            exr::meta::MetaData::read_from_buffered(open().map_err(|e| exr_err(e.into()))?, false)
+                .map_err(exr_err)?;
+        check_header(&name, &meta, file_len)?;
+
+        let image = read()
+            .no_deep_data()
+            .largest_resolution_level()
+            .all_channels()
+            .all_layers()
+            .all_attributes()
+            .from_buffered(open().map_err(|e| exr_err(e.into()))?)
+            .map_err(exr_err)?;
+        let first = image
+            .layer_data
+            .first()
+            .ok_or_else(|| GBufferError::Layout {
+                path: name.clone(),
+                message: "the file has no image part".into(),
+            })?;
+        let (width, height) = (first.size.width(), first.size.height());
+        check_size(&name, width, height)?;
+        let overscan = overscan_of(
+            &name,
+            first.attributes.layer_position,
+            first.size,
+            image.attributes.display_window,
+        )?;
+        let channels = merged_channels(&name, &image.layer_data)?;
+        Ok(Decoded {
+            name,
+            width,
+            height,
+            overscan,
+            channels,
+        })
+    }
+
+    /// The G-buffer of the planes `options` select.
+    fn assemble(&self, options: &ChannelOptions) -> Result<GBuffer, GBufferError> {
+        let (name, width, height, overscan, channels) = (
+            self.name.clone(),
+            self.width,
+            self.height,
+            self.overscan,
+            &self.channels,
+        );
+        let names: Vec<String> = channels.iter().map(|(n, _)| n.clone()).collect();
+        let n = width * height;
+        let (rgba, depth, motion) = select_planes(&name, channels, options)?;
+        // Sub-sampled channels (EXR x/y sampling above 1) hold fewer values than pixels.
+        for plane in rgba.iter().flatten() {
+            if plane.len() != n {
+                return Err(GBufferError::Layout {
+                    path: name.clone(),
+                    message: format!(
+                        "a colour channel has {} values for {n} pixels (sub-sampled channels \
+                         are not supported)",
+                        plane.len()
+                    ),
+                });
+            }
+        }
+        let mut color = vec![[0.0f32, 0.0, 0.0, 1.0]; n];
+        for (c, plane) in rgba.iter().enumerate() {
+            if let Some(plane) = plane {
+                for (px, &v) in color.iter_mut().zip(plane.iter()) {
+                    px[c] = v;
+                }
+            }
+        }
+        let mut g = GBuffer {
+            width,
+            height,
+            overscan,
+            color,
+            depth: depth.cloned(),
+            motion,
+            dropped_pixels: 0,
+            channels_present: names,
+        };
+        g.sanitize(&name)?;
+        Ok(g)
+    }
+
+    /// The Blender view layers in the file (names of `<Layer>.Combined.R`).
+    fn blender_layers(&self) -> Vec<String> {
+        self.channels
+            .iter()
+            .filter_map(|(n, _)| n.strip_suffix(".Combined.R").map(str::to_string))
+            .collect()
+    }
+
+    fn view_layers(&self, wanted: Option<&[String]>) -> Result<Vec<ViewLayer>, GBufferError> {
+        let present = self.blender_layers();
+        if present.is_empty() {
+            if let Some(w) = wanted.filter(|w| !w.is_empty()) {
+                return Err(GBufferError::Layout {
+                    path: self.name.clone(),
+                    message: format!(
+                        "view layers {} were asked for, but the file has no Blender view layers",
+                        w.join(", ")
+                    ),
+                });
+            }
+            let gbuffer = self.assemble(&ChannelOptions::default())?;
+            return Ok(vec![ViewLayer::new(String::new(), gbuffer)]);
+        }
+        let has = |layer: &str, pass: &str| {
+            let full = format!("{layer}.{pass}");
+            self.channels.iter().any(|(n, _)| *n == full)
+        };
+        let names: Vec<String> = match wanted {
+            Some(w) => {
+                for l in w {
+                    if !present.contains(l) {
+                        return Err(GBufferError::Layout {
+                            path: self.name.clone(),
+                            message: format!(
+                                "no view layer {l:?}; the file has {}",
+                                present.join(", ")
+                            ),
+                        });
+                    }
+                }
+                w.to_vec()
+            }
+            // One layer is the input whatever its passes (motion blur alone needs no depth).
+            None if present.len() == 1 => present.clone(),
+            None => present
+                .iter()
+                .filter(|l| has(l, "Depth.Z"))
+                .cloned()
+                .collect(),
+        };
+        if names.is_empty() {
+            return Err(GBufferError::Layout {
+                path: self.name.clone(),
+                message: format!(
+                    "none of the view layers ({}) has a Depth pass",
+                    present.join(", ")
+                ),
+            });
+        }
+        names
+            .into_iter()
+            .map(|layer| {
+                let options = ChannelOptions {
+                    layout: Layout::Blender,
+                    layer: Some(layer.clone()),
+                    ..ChannelOptions::default()
+                };
+                Ok(ViewLayer::new(layer, self.assemble(&options)?))
+            })
+            .collect()
+    }
+}
+
+/// One render layer of a layered input: its name (the artist's view layer name, or the file's)
+/// and its G-buffer. `still` declares a layer without motion vectors to be still.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ViewLayer {
+    /// The layer's name (empty for a plain file).
+    pub name: String,
+    /// Its pixels.
+    pub gbuffer: GBuffer,
+    /// Declared still: no motion vectors needed even when the frame has motion.
+    pub still: bool,
+}
+
+impl ViewLayer {
+    /// A layer that is not declared still.
+    pub fn new(name: String, gbuffer: GBuffer) -> Self {
+        Self {
+            name,
+            gbuffer,
+            still: false,
+        }
     }
 }
 

@@ -29,7 +29,7 @@ pub mod stochastic;
 pub use atomic::write_atomically;
 pub use camera::{Camera, CameraError, ThinLens};
 pub use error::{Error, Result};
-pub use gbuffer::{ChannelOptions, GBuffer, GBufferError};
+pub use gbuffer::{ChannelOptions, GBuffer, GBufferError, ViewLayer};
 pub use image::RgbaImage;
 pub use srgb::srgb_encode;
 pub use stochastic::{Sample, StochasticFrames};

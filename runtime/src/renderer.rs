@@ -261,6 +261,23 @@ impl Renderer {
         self.run(Work::Synthesis(gbuffer), camera, selected, options)
     }
 
+    /// Depth of field and motion blur from several render layers of one frame (Blender view
+    /// layers, or one file per layer): every layer's pixels are splatted with their own PSFs
+    /// into the global depth layers, so what a blurred foreground hides is the background's
+    /// real pixels. One layer (not declared still) gives exactly [`Renderer::synthesize`]'s
+    /// result.
+    pub fn synthesize_layers(
+        &mut self,
+        layers: &[crate::gbuffer::ViewLayer],
+        camera: &Camera,
+        options: &SynthOptions,
+    ) -> Result<Frame, Error> {
+        options.validate()?;
+        let effects = crate::pipeline::classify::layered_effects(layers, camera);
+        let selected = self.databases_for(effects, camera)?;
+        self.run(Work::Layers(layers), camera, selected, options)
+    }
+
     /// Reconstructs depth of field and motion blur from stochastic frames (each sample
     /// labelled with its lens position and time; `docs/STOCHASTIC.md`).
     pub fn reconstruct(
@@ -433,6 +450,9 @@ impl Renderer {
                     Work::Synthesis(g) => {
                         crate::gpu::synthesize_gpu(synthesizer, g, camera, dbs, options)?
                     }
+                    Work::Layers(l) => {
+                        crate::gpu::synthesize_layers_gpu(synthesizer, l, camera, dbs, options)?
+                    }
                     Work::Reconstruction(f) => {
                         crate::gpu::reconstruct_gpu(synthesizer, f, camera, dbs, options)?
                     }
@@ -442,6 +462,7 @@ impl Renderer {
             Device::Cpu => {
                 let (image, stats) = match work {
                     Work::Synthesis(g) => crate::synth::synthesize(g, camera, dbs, options)?,
+                    Work::Layers(l) => crate::synth::synthesize_layers(l, camera, dbs, options)?,
                     Work::Reconstruction(f) => {
                         crate::reconstruct::reconstruct(f, camera, dbs, options)?
                     }
@@ -531,5 +552,6 @@ struct Selected {
 #[derive(Clone, Copy)]
 enum Work<'a> {
     Synthesis(&'a GBuffer),
+    Layers(&'a [crate::gbuffer::ViewLayer]),
     Reconstruction(&'a StochasticFrames),
 }

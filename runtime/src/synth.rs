@@ -7,7 +7,7 @@ use serde::Serialize;
 
 use crate::camera::Camera;
 use crate::dbset::DbSet;
-use crate::gbuffer::GBuffer;
+use crate::gbuffer::{GBuffer, ViewLayer};
 use crate::pipeline::{
     classify, composite, integrate, splat, ClassifyOptions, CompositeOptions, Effects, Integrator,
     PathCounts, SplatOptions,
@@ -154,6 +154,94 @@ pub fn classify_for_synthesis(
     stats.times.classify_ms = ms_since(t);
     record_classified(&classified, dbs, &mut stats);
     Ok((Prepared::Classified(classified), stats))
+}
+
+/// [`classify_for_synthesis`] for a layered input (view layers, one file per render layer):
+/// the layers' pixels classified together ([`crate::pipeline::classify::classify_layers`]).
+/// A single layer that is not declared still goes exactly the single-input way.
+pub fn classify_layers_for_synthesis(
+    layers: &[ViewLayer],
+    camera: &Camera,
+    dbs: &DbSet,
+    options: &SynthOptions,
+) -> Result<(Prepared, SynthStats), crate::pipeline::classify::ClassifyError> {
+    use crate::pipeline::classify::{classify_layers, layered_effects, ClassifyError};
+    let first = match layers {
+        [one] if !one.still => return classify_for_synthesis(&one.gbuffer, camera, dbs, options),
+        [first, ..] => &first.gbuffer,
+        [] => return Err(ClassifyError::NoInputLayers),
+    };
+    let effects = layered_effects(layers, camera);
+    let mut stats = SynthStats {
+        defocus: effects.defocus,
+        motion: effects.motion,
+        width: first.frame_width(),
+        height: first.frame_height(),
+        overscan: first.overscan,
+        frame_edges: options.classify.frame_edges,
+        layers: options.classify.layers,
+        integrator: options.integrator,
+        ..SynthStats::default()
+    };
+    let t = Instant::now();
+    if effects.cheapest_model().is_none() {
+        // Nothing to blur: the layers composited per pixel, nearest over farthest.
+        for layer in layers {
+            crate::pipeline::classify::classify_sizes(&layer.gbuffer, camera)?;
+        }
+        let image = composite_layers_per_pixel(layers);
+        stats.counts.copied = image.pixels.iter().filter(|c| **c != [0.0; 4]).count();
+        stats.layers_used = 1;
+        stats.times.classify_ms = ms_since(t);
+        return Ok((Prepared::PassThrough(image), stats));
+    }
+    let classified = classify_layers(layers, camera, dbs, &options.classify)?;
+    stats.times.classify_ms = ms_since(t);
+    record_classified(&classified, dbs, &mut stats);
+    Ok((Prepared::Classified(classified), stats))
+}
+
+/// The layers' frames composited per pixel, nearest over farthest (premultiplied "over"),
+/// each pixel's order by its depth in each layer (no depth: farthest).
+fn composite_layers_per_pixel(layers: &[ViewLayer]) -> RgbaImage {
+    let frames: Vec<GBuffer> = layers.iter().map(|l| l.gbuffer.frame_only()).collect();
+    let (w, h) = (frames[0].width, frames[0].height);
+    let mut image = RgbaImage::new(w, h);
+    let mut order: Vec<(f32, [f32; 4])> = Vec::with_capacity(frames.len());
+    for (i, out) in image.pixels.iter_mut().enumerate() {
+        order.clear();
+        order.extend(frames.iter().map(|f| {
+            let d = f.depth.as_ref().map_or(f32::INFINITY, |d| d[i]);
+            (d, f.color[i])
+        }));
+        order.sort_by(|a, b| b.0.total_cmp(&a.0)); // farthest first
+        let mut acc = [0.0f32; 4];
+        for (_, c) in &order {
+            let keep = 1.0 - c[3].clamp(0.0, 1.0);
+            acc = std::array::from_fn(|k| c[k] + keep * acc[k]);
+        }
+        *out = acc;
+    }
+    image
+}
+
+/// [`synthesize`] for a layered input ([`classify_layers_for_synthesis`]).
+pub fn synthesize_layers(
+    layers: &[ViewLayer],
+    camera: &Camera,
+    dbs: &DbSet,
+    options: &SynthOptions,
+) -> Result<(RgbaImage, SynthStats), crate::pipeline::classify::ClassifyError> {
+    let total = Instant::now();
+    let (prepared, mut stats) = classify_layers_for_synthesis(layers, camera, dbs, options)?;
+    let image = match prepared {
+        Prepared::PassThrough(image) => image,
+        Prepared::Classified(classified) => {
+            render_classified(&classified, dbs, options, &mut stats)
+        }
+    };
+    stats.times.total_ms = ms_since(total);
+    Ok((image, stats))
 }
 
 /// Synthesises depth of field and motion blur from a pinhole G-buffer. `dbs` must hold a

@@ -11,6 +11,8 @@ pub(crate) struct FrameJob {
     pub(crate) camera: Option<PathBuf>,
     pub(crate) preview: Option<PathBuf>,
     pub(crate) stats: Option<PathBuf>,
+    /// The frame number, in a frame range.
+    pub(crate) frame: Option<u32>,
 }
 
 /// Replaces the run of `#` in `path` by `frame`, zero-padded to the run's length.
@@ -58,6 +60,7 @@ pub(crate) fn frame_jobs(args: &FramePaths) -> Result<Vec<FrameJob>> {
             camera: args.camera.clone(),
             preview: args.preview.clone(),
             stats: args.stats.clone(),
+            frame: None,
         }]);
     };
     let bad = || anyhow::anyhow!("--frames takes A-B (first and last frame), got '{range}'");
@@ -91,6 +94,7 @@ pub(crate) fn frame_jobs(args: &FramePaths) -> Result<Vec<FrameJob>> {
                 camera: opt(args.camera, f)?,
                 preview: opt(args.preview, f)?,
                 stats: opt(args.stats, f)?,
+                frame: Some(f),
             })
         })
         .collect()

@@ -9,7 +9,7 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 
 use spreadlet::baseline::{FilterOptions, METHODS};
-use spreadlet::gbuffer::{ChannelOptions, GBuffer, Layout};
+use spreadlet::gbuffer::{ChannelOptions, GBuffer, Layout, ViewLayer};
 use spreadlet::pipeline::{
     ClassifyOptions, CompositeOptions, Effects, FrameEdges, Integrator, RotationSampling,
     SplatOptions,
@@ -23,9 +23,21 @@ use super::{renderer_options, write_json};
 #[derive(Args, Debug)]
 pub(crate) struct SynthArgs {
     /// Pinhole G-buffer: OpenEXR with colour, depth and (for motion blur) motion vectors. For a
-    /// sequence, a run of # stands for the frame number (frames/####.exr with --frames).
-    #[arg(long)]
-    pub(crate) input: PathBuf,
+    /// sequence, a run of # stands for the frame number (frames/####.exr with --frames). A
+    /// Blender file with several view layers is a layered input (every layer with Combined
+    /// and Depth, or those of --view-layers); several --input files are the render layers of
+    /// one frame: every layer's pixels are blurred with their own depth and motion, so what a
+    /// blurred foreground hides is the background layer's real pixels.
+    #[arg(long, required = true)]
+    pub(crate) input: Vec<PathBuf>,
+    /// The view layers to use from a multi-view-layer file, comma-separated (default: every
+    /// layer with Combined and Depth passes).
+    #[arg(long, value_delimiter = ',')]
+    pub(crate) view_layers: Option<Vec<String>>,
+    /// Layers without motion vectors that are still, comma-separated (else a layer without
+    /// vectors in a frame with motion blur is an error).
+    #[arg(long, value_delimiter = ',')]
+    pub(crate) still_layers: Vec<String>,
     /// Method: spreadlet; the baselines dense (every pre-filtered PSF drawn whole, no
     /// Laplacian) and filter (gathering with the same PSFs; docs/STUDY.md); or a peer
     /// method for comparison (mcguire, guertin: motion blur from the G-buffer, no defocus;
@@ -157,11 +169,141 @@ impl SynthArgs {
     }
 }
 
+/// The render layers of `job`'s frame: every --input file's view layers (a file with one
+/// layer, or read with explicit channel flags, is one layer, read exactly as a single
+/// G-buffer).
+fn read_layers(args: &SynthArgs, job: &FrameJob) -> Result<Vec<ViewLayer>> {
+    let plain_flags = args.layer.is_some()
+        || args.layout != Layout::Auto
+        || args.depth_channel.is_some()
+        || args.motion_channels.is_some()
+        || args.motion_y_up;
+    let mut paths = vec![job.input.clone()];
+    for extra in &args.input[1..] {
+        paths.push(match job.frame {
+            Some(f) => super::frames::frame_path(extra, f)?,
+            None => extra.clone(),
+        });
+    }
+    if plain_flags && paths.len() > 1 {
+        bail!("--layer, --layout and the plain-layout channel flags read one --input file");
+    }
+    if plain_flags {
+        let g = GBuffer::read_exr(&paths[0], &args.channel_options()?)?;
+        return Ok(vec![ViewLayer::new(
+            args.layer.clone().unwrap_or_default(),
+            g,
+        )]);
+    }
+    let mut layers = Vec::new();
+    for path in &paths {
+        let wanted = if paths.len() == 1 {
+            args.view_layers.as_deref()
+        } else {
+            None
+        };
+        for mut layer in GBuffer::read_view_layers(path, wanted)? {
+            if paths.len() > 1 {
+                let stem = path.file_stem().map(|s| s.to_string_lossy().to_string());
+                let file = stem.unwrap_or_default();
+                layer.name = if layer.name.is_empty() {
+                    file
+                } else {
+                    format!("{file}/{}", layer.name)
+                };
+            }
+            layers.push(layer);
+        }
+    }
+    if paths.len() > 1 && args.view_layers.is_some() {
+        bail!("--view-layers picks layers of one multi-view-layer file; with several --input files every file is a layer");
+    }
+    for layer in &mut layers {
+        layer.still = args.still_layers.iter().any(|s| *s == layer.name);
+    }
+    for s in &args.still_layers {
+        if !layers.iter().any(|l| l.name == *s) {
+            let names: Vec<&str> = layers.iter().map(|l| l.name.as_str()).collect();
+            bail!(
+                "--still-layers names {s:?}, which is not a layer of the input ({})",
+                names.join(", ")
+            );
+        }
+    }
+    Ok(layers)
+}
+
+/// One frame of a layered input through the renderer.
+fn layered_frame(
+    args: &SynthArgs,
+    job: &FrameJob,
+    layers: &[ViewLayer],
+    camera: &spreadlet::Camera,
+    renderer: &mut Renderer,
+    read_ms: f64,
+    started: Instant,
+) -> Result<()> {
+    let options = args.synth_options();
+    let frame = renderer.synthesize_layers(layers, camera, &options)?;
+    let (image, stats) = (&frame.image, &frame.stats);
+    let t = Instant::now();
+    image.write_exr(&job.out)?;
+    let names: Vec<&str> = layers.iter().map(|l| l.name.as_str()).collect();
+    let finish = || -> Result<()> {
+        if let Some(p) = &job.preview {
+            image.write_png(p)?;
+        }
+        let write_ms = ms_since(t);
+        if !args.quiet {
+            eprintln!(
+                "{}x{} from view layers {}: {} sparse, {} dense, {} copied; {} of {} layers; {:.1} ms",
+                stats.width,
+                stats.height,
+                names.join(", "),
+                stats.counts.sparse,
+                stats.counts.dense,
+                stats.counts.copied,
+                stats.layers_used,
+                stats.layers,
+                stats.times.total_ms,
+            );
+        }
+        if let Some(p) = &job.stats {
+            let json = serde_json::json!({
+                "input": args.input,
+                "view_layers": names,
+                "still_layers": layers.iter().filter(|l| l.still).map(|l| l.name.as_str()).collect::<Vec<_>>(),
+                "output": job.out,
+                "backend": frame.device,
+                "effects": { "defocus": stats.defocus, "motion": stats.motion },
+                "databases": frame.databases,
+                "synthesis": stats,
+                "times_ms": {
+                    "read_input": read_ms,
+                    "database": frame.database_ms,
+                    "write_output": write_ms,
+                    "wall": ms_since(started),
+                },
+            });
+            write_json(p, &json)?;
+        }
+        Ok(())
+    };
+    if let Err(e) = finish() {
+        let _ = std::fs::remove_file(&job.out);
+        if let Some(p) = &job.preview {
+            let _ = std::fs::remove_file(p);
+        }
+        return Err(e);
+    }
+    Ok(())
+}
+
 /// Runs `spreadlet synth`: every frame of the run through one renderer, so databases and GPU
 /// pipelines are loaded once.
 pub(crate) fn run(args: SynthArgs) -> Result<()> {
     let jobs = frame_jobs(&FramePaths {
-        input: &args.input,
+        input: &args.input[0],
         out: &args.out,
         camera: &args.camera,
         preview: &args.preview,
@@ -208,10 +350,22 @@ fn synth_frame(args: &SynthArgs, job: &FrameJob, renderer: &mut Renderer) -> Res
     let started = Instant::now();
     let camera = load_camera(job.camera.as_deref(), &args.camera_flags)?;
     let t = Instant::now();
-    let gbuffer = GBuffer::read_exr(&job.input, &args.channel_options()?)?;
+    let mut layers = read_layers(args, job)?;
     let read_ms = ms_since(t);
     let options = args.synth_options();
     options.validate()?;
+    let layer_names: Vec<String> = layers.iter().map(|l| l.name.clone()).collect();
+    if layers.len() > 1 {
+        if !matches!(args.method.as_str(), "spreadlet" | "dense") {
+            bail!(
+                "a layered input ({}) works with the spreadlet and dense methods, not {}",
+                layer_names.join(", "),
+                args.method
+            );
+        }
+        return layered_frame(args, job, &layers, &camera, renderer, read_ms, started);
+    }
+    let gbuffer = layers.remove(0).gbuffer;
     if !METHODS.contains(&args.method.as_str()) {
         return peer_frame(args, job, &gbuffer, &camera);
     }

@@ -34,11 +34,46 @@ pub fn synthesize_gpu(
     dbs: &DbSet,
     options: &SynthOptions,
 ) -> Result<(RgbaImage, SynthStats, GpuStageTimes), GpuError> {
+    synthesize_input_gpu(
+        gpu,
+        |o| classify_for_synthesis(gbuffer, camera, dbs, o),
+        dbs,
+        options,
+    )
+}
+
+/// [`synthesize_gpu`] for a layered input (`synth::classify_layers_for_synthesis`).
+pub fn synthesize_layers_gpu(
+    gpu: &mut GpuSynthesizer,
+    layers: &[crate::gbuffer::ViewLayer],
+    camera: &Camera,
+    dbs: &DbSet,
+    options: &SynthOptions,
+) -> Result<(RgbaImage, SynthStats, GpuStageTimes), GpuError> {
+    synthesize_input_gpu(
+        gpu,
+        |o| crate::synth::classify_layers_for_synthesis(layers, camera, dbs, o),
+        dbs,
+        options,
+    )
+}
+
+/// The GPU stages after `classify` has run on the CPU.
+fn synthesize_input_gpu(
+    gpu: &mut GpuSynthesizer,
+    classify: impl FnOnce(
+        &SynthOptions,
+    ) -> Result<
+        (crate::synth::Prepared, SynthStats),
+        crate::pipeline::classify::ClassifyError,
+    >,
+    dbs: &DbSet,
+    options: &SynthOptions,
+) -> Result<(RgbaImage, SynthStats, GpuStageTimes), GpuError> {
     gpu.check_database(dbs.combined.as_ref())?;
     gpu.apply_call_options(options);
     let total = Instant::now();
-    let (prepared, mut stats) = classify_for_synthesis(gbuffer, camera, dbs, options)
-        .map_err(|e| GpuError::Input(e.to_string()))?;
+    let (prepared, mut stats) = classify(options).map_err(|e| GpuError::Input(e.to_string()))?;
     let classified = match prepared {
         Prepared::PassThrough(image) => {
             stats.times.total_ms = ms_since(total);

@@ -32,7 +32,7 @@ use super::splat::psf_reach;
 use super::types::{FrameParams, SplatPath, SplatRecord};
 use crate::camera::Camera;
 use crate::dbset::{DbSet, NO_TWIN};
-use crate::gbuffer::GBuffer;
+use crate::gbuffer::{GBuffer, ViewLayer};
 
 /// Errors of classification.
 #[derive(Debug, thiserror::Error)]
@@ -73,6 +73,17 @@ pub enum ClassifyError {
     /// Zero layers requested.
     #[error("--layers must be at least 1")]
     NoLayers,
+    /// A layered input with no layer.
+    #[error("the layered input has no layers")]
+    NoInputLayers,
+    /// A render layer does not line up with the others.
+    #[error("view layer {layer:?} does not line up with the others: {message}")]
+    LayerMismatch {
+        /// The layer.
+        layer: String,
+        /// What differs.
+        message: String,
+    },
     /// A physical-lens database describes another camera or lacks its prescription.
     #[error("physical-lens database: {0}")]
     PhysicalLens(String),
@@ -282,14 +293,211 @@ pub fn classify(
     dbs: &DbSet,
     options: &ClassifyOptions,
 ) -> Result<Classified, ClassifyError> {
-    let (w, h) = (gbuffer.width, gbuffer.height);
     classify_sizes(gbuffer, camera)?;
-    let overscan = gbuffer.overscan;
     if options.layers == 0 {
         return Err(ClassifyError::NoLayers);
     }
     let effects = Effects::of(camera, gbuffer);
-    let present = || gbuffer.channels_present.join(", ");
+    check_passes(gbuffer, camera, None, false)?;
+    let model = resolve_model(effects, dbs)?;
+    let mut counts = PathCounts {
+        dropped: gbuffer.dropped_pixels,
+        ..PathCounts::default()
+    };
+    let fragments = pixel_fragments(
+        gbuffer,
+        camera,
+        effects,
+        model,
+        options,
+        options.edge_split,
+        &mut counts,
+    );
+    classify_fragments(
+        &fragments,
+        gbuffer.frame_width(),
+        gbuffer.frame_height(),
+        data_window(gbuffer),
+        camera,
+        dbs,
+        model,
+        options,
+        counts,
+    )
+}
+
+/// Classifies the pixels of several render layers of one frame (view layers, one file per
+/// layer): every layer's pixels are fragments with their own colour, alpha, depth and
+/// motion, layered together into the global depth layers, so what a foreground hides is
+/// real data behind it. Every layer must cover the camera's frame with the same overscan.
+/// Partly covered edge pixels whose depth is the miss value (Blender writes the depth of the
+/// first sample that hit the layer) take the depth and motion of their nearest covered
+/// neighbour in the same layer; a layer with transparency is not edge split (its edge pixels
+/// hold its own surface only), an opaque one is.
+pub fn classify_layers(
+    layers: &[ViewLayer],
+    camera: &Camera,
+    dbs: &DbSet,
+    options: &ClassifyOptions,
+) -> Result<Classified, ClassifyError> {
+    let Some(first) = layers.first() else {
+        return Err(ClassifyError::NoInputLayers);
+    };
+    if options.layers == 0 {
+        return Err(ClassifyError::NoLayers);
+    }
+    for layer in layers {
+        classify_sizes(&layer.gbuffer, camera)?;
+        let g = &layer.gbuffer;
+        if (g.width, g.height, g.overscan)
+            != (
+                first.gbuffer.width,
+                first.gbuffer.height,
+                first.gbuffer.overscan,
+            )
+        {
+            return Err(ClassifyError::LayerMismatch {
+                layer: layer.name.clone(),
+                message: format!(
+                    "{}x{} pixels with overscan {:?}, but {:?} has {}x{} with {:?}",
+                    g.width,
+                    g.height,
+                    g.overscan,
+                    first.name,
+                    first.gbuffer.width,
+                    first.gbuffer.height,
+                    first.gbuffer.overscan
+                ),
+            });
+        }
+    }
+    let effects = layered_effects(layers, camera);
+    let model = resolve_model(effects, dbs)?;
+    let mut counts = PathCounts::default();
+    let mut fragments = Vec::new();
+    for layer in layers {
+        check_passes(&layer.gbuffer, camera, Some(&layer.name), layer.still)?;
+        counts.dropped += layer.gbuffer.dropped_pixels;
+        let repaired = with_edge_depths(&layer.gbuffer);
+        let gbuffer = repaired.as_ref().unwrap_or(&layer.gbuffer);
+        let opaque = gbuffer.color.iter().all(|c| c[3] >= 0.999);
+        let layer_effects = Effects {
+            motion: effects.motion && gbuffer.motion.is_some(),
+            ..effects
+        };
+        fragments.extend(pixel_fragments(
+            gbuffer,
+            camera,
+            layer_effects,
+            model,
+            options,
+            options.edge_split && opaque,
+            &mut counts,
+        ));
+    }
+    classify_fragments(
+        &fragments,
+        first.gbuffer.frame_width(),
+        first.gbuffer.frame_height(),
+        data_window(&first.gbuffer),
+        camera,
+        dbs,
+        model,
+        options,
+        counts,
+    )
+}
+
+/// The effects of a layered frame: depth of field from the camera, motion blur when the
+/// shutter is open and some layer moves.
+pub fn layered_effects(layers: &[ViewLayer], camera: &Camera) -> Effects {
+    Effects {
+        defocus: camera.has_lens(),
+        motion: layers
+            .iter()
+            .any(|l| Effects::of(camera, &l.gbuffer).motion),
+    }
+}
+
+/// Depth at or beyond which a pixel's depth is the miss value (Blender writes 1e10).
+const MISS_DEPTH: f32 = 1e9;
+
+/// `gbuffer` with its partly covered pixels that carry the miss depth given the depth and
+/// motion of the nearest covered pixel (within 3 pixels, the most covered at equal distance);
+/// `None` when there are none.
+fn with_edge_depths(gbuffer: &GBuffer) -> Option<GBuffer> {
+    let depth = gbuffer.depth.as_ref()?;
+    let (w, h) = (gbuffer.width, gbuffer.height);
+    let needs = |i: usize| gbuffer.color[i][3] > 0.0 && depth[i] >= MISS_DEPTH;
+    if !(0..w * h).any(needs) {
+        return None;
+    }
+    let mut out = gbuffer.clone();
+    let (Some(new_depth), motion) = (out.depth.as_mut(), out.motion.as_mut()) else {
+        return None;
+    };
+    let mut new_motion = motion;
+    const REACH: i64 = 3;
+    for i in (0..w * h).filter(|&i| needs(i)) {
+        let (x, y) = ((i % w) as i64, (i / w) as i64);
+        let mut best: Option<(i64, f32, usize)> = None;
+        for dy in -REACH..=REACH {
+            for dx in -REACH..=REACH {
+                let (nx, ny) = (x + dx, y + dy);
+                if nx < 0 || ny < 0 || nx >= w as i64 || ny >= h as i64 {
+                    continue;
+                }
+                let j = ny as usize * w + nx as usize;
+                if depth[j] >= MISS_DEPTH || gbuffer.color[j][3] <= 0.0 {
+                    continue;
+                }
+                let d2 = dx * dx + dy * dy;
+                let a = gbuffer.color[j][3];
+                let better = match best {
+                    None => true,
+                    Some((bd, ba, _)) => d2 < bd || (d2 == bd && a > ba),
+                };
+                if better {
+                    best = Some((d2, a, j));
+                }
+            }
+        }
+        if let Some((_, _, j)) = best {
+            new_depth[i] = depth[j];
+            if let (Some(m), Some(src)) = (new_motion.as_deref_mut(), gbuffer.motion.as_ref()) {
+                m[i] = src[j];
+            }
+        }
+    }
+    Some(out)
+}
+
+/// The data window of `gbuffer` in frame coordinates.
+fn data_window(gbuffer: &GBuffer) -> DataWindow {
+    let (w, h, overscan) = (gbuffer.width, gbuffer.height, gbuffer.overscan);
+    DataWindow {
+        x0: -(overscan.left as i32),
+        y0: -(overscan.top as i32),
+        x1: (w - overscan.left) as i32 - 1,
+        y1: (h - overscan.top) as i32 - 1,
+    }
+}
+
+/// The passes the camera needs: depth for depth of field, motion vectors for an open shutter
+/// (unless the layer is declared `still`). `layer` names the layer in the message.
+fn check_passes(
+    gbuffer: &GBuffer,
+    camera: &Camera,
+    layer: Option<&str>,
+    still: bool,
+) -> Result<(), ClassifyError> {
+    let present = || {
+        let channels = gbuffer.channels_present.join(", ");
+        match layer {
+            Some(l) => format!("{channels}; view layer {l:?}"),
+            None => channels,
+        }
+    };
     if camera.has_lens() && gbuffer.depth.is_none() {
         return Err(ClassifyError::MissingPass {
             effect: "depth of field",
@@ -297,17 +505,31 @@ pub fn classify(
             present: present(),
         });
     }
-    if camera.has_shutter() && gbuffer.motion.is_none() {
+    if camera.has_shutter() && gbuffer.motion.is_none() && !still {
         return Err(ClassifyError::MissingPass {
             effect: "motion blur (shutter_frames > 0)",
             pass: "motion vector",
             present: present(),
         });
     }
-    let model = resolve_model(effects, dbs)?;
+    Ok(())
+}
+
+/// The fragments of every pixel of `gbuffer` (up to two per pixel with `edge_split`), and
+/// the background continued behind sharper occluders ([`ClassifyOptions::fill_hidden`]).
+fn pixel_fragments(
+    gbuffer: &GBuffer,
+    camera: &Camera,
+    effects: Effects,
+    model: Option<PsfModel>,
+    options: &ClassifyOptions,
+    split_edges: bool,
+    counts: &mut PathCounts,
+) -> Vec<Fragment> {
+    let (w, h) = (gbuffer.width, gbuffer.height);
+    let overscan = gbuffer.overscan;
     let lens = camera.thin_lens();
     let shutter = camera.shutter_frames as f32;
-
     // Parallax of every pixel and the range over pixels that carry something.
     let depth_at = |i: usize| gbuffer.depth.as_ref().map_or(f32::INFINITY, |d| d[i]);
     let parallax_of = |d: f32| if d.is_finite() { 1.0 / d } else { 0.0 };
@@ -318,11 +540,6 @@ pub fn classify(
         }
     };
     let signed_coc = |d: f32| -> f32 { lens.map_or(0.0, |l| l.signed_coc_px(f64::from(d)) as f32) };
-
-    let mut counts = PathCounts {
-        dropped: gbuffer.dropped_pixels,
-        ..PathCounts::default()
-    };
 
     // Fragments per pixel (up to two: edge split).
     let mut fragments: Vec<Fragment> = Vec::with_capacity(w * h);
@@ -344,7 +561,7 @@ pub fn classify(
                 depth: d,
                 motion: motion_at(i),
             };
-            let split = if options.edge_split && model.is_some() {
+            let split = if split_edges && model.is_some() {
                 edge_split(
                     gbuffer,
                     x,
@@ -401,23 +618,7 @@ pub fn classify(
         fragments.extend(filled);
     }
 
-    let data = DataWindow {
-        x0: -(overscan.left as i32),
-        y0: -(overscan.top as i32),
-        x1: (w - overscan.left) as i32 - 1,
-        y1: (h - overscan.top) as i32 - 1,
-    };
-    classify_fragments(
-        &fragments,
-        gbuffer.frame_width(),
-        gbuffer.frame_height(),
-        data,
-        camera,
-        dbs,
-        model,
-        options,
-        counts,
-    )
+    fragments
 }
 
 /// The model that drives the lookups for `effects`: lens-motion or physical-lens from
