@@ -186,9 +186,7 @@ pub fn classify_layers_for_synthesis(
     let t = Instant::now();
     if effects.cheapest_model().is_none() {
         // Nothing to blur: the layers composited per pixel, nearest over farthest.
-        for layer in layers {
-            crate::pipeline::classify::classify_sizes(&layer.gbuffer, camera)?;
-        }
+        crate::pipeline::classify::check_layers_line_up(layers, camera)?;
         let image = composite_layers_per_pixel(layers);
         stats.counts.copied = image.pixels.iter().filter(|c| **c != [0.0; 4]).count();
         stats.layers_used = 1;

@@ -202,11 +202,14 @@ fn read_layers(args: &SynthArgs, job: &FrameJob) -> Result<Vec<ViewLayer>> {
         } else {
             None
         };
-        for mut layer in GBuffer::read_view_layers(path, wanted)? {
+        let in_file = GBuffer::read_view_layers(path, wanted)?;
+        let single = in_file.len() == 1;
+        for mut layer in in_file {
+            // Several files: a file's one layer is named after the file, else "file/layer".
             if paths.len() > 1 {
                 let stem = path.file_stem().map(|s| s.to_string_lossy().to_string());
                 let file = stem.unwrap_or_default();
-                layer.name = if layer.name.is_empty() {
+                layer.name = if single {
                     file
                 } else {
                     format!("{file}/{}", layer.name)
@@ -219,7 +222,7 @@ fn read_layers(args: &SynthArgs, job: &FrameJob) -> Result<Vec<ViewLayer>> {
         bail!("--view-layers picks layers of one multi-view-layer file; with several --input files every file is a layer");
     }
     for layer in &mut layers {
-        layer.still = args.still_layers.iter().any(|s| *s == layer.name);
+        layer.still = args.still_layers.contains(&layer.name);
     }
     for s in &args.still_layers {
         if !layers.iter().any(|l| l.name == *s) {

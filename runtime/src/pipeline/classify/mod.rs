@@ -326,28 +326,16 @@ pub fn classify(
     )
 }
 
-/// Classifies the pixels of several render layers of one frame (view layers, one file per
-/// layer): every layer's pixels are fragments with their own colour, alpha, depth and
-/// motion, layered together into the global depth layers, so what a foreground hides is
-/// real data behind it. Every layer must cover the camera's frame with the same overscan.
-/// Partly covered edge pixels whose depth is the miss value (Blender writes the depth of the
-/// first sample that hit the layer) take the depth and motion of their nearest covered
-/// neighbour in the same layer; a layer with transparency is not edge split (its edge pixels
-/// hold its own surface only), an opaque one is.
-pub fn classify_layers(
-    layers: &[ViewLayer],
+/// Checks that every layer covers the same pixels as the first (size and overscan), naming the
+/// one that does not, and that the first fits the camera; returns the first.
+pub fn check_layers_line_up<'a>(
+    layers: &'a [ViewLayer],
     camera: &Camera,
-    dbs: &DbSet,
-    options: &ClassifyOptions,
-) -> Result<Classified, ClassifyError> {
+) -> Result<&'a ViewLayer, ClassifyError> {
     let Some(first) = layers.first() else {
         return Err(ClassifyError::NoInputLayers);
     };
-    if options.layers == 0 {
-        return Err(ClassifyError::NoLayers);
-    }
     for layer in layers {
-        classify_sizes(&layer.gbuffer, camera)?;
         let g = &layer.gbuffer;
         if (g.width, g.height, g.overscan)
             != (
@@ -370,6 +358,28 @@ pub fn classify_layers(
                 ),
             });
         }
+    }
+    classify_sizes(&first.gbuffer, camera)?;
+    Ok(first)
+}
+
+/// Classifies the pixels of several render layers of one frame (view layers, one file per
+/// layer): every layer's pixels are fragments with their own colour, alpha, depth and
+/// motion, layered together into the global depth layers, so what a foreground hides is
+/// real data behind it. Every layer must cover the camera's frame with the same overscan.
+/// Partly covered edge pixels whose depth is the miss value (Blender writes the depth of the
+/// first sample that hit the layer) take the depth and motion of their nearest covered
+/// neighbour in the same layer; a layer with transparency is not edge split (its edge pixels
+/// hold its own surface only), an opaque one is.
+pub fn classify_layers(
+    layers: &[ViewLayer],
+    camera: &Camera,
+    dbs: &DbSet,
+    options: &ClassifyOptions,
+) -> Result<Classified, ClassifyError> {
+    let first = check_layers_line_up(layers, camera)?;
+    if options.layers == 0 {
+        return Err(ClassifyError::NoLayers);
     }
     let effects = layered_effects(layers, camera);
     let model = resolve_model(effects, dbs)?;
