@@ -77,9 +77,6 @@ impl GBuffer {
     /// pixels on every side as overscan: the display window is the inner frame at (0, 0), the
     /// data window starts at `(-overscan_px, -overscan_px)`, as renderers write overscan.
     pub fn write_exr_with_overscan(&self, path: &Path, overscan_px: usize) -> Result<()> {
-        let name = |pass: &str, c: &str| format!("{VIEW_LAYER}.{pass}.{c}");
-        let color = |c: usize| self.color.iter().map(|p| p[c]).collect::<Vec<f32>>();
-        let vector = |c: usize| self.vector.iter().map(|p| p[c]).collect::<Vec<f32>>();
         if 2 * overscan_px >= self.width.min(self.height) {
             return Err(Error::Layout {
                 path: path.to_path_buf(),
@@ -94,19 +91,56 @@ impl GBuffer {
             self.width,
             self.height,
             overscan_px,
-            vec![
-                (name("Combined", "R"), color(0)),
-                (name("Combined", "G"), color(1)),
-                (name("Combined", "B"), color(2)),
-                (name("Combined", "A"), color(3)),
-                (name("Depth", "Z"), self.depth.clone()),
-                (name("Vector", "X"), vector(0)),
-                (name("Vector", "Y"), vector(1)),
-                (name("Vector", "Z"), vector(2)),
-                (name("Vector", "W"), vector(3)),
-            ],
+            self.channels(VIEW_LAYER),
             None,
         )?)
+    }
+
+    /// Writes several view layers of one frame into one multilayer EXR (f32, ZIP), atomically,
+    /// as one Blender render with several view layers does: `<name>.Combined.RGBA`,
+    /// `<name>.Depth.Z`, `<name>.Vector.XYZW` per layer. The layers must have one size.
+    pub fn write_view_layers(path: &Path, layers: &[(String, GBuffer)]) -> Result<()> {
+        let Some((_, first)) = layers.first() else {
+            return Err(Error::Layout {
+                path: path.to_path_buf(),
+                message: "no view layers to write".into(),
+            });
+        };
+        let mut channels = Vec::new();
+        for (name, g) in layers {
+            if (g.width, g.height) != (first.width, first.height) {
+                return Err(Error::Layout {
+                    path: path.to_path_buf(),
+                    message: format!("view layer {name:?} differs in size from the first"),
+                });
+            }
+            channels.extend(g.channels(name));
+        }
+        Ok(exr_io::write_channels(
+            path,
+            first.width,
+            first.height,
+            channels,
+            None,
+        )?)
+    }
+
+    /// The channels of this G-buffer as the view layer `layer`.
+    fn channels(&self, layer: &str) -> Vec<(String, Vec<f32>)> {
+        let name = |pass: &str, c: &str| format!("{layer}.{pass}.{c}");
+        let color = |c: usize| self.color.iter().map(|p| p[c]).collect::<Vec<f32>>();
+        let vector = |c: usize| self.vector.iter().map(|p| p[c]).collect::<Vec<f32>>();
+        vec![
+            (name("Combined", "R"), color(0)),
+            (name("Combined", "G"), color(1)),
+            (name("Combined", "B"), color(2)),
+            (name("Combined", "A"), color(3)),
+            (name("Depth", "Z"), self.depth.clone()),
+            (name("Vector", "X"), vector(0)),
+            (name("Vector", "Y"), vector(1)),
+            (name("Vector", "Z"), vector(2)),
+            (name("Vector", "W"), vector(3)),
+        ]
     }
 
     /// Reads a G-buffer in Blender's layout; the view layer name is whatever precedes

@@ -34,8 +34,10 @@ pub use error::{Error, Result};
 pub use gbuffer::GBuffer;
 pub use image::RgbaImage;
 pub use render::{
-    estimate_reference_noise, render_gbuffer, render_reference, render_stochastic, NoiseEstimate,
-    RenderOptions,
+    estimate_reference_noise, render_gbuffer, render_reference, render_stochastic,
+    render_view_layers, NoiseEstimate, RenderOptions,
 };
-pub use scene::{builtin, builtin_json, Scene, SceneDescription, BUILTIN_NAMES, MISS_DEPTH};
+pub use scene::{
+    builtin, builtin_json, Scene, SceneDescription, ViewLayerPass, BUILTIN_NAMES, MISS_DEPTH,
+};
 pub use stochastic::{Sample, StochasticFrames};

@@ -92,10 +92,62 @@ pub fn render_gbuffer(
     aa_samples: usize,
     options: &RenderOptions,
 ) -> Result<GBuffer> {
+    render_gbuffer_with(scene, aa_samples, options, "pinhole G-buffer", &|ray| {
+        scene.trace(ray)
+    })
+}
+
+/// The view layers of a render split into the objects named in `foreground` and the rest,
+/// as one render with two Blender view layers writes them (`Background`, `Foreground`;
+/// [`Scene::trace_layer`]): each a pinhole G-buffer like [`render_gbuffer`]'s, with the same
+/// seed, so compositing Foreground over Background gives that G-buffer's colour wherever the
+/// layers' anti-aliased edges do not meet.
+pub fn render_view_layers(
+    scene: &Scene,
+    aa_samples: usize,
+    options: &RenderOptions,
+    foreground: &[String],
+) -> Result<Vec<(String, GBuffer)>> {
+    let names: Vec<&str> = scene.objects.iter().map(|o| o.name.as_str()).collect();
+    for f in foreground {
+        if !names.contains(&f.as_str()) {
+            return Err(crate::error::Error::Invalid {
+                context: format!("scene {}", scene.name),
+                message: format!(
+                    "no object {f:?} for the foreground layer; the scene has {}",
+                    names.join(", ")
+                ),
+            });
+        }
+    }
+    let in_foreground: Vec<bool> = names
+        .iter()
+        .map(|n| foreground.iter().any(|f| f == n))
+        .collect();
+    let mut layers = Vec::new();
+    for (name, pass) in [
+        ("Background", crate::scene::ViewLayerPass::Background),
+        ("Foreground", crate::scene::ViewLayerPass::Foreground),
+    ] {
+        let g = render_gbuffer_with(scene, aa_samples, options, name, &|ray| {
+            scene.trace_layer(ray, pass, &in_foreground)
+        })?;
+        layers.push((name.to_string(), g));
+    }
+    Ok(layers)
+}
+
+fn render_gbuffer_with(
+    scene: &Scene,
+    aa_samples: usize,
+    options: &RenderOptions,
+    label: &str,
+    trace: &(dyn Fn(&crate::camera::Ray) -> crate::scene::Trace + Sync),
+) -> Result<GBuffer> {
     check_spp(aa_samples, "G-buffer anti-aliasing")?;
     let camera = &scene.camera;
     let (width, height) = (camera.spec.width as usize, camera.spec.height as usize);
-    let bar = progress_bar(options, height, "pinhole G-buffer");
+    let bar = progress_bar(options, height, label);
     let pixels = render_rows(height, &bar, |y| {
         (0..width)
             .map(|x| {
@@ -105,14 +157,14 @@ pub fn render_gbuffer(
                 let mut sum = [0.0f64; 4];
                 for i in 0..aa_samples {
                     let pixel = DVec2::new(x as f64 + set[i], y as f64 + set[aa_samples + i]);
-                    let trace = scene.trace(&camera.ray(pixel, DVec2::ZERO, 0.0));
+                    let trace = trace(&camera.ray(pixel, DVec2::ZERO, 0.0));
                     for (s, c) in sum.iter_mut().zip(trace.color) {
                         *s += f64::from(c);
                     }
                 }
                 let color = sum.map(|s| (s / aa_samples as f64) as f32);
                 let centre = DVec2::new(x as f64 + 0.5, y as f64 + 0.5);
-                let trace = scene.trace(&camera.ray(centre, DVec2::ZERO, 0.0));
+                let trace = trace(&camera.ray(centre, DVec2::ZERO, 0.0));
                 let (depth, vector) = match &trace.hit {
                     Some(hit) => {
                         let now = scene.image_position(hit, 0.0).unwrap_or(centre);
@@ -295,4 +347,45 @@ pub fn estimate_reference_noise(
         max_srgb: max / 2.0,
         ssim_halves,
     })
+}
+
+#[cfg(test)]
+mod view_layer_tests {
+    use super::*;
+
+    #[test]
+    fn foreground_over_background_is_the_flat_render_where_coverage_is_whole() {
+        let scene = crate::builtin("occluder")
+            .and_then(|s| s.with_size(48, 48))
+            .expect("scene");
+        let options = RenderOptions::default();
+        let flat = render_gbuffer(&scene, 4, &options).expect("flat");
+        let fg: Vec<String> = ["bar left", "bar middle", "bar right"]
+            .map(String::from)
+            .to_vec();
+        let layers = render_view_layers(&scene, 4, &options, &fg).expect("layers");
+        let (bg, fgl) = (&layers[0].1, &layers[1].1);
+        let (mut whole, mut empty) = (0, 0);
+        for i in 0..flat.color.len() {
+            let a = fgl.color[i][3];
+            if a == 1.0 {
+                assert_eq!(fgl.color[i], flat.color[i], "pixel {i}");
+                assert_eq!(fgl.depth[i], flat.depth[i]);
+                whole += 1;
+            } else if a == 0.0 {
+                assert_eq!(bg.color[i], flat.color[i], "pixel {i}");
+                assert_eq!(fgl.color[i], [0.0; 4]);
+                assert_eq!(fgl.depth[i], crate::MISS_DEPTH);
+                empty += 1;
+            }
+            // The background layer covers the whole frame behind the bars.
+            assert!(
+                bg.depth[i] > 1.0,
+                "the bars are in the background layer at pixel {i}"
+            );
+        }
+        assert!(whole > 50 && empty > 1000, "whole {whole}, empty {empty}");
+        let none = render_view_layers(&scene, 4, &options, &["tree".to_string()]);
+        assert!(none.is_err());
+    }
 }

@@ -131,6 +131,15 @@ pub struct Scene {
     description: SceneDescription,
 }
 
+/// The two view layers of a foreground/background split ([`Scene::trace_layer`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ViewLayerPass {
+    /// Everything but the foreground objects, which still cast their shadows.
+    Background,
+    /// The foreground objects alone, the rest held out.
+    Foreground,
+}
+
 /// Names of the scenes embedded in the library.
 pub const BUILTIN_NAMES: [&str; 5] = ["bokeh", "crossing", "occluder", "rotating", "physical"];
 
@@ -294,9 +303,22 @@ impl Scene {
 
     /// Closest hit of a world ray at time `ray.time` with distance in (1e-9, t_max).
     pub fn intersect(&self, ray: &Ray, t_max: f64) -> Option<Hit> {
+        self.intersect_visible(ray, t_max, &|_| true)
+    }
+
+    /// [`Scene::intersect`] among the objects for which `visible(index)` holds.
+    pub fn intersect_visible(
+        &self,
+        ray: &Ray,
+        t_max: f64,
+        visible: &dyn Fn(usize) -> bool,
+    ) -> Option<Hit> {
         let mut best: Option<(usize, crate::shapes::RestHit)> = None;
         let mut limit = t_max;
         for (i, object) in self.objects.iter().enumerate() {
+            if !visible(i) {
+                continue;
+            }
             let rest_ray = object.motion.to_rest(ray);
             if let Some(hit) = object.shape.intersect(&rest_ray, 1e-9, limit) {
                 limit = hit.distance;
@@ -389,6 +411,42 @@ impl Scene {
             }
             None => {
                 let [r, g, b] = self.background;
+                Trace {
+                    color: [r, g, b, 0.0],
+                    depth: f64::from(MISS_DEPTH),
+                    hit: None,
+                }
+            }
+        }
+    }
+
+    /// What `ray` sees in one view layer of a render split into a foreground (the objects
+    /// `in_foreground` marks) and a background, as a compositing artist renders them in
+    /// Blender: the background layer does not see the foreground objects but keeps their
+    /// shadows ("indirect only"); the foreground layer sees only them, everything else held
+    /// out (colour and alpha 0, miss depth).
+    pub fn trace_layer(&self, ray: &Ray, layer: ViewLayerPass, in_foreground: &[bool]) -> Trace {
+        let fg = |i: usize| in_foreground.get(i).copied().unwrap_or(false);
+        let hit = match layer {
+            ViewLayerPass::Background => self.intersect_visible(ray, f64::INFINITY, &|i| !fg(i)),
+            ViewLayerPass::Foreground => {
+                self.intersect(ray, f64::INFINITY).filter(|h| fg(h.object))
+            }
+        };
+        match hit {
+            Some(hit) => {
+                let [r, g, b] = self.shade(&hit, ray.time);
+                Trace {
+                    color: [r, g, b, 1.0],
+                    depth: self.camera.planar_depth(hit.point, ray.time),
+                    hit: Some(hit),
+                }
+            }
+            None => {
+                let [r, g, b] = match layer {
+                    ViewLayerPass::Background => self.background,
+                    ViewLayerPass::Foreground => [0.0; 3],
+                };
                 Trace {
                     color: [r, g, b, 0.0],
                     depth: f64::from(MISS_DEPTH),

@@ -7,8 +7,8 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use clap::{Args, Parser, Subcommand};
 use scene::{
-    estimate_reference_noise, render_gbuffer, render_reference, render_stochastic, RenderOptions,
-    Scene, BUILTIN_NAMES,
+    estimate_reference_noise, render_gbuffer, render_reference, render_stochastic,
+    render_view_layers, RenderOptions, Scene, BUILTIN_NAMES,
 };
 
 #[derive(Parser)]
@@ -65,6 +65,15 @@ struct RenderArgs {
     /// (data window larger than the display window); the other outputs keep the frame.
     #[arg(long, default_value_t = 0)]
     overscan: u32,
+    /// The G-buffer as two Blender view layers in one EXR, `Foreground` (the objects of
+    /// --foreground, the rest held out) and `Background` (the rest; the foreground still
+    /// casts its shadows), as a compositing artist renders them.
+    #[arg(long, requires = "foreground")]
+    view_layers: Option<PathBuf>,
+    /// Objects of the foreground view layer, by name, comma-separated (`dump SCENE` lists
+    /// them).
+    #[arg(long, value_delimiter = ',')]
+    foreground: Vec<String>,
     /// Stochastic frames EXR (docs/STOCHASTIC.md).
     #[arg(long)]
     stochastic: Option<PathBuf>,
@@ -124,11 +133,12 @@ fn png_beside(path: &Path) -> PathBuf {
 
 fn render(args: RenderArgs) -> Result<()> {
     if args.gbuffer.is_none()
+        && args.view_layers.is_none()
         && args.stochastic.is_none()
         && args.reference.is_none()
         && args.camera_out.is_none()
     {
-        bail!("nothing to do: give --gbuffer, --stochastic, --reference and/or --camera-out");
+        bail!("nothing to do: give --gbuffer, --view-layers, --stochastic, --reference and/or --camera-out");
     }
     let scene = load_scene(&args.scene)?;
     let options = RenderOptions {
@@ -148,6 +158,17 @@ fn render(args: RenderArgs) -> Result<()> {
     if let Some(path) = &args.camera_out {
         write_text_atomically(path, &(scene.camera_json() + "\n"))?;
         eprintln!("camera: {}", path.display());
+    }
+    if let Some(path) = &args.view_layers {
+        let start = Instant::now();
+        let layers = render_view_layers(&scene, args.aa, &options, &args.foreground)?;
+        scene::GBuffer::write_view_layers(path, &layers)?;
+        eprintln!(
+            "view layers Background, Foreground ({} aa): {} in {:.2} s",
+            args.aa,
+            path.display(),
+            start.elapsed().as_secs_f64()
+        );
     }
     if let Some(path) = &args.gbuffer {
         let start = Instant::now();
