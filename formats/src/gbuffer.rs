@@ -248,15 +248,7 @@ impl GBuffer {
 
     /// Reads a G-buffer from an OpenEXR file.
     pub fn read_exr(path: &Path, options: &ChannelOptions) -> Result<Self, GBufferError> {
-        let name = path.display().to_string();
-        let file_len = std::fs::metadata(path)
-            .map_err(|e| GBufferError::Exr {
-                path: name.clone(),
-                message: e.to_string(),
-            })?
-            .len();
-        let open = || std::fs::File::open(path).map(std::io::BufReader::new);
-        Self::decode_exr(&name, file_len, open, options)
+        Decoded::read_file(path)?.assemble(options)
     }
 
     /// Reads a G-buffer from the bytes of an OpenEXR file; `name` names it in messages.
@@ -294,15 +286,7 @@ impl GBuffer {
         path: &Path,
         wanted: Option<&[String]>,
     ) -> Result<Vec<ViewLayer>, GBufferError> {
-        let name = path.display().to_string();
-        let file_len = std::fs::metadata(path)
-            .map_err(|e| GBufferError::Exr {
-                path: name.clone(),
-                message: e.to_string(),
-            })?
-            .len();
-        let open = || std::fs::File::open(path).map(std::io::BufReader::new);
-        Decoded::read(&name, file_len, open)?.view_layers(wanted)
+        Decoded::read_file(path)?.view_layers(wanted)
     }
 
     /// Applies the bad-value policy (see the module documentation).
@@ -371,6 +355,18 @@ struct Decoded {
 }
 
 impl Decoded {
+    fn read_file(path: &Path) -> Result<Self, GBufferError> {
+        let name = path.display().to_string();
+        let file_len = std::fs::metadata(path)
+            .map_err(|e| GBufferError::Exr {
+                path: name.clone(),
+                message: e.to_string(),
+            })?
+            .len();
+        let open = || std::fs::File::open(path).map(std::io::BufReader::new);
+        Self::read(&name, file_len, open)
+    }
+
     fn read<R, F>(name: &str, file_len: u64, open: F) -> Result<Self, GBufferError>
     where
         R: std::io::Read + std::io::Seek + Send,

@@ -100,6 +100,23 @@ pub fn ms_since(t: Instant) -> f64 {
     t.elapsed().as_secs_f64() * 1e3
 }
 
+impl SynthStats {
+    /// The statistics a run starts with: its effects, the frame of `gbuffer` and the options.
+    fn starting(effects: Effects, gbuffer: &GBuffer, options: &SynthOptions) -> Self {
+        SynthStats {
+            defocus: effects.defocus,
+            motion: effects.motion,
+            width: gbuffer.frame_width(),
+            height: gbuffer.frame_height(),
+            overscan: gbuffer.overscan,
+            frame_edges: options.classify.frame_edges,
+            layers: options.classify.layers,
+            integrator: options.integrator,
+            ..SynthStats::default()
+        }
+    }
+}
+
 /// The device-independent front of synthesis: what the input calls for, classified, or the
 /// input itself when it calls for nothing.
 #[derive(Clone, Debug)]
@@ -120,17 +137,7 @@ pub fn classify_for_synthesis(
     options: &SynthOptions,
 ) -> Result<(Prepared, SynthStats), crate::pipeline::classify::ClassifyError> {
     let effects = Effects::of(camera, gbuffer);
-    let mut stats = SynthStats {
-        defocus: effects.defocus,
-        motion: effects.motion,
-        width: gbuffer.frame_width(),
-        height: gbuffer.frame_height(),
-        overscan: gbuffer.overscan,
-        frame_edges: options.classify.frame_edges,
-        layers: options.classify.layers,
-        integrator: options.integrator,
-        ..SynthStats::default()
-    };
+    let mut stats = SynthStats::starting(effects, gbuffer, options);
     let t = Instant::now();
     if effects.cheapest_model().is_none() {
         // Nothing to simulate: every PSF is a single pixel; the input comes back as it is.
@@ -172,17 +179,7 @@ pub fn classify_layers_for_synthesis(
         [] => return Err(ClassifyError::NoInputLayers),
     };
     let effects = layered_effects(layers, camera);
-    let mut stats = SynthStats {
-        defocus: effects.defocus,
-        motion: effects.motion,
-        width: first.frame_width(),
-        height: first.frame_height(),
-        overscan: first.overscan,
-        frame_edges: options.classify.frame_edges,
-        layers: options.classify.layers,
-        integrator: options.integrator,
-        ..SynthStats::default()
-    };
+    let mut stats = SynthStats::starting(effects, first, options);
     let t = Instant::now();
     if effects.cheapest_model().is_none() {
         // Nothing to blur: the layers composited per pixel, nearest over farthest.
@@ -231,15 +228,8 @@ pub fn synthesize_layers(
     options: &SynthOptions,
 ) -> Result<(RgbaImage, SynthStats), crate::pipeline::classify::ClassifyError> {
     let total = Instant::now();
-    let (prepared, mut stats) = classify_layers_for_synthesis(layers, camera, dbs, options)?;
-    let image = match prepared {
-        Prepared::PassThrough(image) => image,
-        Prepared::Classified(classified) => {
-            render_classified(&classified, dbs, options, &mut stats)
-        }
-    };
-    stats.times.total_ms = ms_since(total);
-    Ok((image, stats))
+    let prepared = classify_layers_for_synthesis(layers, camera, dbs, options)?;
+    Ok(render_prepared(prepared, dbs, options, total))
 }
 
 /// Synthesises depth of field and motion blur from a pinhole G-buffer. `dbs` must hold a
@@ -252,7 +242,18 @@ pub fn synthesize(
     options: &SynthOptions,
 ) -> Result<(RgbaImage, SynthStats), crate::pipeline::classify::ClassifyError> {
     let total = Instant::now();
-    let (prepared, mut stats) = classify_for_synthesis(gbuffer, camera, dbs, options)?;
+    let prepared = classify_for_synthesis(gbuffer, camera, dbs, options)?;
+    Ok(render_prepared(prepared, dbs, options, total))
+}
+
+/// The CPU stages after classification: the image of `prepared`, its statistics completed
+/// with the total time since `total`.
+fn render_prepared(
+    (prepared, mut stats): (Prepared, SynthStats),
+    dbs: &DbSet,
+    options: &SynthOptions,
+    total: Instant,
+) -> (RgbaImage, SynthStats) {
     let image = match prepared {
         Prepared::PassThrough(image) => image,
         Prepared::Classified(classified) => {
@@ -260,7 +261,7 @@ pub fn synthesize(
         }
     };
     stats.times.total_ms = ms_since(total);
-    Ok((image, stats))
+    (image, stats)
 }
 
 /// Records what classification produced in `stats`: models, counts per path, padding, layers

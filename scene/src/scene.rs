@@ -400,24 +400,7 @@ impl Scene {
 
     /// Traces one camera ray: colour, alpha and planar depth.
     pub fn trace(&self, ray: &Ray) -> Trace {
-        match self.intersect(ray, f64::INFINITY) {
-            Some(hit) => {
-                let [r, g, b] = self.shade(&hit, ray.time);
-                Trace {
-                    color: [r, g, b, 1.0],
-                    depth: self.camera.planar_depth(hit.point, ray.time),
-                    hit: Some(hit),
-                }
-            }
-            None => {
-                let [r, g, b] = self.background;
-                Trace {
-                    color: [r, g, b, 0.0],
-                    depth: f64::from(MISS_DEPTH),
-                    hit: None,
-                }
-            }
-        }
+        self.shaded(ray, self.intersect(ray, f64::INFINITY), self.background)
     }
 
     /// What `ray` sees in one view layer of a render split into a foreground (the objects
@@ -427,12 +410,20 @@ impl Scene {
     /// out (colour and alpha 0, miss depth).
     pub fn trace_layer(&self, ray: &Ray, layer: ViewLayerPass, in_foreground: &[bool]) -> Trace {
         let fg = |i: usize| in_foreground.get(i).copied().unwrap_or(false);
-        let hit = match layer {
-            ViewLayerPass::Background => self.intersect_visible(ray, f64::INFINITY, &|i| !fg(i)),
-            ViewLayerPass::Foreground => {
-                self.intersect(ray, f64::INFINITY).filter(|h| fg(h.object))
+        match layer {
+            ViewLayerPass::Background => {
+                let hit = self.intersect_visible(ray, f64::INFINITY, &|i| !fg(i));
+                self.shaded(ray, hit, self.background)
             }
-        };
+            ViewLayerPass::Foreground => {
+                let hit = self.intersect(ray, f64::INFINITY).filter(|h| fg(h.object));
+                self.shaded(ray, hit, [0.0; 3])
+            }
+        }
+    }
+
+    /// The trace of `ray` with its nearest `hit`, or `missed` radiance (alpha 0) without one.
+    fn shaded(&self, ray: &Ray, hit: Option<Hit>, missed: [f32; 3]) -> Trace {
         match hit {
             Some(hit) => {
                 let [r, g, b] = self.shade(&hit, ray.time);
@@ -443,10 +434,7 @@ impl Scene {
                 }
             }
             None => {
-                let [r, g, b] = match layer {
-                    ViewLayerPass::Background => self.background,
-                    ViewLayerPass::Foreground => [0.0; 3],
-                };
+                let [r, g, b] = missed;
                 Trace {
                     color: [r, g, b, 0.0],
                     depth: f64::from(MISS_DEPTH),

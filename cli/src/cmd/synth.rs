@@ -249,14 +249,8 @@ fn layered_frame(
     let options = args.synth_options();
     let frame = renderer.synthesize_layers(layers, camera, &options)?;
     let (image, stats) = (&frame.image, &frame.stats);
-    let t = Instant::now();
-    image.write_exr(&job.out)?;
     let names: Vec<&str> = layers.iter().map(|l| l.name.as_str()).collect();
-    let finish = || -> Result<()> {
-        if let Some(p) = &job.preview {
-            image.write_png(p)?;
-        }
-        let write_ms = ms_since(t);
+    write_frame_outputs(job, image, |write_ms| {
         if !args.quiet {
             eprintln!(
                 "{}x{} from view layers {}: {} sparse, {} dense, {} copied; {} of {} layers; {:.1} ms",
@@ -281,16 +275,44 @@ fn layered_frame(
                 "effects": { "defocus": stats.defocus, "motion": stats.motion },
                 "databases": frame.databases,
                 "synthesis": stats,
-                "times_ms": {
-                    "read_input": read_ms,
-                    "database": frame.database_ms,
-                    "write_output": write_ms,
-                    "wall": ms_since(started),
-                },
+                "times_ms": times_json(read_ms, frame.database_ms, write_ms, started),
             });
             write_json(p, &json)?;
         }
         Ok(())
+    })
+}
+
+/// The `times_ms` of a frame's statistics.
+fn times_json(
+    read_ms: f64,
+    database_ms: f64,
+    write_ms: f64,
+    started: Instant,
+) -> serde_json::Value {
+    serde_json::json!({
+        "read_input": read_ms,
+        "database": database_ms,
+        "write_output": write_ms,
+        "wall": ms_since(started),
+    })
+}
+
+/// Writes `image` to the job's output and preview, then runs `rest` with the milliseconds the
+/// writing took (statistics, messages); when anything after the image fails, the image and
+/// the preview are removed too, so a failed run leaves no output behind.
+fn write_frame_outputs(
+    job: &FrameJob,
+    image: &spreadlet::RgbaImage,
+    rest: impl FnOnce(f64) -> Result<()>,
+) -> Result<()> {
+    let t = Instant::now();
+    image.write_exr(&job.out)?;
+    let finish = || -> Result<()> {
+        if let Some(p) = &job.preview {
+            image.write_png(p)?;
+        }
+        rest(ms_since(t))
     };
     if let Err(e) = finish() {
         let _ = std::fs::remove_file(&job.out);
@@ -378,15 +400,7 @@ fn synth_frame(args: &SynthArgs, job: &FrameJob, renderer: &mut Renderer) -> Res
     let effects = Effects::of(&camera, &gbuffer);
     let frame = renderer.synthesize(&gbuffer, &camera, &options)?;
     let (image, stats) = (&frame.image, &frame.stats);
-    let t = Instant::now();
-    image.write_exr(&job.out)?;
-    // Everything after the image: on failure the image is removed too, so a failed run leaves
-    // no output behind.
-    let finish = || -> Result<()> {
-        if let Some(p) = &job.preview {
-            image.write_png(p)?;
-        }
-        let write_ms = ms_since(t);
+    write_frame_outputs(job, image, |write_ms| {
         if !args.quiet {
             eprintln!(
                 "{}x{} ({}{}): {} sparse, {} dense, {} copied, {} dropped; {} of {} layers; \
@@ -428,24 +442,12 @@ fn synth_frame(args: &SynthArgs, job: &FrameJob, renderer: &mut Renderer) -> Res
                 "conditioning": frame.conditioning,
                 "synthesis": stats,
                 "gpu_stages_ms": gpu_stages,
-                "times_ms": {
-                    "read_input": read_ms,
-                    "database": frame.database_ms,
-                    "write_output": write_ms,
-                    "wall": ms_since(started),
-                },
+                "times_ms": times_json(read_ms, frame.database_ms, write_ms, started),
             });
             write_json(p, &json)?;
         }
         Ok(())
-    };
-    if let Err(e) = finish() {
-        let _ = std::fs::remove_file(&job.out);
-        if let Some(p) = &job.preview {
-            let _ = std::fs::remove_file(p);
-        }
-        return Err(e);
-    }
+    })?;
     if stats.counts.clamped > 0 {
         eprintln!(
             "warning: {} pixel(s) asked for a PSF beyond the database's range and were drawn with its largest (see --stats: counts.clamped)",
