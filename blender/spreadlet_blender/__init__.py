@@ -186,6 +186,9 @@ def _work_folder(scene):
 def _on_render_init(scene, *args):
     if _operator_running or animation or not scene.spreadlet.every_render:
         return
+    if scene.camera is None or scene.camera.type != 'CAMERA':
+        print("Spreadlet: the scene has no active camera; this render is left as it is")
+        return
     pinhole = PinholeRender(scene).__enter__()
     render = scene.render
     # Where the render would have written each frame, now that the format is EXR.
