@@ -236,6 +236,16 @@ fn layers_that_do_not_line_up_or_lack_vectors_are_errors_naming_the_layer() {
         &["--still-layers", "still"],
     ));
     assert!(out.exists());
+    // One file without vectors: an error, unless its one layer is declared still.
+    let alone = dir.path().join("alone.exr");
+    assert_clean_failure(&synth(&[&still], &camera, &alone, &[]), "motion vector");
+    assert_success(&synth(
+        &[&still],
+        &camera,
+        &alone,
+        &["--still-layers", "ViewLayer"],
+    ));
+    assert!(alone.exists());
 
     let small = scene::builtin("crossing")
         .and_then(|s| s.with_size(32, 32))

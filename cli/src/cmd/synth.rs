@@ -185,6 +185,9 @@ fn read_layers(args: &SynthArgs, job: &FrameJob) -> Result<Vec<ViewLayer>> {
             None => extra.clone(),
         });
     }
+    if paths.len() > 1 && args.view_layers.is_some() {
+        bail!("--view-layers picks layers of one multi-view-layer file; with several --input files every file is a layer");
+    }
     if plain_flags && paths.len() > 1 {
         bail!("--layer, --layout and the plain-layout channel flags read one --input file");
     }
@@ -197,12 +200,7 @@ fn read_layers(args: &SynthArgs, job: &FrameJob) -> Result<Vec<ViewLayer>> {
     }
     let mut layers = Vec::new();
     for path in &paths {
-        let wanted = if paths.len() == 1 {
-            args.view_layers.as_deref()
-        } else {
-            None
-        };
-        let in_file = GBuffer::read_view_layers(path, wanted)?;
+        let in_file = GBuffer::read_view_layers(path, args.view_layers.as_deref())?;
         let single = in_file.len() == 1;
         for mut layer in in_file {
             // Several files: a file's one layer is named after the file, else "file/layer".
@@ -217,9 +215,6 @@ fn read_layers(args: &SynthArgs, job: &FrameJob) -> Result<Vec<ViewLayer>> {
             }
             layers.push(layer);
         }
-    }
-    if paths.len() > 1 && args.view_layers.is_some() {
-        bail!("--view-layers picks layers of one multi-view-layer file; with several --input files every file is a layer");
     }
     for layer in &mut layers {
         layer.still = args.still_layers.contains(&layer.name);
@@ -380,7 +375,8 @@ fn synth_frame(args: &SynthArgs, job: &FrameJob, renderer: &mut Renderer) -> Res
     let options = args.synth_options();
     options.validate()?;
     let layer_names: Vec<String> = layers.iter().map(|l| l.name.clone()).collect();
-    if layers.len() > 1 {
+    // A single layer declared still goes the layered way too: it needs no vectors.
+    if layers.len() > 1 || layers[0].still {
         if !matches!(args.method.as_str(), "spreadlet" | "dense") {
             bail!(
                 "a layered input ({}) works with the spreadlet and dense methods, not {}",

@@ -437,49 +437,49 @@ const MISS_DEPTH: f32 = 1e9;
 /// `None` when there are none.
 fn with_edge_depths(gbuffer: &GBuffer) -> Option<GBuffer> {
     let depth = gbuffer.depth.as_ref()?;
-    let (w, h) = (gbuffer.width, gbuffer.height);
-    let needs = |i: usize| gbuffer.color[i][3] > 0.0 && depth[i] >= MISS_DEPTH;
-    if !(0..w * h).any(needs) {
+    let w = gbuffer.width;
+    let covered = |j: usize| depth[j] < MISS_DEPTH && gbuffer.color[j][3] > 0.0;
+    let repairs: Vec<(usize, usize)> = (0..w * gbuffer.height)
+        .filter(|&i| gbuffer.color[i][3] > 0.0 && depth[i] >= MISS_DEPTH)
+        .filter_map(|i| nearest_covered(gbuffer, i, &covered).map(|j| (i, j)))
+        .collect();
+    if repairs.is_empty() {
         return None;
     }
+    // A source pixel is covered, so never repaired itself: reading it from `out` is safe.
     let mut out = gbuffer.clone();
-    let (Some(new_depth), motion) = (out.depth.as_mut(), out.motion.as_mut()) else {
-        return None;
-    };
-    let mut new_motion = motion;
-    const REACH: i64 = 3;
-    for i in (0..w * h).filter(|&i| needs(i)) {
-        let (x, y) = ((i % w) as i64, (i / w) as i64);
-        let mut best: Option<(i64, f32, usize)> = None;
-        for dy in -REACH..=REACH {
-            for dx in -REACH..=REACH {
-                let (nx, ny) = (x + dx, y + dy);
-                if nx < 0 || ny < 0 || nx >= w as i64 || ny >= h as i64 {
-                    continue;
-                }
-                let j = ny as usize * w + nx as usize;
-                if depth[j] >= MISS_DEPTH || gbuffer.color[j][3] <= 0.0 {
-                    continue;
-                }
-                let d2 = dx * dx + dy * dy;
-                let a = gbuffer.color[j][3];
-                let better = match best {
-                    None => true,
-                    Some((bd, ba, _)) => d2 < bd || (d2 == bd && a > ba),
-                };
-                if better {
-                    best = Some((d2, a, j));
-                }
-            }
+    for (i, j) in repairs {
+        if let Some(d) = out.depth.as_mut() {
+            d[i] = d[j];
         }
-        if let Some((_, _, j)) = best {
-            new_depth[i] = depth[j];
-            if let (Some(m), Some(src)) = (new_motion.as_deref_mut(), gbuffer.motion.as_ref()) {
-                m[i] = src[j];
-            }
+        if let Some(m) = out.motion.as_mut() {
+            m[i] = m[j];
         }
     }
     Some(out)
+}
+
+/// The covered pixel nearest to pixel `i` within 3 pixels (the most covered at equal
+/// distance, the first in row order at equal coverage).
+fn nearest_covered(gbuffer: &GBuffer, i: usize, covered: &dyn Fn(usize) -> bool) -> Option<usize> {
+    const REACH: i64 = 3;
+    let (w, h) = (gbuffer.width as i64, gbuffer.height as i64);
+    let (x, y) = (i as i64 % w, i as i64 / w);
+    let mut best: Option<(i64, f32, usize)> = None;
+    for ny in (y - REACH).max(0)..=(y + REACH).min(h - 1) {
+        for nx in (x - REACH).max(0)..=(x + REACH).min(w - 1) {
+            let j = (ny * w + nx) as usize;
+            if !covered(j) {
+                continue;
+            }
+            let d2 = (nx - x).pow(2) + (ny - y).pow(2);
+            let a = gbuffer.color[j][3];
+            if best.is_none_or(|(bd, ba, _)| d2 < bd || (d2 == bd && a > ba)) {
+                best = Some((d2, a, j));
+            }
+        }
+    }
+    best.map(|(_, _, j)| j)
 }
 
 /// The data window of `gbuffer` in frame coordinates.
