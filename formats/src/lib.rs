@@ -9,6 +9,8 @@
 //!   or Blender multilayer, with its data window beyond the frame (overscan).
 //! - [`StochasticFrames`]: labelled samples (lens position, time, motion) in one EXR
 //!   (`docs/STOCHASTIC.md`).
+//! - [`DeepImage`]: deep scanline OpenEXR (samples per pixel, each with colour, alpha and
+//!   depth), read and written by a reader of our own.
 //! - [`exr_io`]: named f32 channels in and out, with the header's size checked against the
 //!   file's before any pixel is decoded.
 //! - [`srgb_encode`]: the one sRGB transfer function (IEC 61966-2-1).
@@ -18,6 +20,7 @@
 
 pub mod atomic;
 pub mod camera;
+pub mod deep;
 pub mod error;
 pub mod exr_io;
 pub mod gbuffer;
@@ -28,6 +31,7 @@ pub mod stochastic;
 
 pub use atomic::write_atomically;
 pub use camera::{Camera, CameraError, ThinLens};
+pub use deep::{DeepCompression, DeepError, DeepImage, DeepSample};
 pub use error::{Error, Result};
 pub use gbuffer::{ChannelOptions, GBuffer, GBufferError, ViewLayer};
 pub use image::RgbaImage;

@@ -11,6 +11,10 @@ pub const MAX_PIXELS: usize = 8192 * 8192;
 /// parts): 16 channels of the largest image, 4 GiB of f32.
 pub const MAX_SAMPLES: usize = 16 * MAX_PIXELS;
 
+/// Largest number of samples a deep OpenEXR may hold, over all its pixels: 2^26 (64 per pixel
+/// of a 1024 x 1024 frame), 2 GiB as the reader holds them.
+pub const MAX_DEEP_SAMPLES: usize = 1 << 26;
+
 /// Largest number of samples per channel of any other EXR file (stochastic frames hold
 /// `height x spp` rows): 2^28, 1 GiB of f32.
 pub const MAX_CHANNEL_SAMPLES: usize = 1 << 28;

@@ -41,7 +41,7 @@ pub use error::Error;
 pub use formats::camera;
 /// The pinhole G-buffer and its EXR reader (from `formats`).
 pub use formats::gbuffer;
-pub use formats::{RgbaImage, Sample, StochasticFrames};
+pub use formats::{DeepImage, RgbaImage, Sample, StochasticFrames};
 pub use gbuffer::{ChannelOptions, GBuffer, ViewLayer};
 pub use renderer::{Backend, DbSource, Event, Frame, Method, Renderer, RendererOptions};
 pub use synth::{SynthOptions, SynthStats};

@@ -146,6 +146,7 @@ pub fn sample_fragments(
             parallax: 1.0 / s.depth,
             depth: s.depth,
             motion: [motion[0] * shutter, motion[1] * shutter],
+            source: 0,
         };
         let footprint = match placement {
             SamplePlacement::Footprint { sigma_px } if coc.abs() < 2.0 * sigma_px => Some(sigma_px),

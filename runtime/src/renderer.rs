@@ -278,6 +278,21 @@ impl Renderer {
         self.run(Work::Layers(layers), camera, selected, options)
     }
 
+    /// Depth of field and motion blur from a deep image ([`formats::DeepImage`]): every deep
+    /// sample is splatted with its own PSF, so anti-aliased edges and semi-transparent
+    /// surfaces blur by their own depths.
+    pub fn synthesize_deep(
+        &mut self,
+        deep: &formats::DeepImage,
+        camera: &Camera,
+        options: &SynthOptions,
+    ) -> Result<Frame, Error> {
+        options.validate()?;
+        let effects = crate::pipeline::classify::deep_effects(deep, camera);
+        let selected = self.databases_for(effects, camera)?;
+        self.run(Work::Deep(deep), camera, selected, options)
+    }
+
     /// Reconstructs depth of field and motion blur from stochastic frames (each sample
     /// labelled with its lens position and time; `docs/STOCHASTIC.md`).
     pub fn reconstruct(
@@ -453,6 +468,9 @@ impl Renderer {
                     Work::Layers(l) => {
                         crate::gpu::synthesize_layers_gpu(synthesizer, l, camera, dbs, options)?
                     }
+                    Work::Deep(d) => {
+                        crate::gpu::synthesize_deep_gpu(synthesizer, d, camera, dbs, options)?
+                    }
                     Work::Reconstruction(f) => {
                         crate::gpu::reconstruct_gpu(synthesizer, f, camera, dbs, options)?
                     }
@@ -463,6 +481,7 @@ impl Renderer {
                 let (image, stats) = match work {
                     Work::Synthesis(g) => crate::synth::synthesize(g, camera, dbs, options)?,
                     Work::Layers(l) => crate::synth::synthesize_layers(l, camera, dbs, options)?,
+                    Work::Deep(d) => crate::synth::synthesize_deep(d, camera, dbs, options)?,
                     Work::Reconstruction(f) => {
                         crate::reconstruct::reconstruct(f, camera, dbs, options)?
                     }
@@ -553,5 +572,6 @@ struct Selected {
 enum Work<'a> {
     Synthesis(&'a GBuffer),
     Layers(&'a [crate::gbuffer::ViewLayer]),
+    Deep(&'a formats::DeepImage),
     Reconstruction(&'a StochasticFrames),
 }

@@ -12,7 +12,7 @@ use crate::pipeline::{
     classify, composite, integrate, splat, ClassifyOptions, CompositeOptions, Effects, Integrator,
     PathCounts, SplatOptions,
 };
-use formats::RgbaImage;
+use formats::{DeepImage, RgbaImage};
 
 /// All knobs of synthesis. The default is exactly what `spreadlet synth` does with no flags.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -218,6 +218,64 @@ fn composite_layers_per_pixel(layers: &[ViewLayer]) -> RgbaImage {
         *out = acc;
     }
     image
+}
+
+/// [`classify_for_synthesis`] for a deep image: every deep sample a fragment
+/// ([`crate::pipeline::classify::classify_deep`]); with nothing to blur, the image flattened.
+pub fn classify_deep_for_synthesis(
+    deep: &DeepImage,
+    camera: &Camera,
+    dbs: &DbSet,
+    options: &SynthOptions,
+) -> Result<(Prepared, SynthStats), crate::pipeline::classify::ClassifyError> {
+    use crate::pipeline::classify::{check_deep_size, classify_deep, deep_effects};
+    let effects = deep_effects(deep, camera);
+    let mut stats = SynthStats {
+        defocus: effects.defocus,
+        motion: effects.motion,
+        width: deep.frame_width(),
+        height: deep.frame_height(),
+        overscan: deep.overscan,
+        frame_edges: options.classify.frame_edges,
+        layers: options.classify.layers,
+        integrator: options.integrator,
+        ..SynthStats::default()
+    };
+    let t = Instant::now();
+    if effects.cheapest_model().is_none() {
+        check_deep_size(deep, camera)?;
+        let flat = deep.flatten();
+        let (fw, fh, o) = (deep.frame_width(), deep.frame_height(), deep.overscan);
+        let pixels = (0..fw * fh)
+            .map(|i| flat[(o.top + i / fw) * deep.width + o.left + i % fw])
+            .collect();
+        let image = RgbaImage {
+            width: fw,
+            height: fh,
+            pixels,
+        };
+        stats.counts.copied = image.pixels.iter().filter(|c| **c != [0.0; 4]).count();
+        stats.counts.dropped = deep.dropped_samples;
+        stats.layers_used = 1;
+        stats.times.classify_ms = ms_since(t);
+        return Ok((Prepared::PassThrough(image), stats));
+    }
+    let classified = classify_deep(deep, camera, dbs, &options.classify)?;
+    stats.times.classify_ms = ms_since(t);
+    record_classified(&classified, dbs, &mut stats);
+    Ok((Prepared::Classified(classified), stats))
+}
+
+/// [`synthesize`] for a deep image ([`classify_deep_for_synthesis`]).
+pub fn synthesize_deep(
+    deep: &DeepImage,
+    camera: &Camera,
+    dbs: &DbSet,
+    options: &SynthOptions,
+) -> Result<(RgbaImage, SynthStats), crate::pipeline::classify::ClassifyError> {
+    let total = Instant::now();
+    let prepared = classify_deep_for_synthesis(deep, camera, dbs, options)?;
+    Ok(render_prepared(prepared, dbs, options, total))
 }
 
 /// [`synthesize`] for a layered input ([`classify_layers_for_synthesis`]).

@@ -34,7 +34,7 @@ pub use error::{Error, Result};
 pub use gbuffer::GBuffer;
 pub use image::RgbaImage;
 pub use render::{
-    estimate_reference_noise, render_gbuffer, render_reference, render_stochastic,
+    estimate_reference_noise, render_deep, render_gbuffer, render_reference, render_stochastic,
     render_view_layers, NoiseEstimate, RenderOptions,
 };
 pub use scene::{

@@ -137,6 +137,93 @@ pub fn render_view_layers(
     Ok(layers)
 }
 
+/// The pinhole frame as a deep image: the same stratified sub-pixel positions (and seed) as
+/// [`render_gbuffer`], each sub-sample's surface kept apart. A pixel's sub-samples that hit
+/// the same object become one deep sample (its depth and forward motion the mean of theirs),
+/// and those that miss one at the miss depth with alpha 0; samples are sorted front to back
+/// and stored so that compositing them "over" one another gives [`render_gbuffer`]'s colour:
+/// a sample covering a share `c` of the pixel behind samples covering `C` before it is stored
+/// with alpha `c / (1 - C)` and colour scaled alike.
+pub fn render_deep(
+    scene: &Scene,
+    aa_samples: usize,
+    options: &RenderOptions,
+) -> Result<formats::DeepImage> {
+    use formats::DeepSample;
+    check_spp(aa_samples, "deep image anti-aliasing")?;
+    let camera = &scene.camera;
+    let (width, height) = (camera.spec.width as usize, camera.spec.height as usize);
+    let bar = progress_bar(options, height, "deep image");
+    let pixels: Vec<Vec<DeepSample>> = render_rows(height, &bar, |y| {
+        (0..width)
+            .map(|x| {
+                let index = (y * width + x) as u64;
+                let mut rng = pixel_rng(options.seed, Stream::GBuffer, index);
+                let set = latin_hypercube(&mut rng, aa_samples, 2);
+                // Per surface (object index; None = miss): count, colour sum, depth sum,
+                // motion sum.
+                let mut groups: Vec<(Option<usize>, usize, [f64; 4], f64, DVec2)> = Vec::new();
+                for i in 0..aa_samples {
+                    let pixel = DVec2::new(x as f64 + set[i], y as f64 + set[aa_samples + i]);
+                    let trace = scene.trace(&camera.ray(pixel, DVec2::ZERO, 0.0));
+                    let object = trace.hit.map(|h| h.object);
+                    let motion = trace.hit.map_or(DVec2::ZERO, |hit| {
+                        let now = scene.image_position(&hit, 0.0).unwrap_or(pixel);
+                        scene.image_position(&hit, 1.0).unwrap_or(now) - now
+                    });
+                    let k = match groups.iter().position(|g| g.0 == object) {
+                        Some(k) => k,
+                        None => {
+                            groups.push((object, 0, [0.0; 4], 0.0, DVec2::ZERO));
+                            groups.len() - 1
+                        }
+                    };
+                    let g = &mut groups[k];
+                    g.1 += 1;
+                    for (s, c) in g.2.iter_mut().zip(trace.color) {
+                        *s += f64::from(c);
+                    }
+                    g.3 += trace.depth;
+                    g.4 += motion;
+                }
+                let n = aa_samples as f64;
+                let mut samples: Vec<DeepSample> = groups
+                    .iter()
+                    .map(|&(_, count, color, depth, motion)| {
+                        let m = motion / count as f64;
+                        DeepSample {
+                            color: color.map(|c| (c / n) as f32),
+                            depth: (depth / count as f64) as f32,
+                            depth_back: (depth / count as f64) as f32,
+                            motion: [m.x as f32, m.y as f32],
+                        }
+                    })
+                    .collect();
+                samples.sort_by(|a, b| a.depth.total_cmp(&b.depth));
+                // Shares of the pixel to "over" semantics, front to back.
+                let mut covered = 0.0f32;
+                for s in &mut samples {
+                    let share = s.color[3];
+                    let through = (1.0 - covered).max(f32::MIN_POSITIVE);
+                    s.color = s.color.map(|c| c / through);
+                    s.color[3] = s.color[3].min(1.0);
+                    covered += share;
+                }
+                samples
+            })
+            .collect()
+    });
+    let mut offsets = Vec::with_capacity(width * height + 1);
+    offsets.push(0);
+    let mut samples = Vec::new();
+    for pixel in pixels {
+        samples.extend(pixel);
+        offsets.push(samples.len());
+    }
+    formats::DeepImage::from_samples(width, height, offsets, samples, true)
+        .map_err(|e| invalid("deep image", e.to_string()))
+}
+
 fn render_gbuffer_with(
     scene: &Scene,
     aa_samples: usize,

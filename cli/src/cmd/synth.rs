@@ -14,7 +14,7 @@ use spreadlet::pipeline::{
     ClassifyOptions, CompositeOptions, Effects, FrameEdges, Integrator, RotationSampling,
     SplatOptions,
 };
-use spreadlet::{Backend, Method, Renderer, SynthOptions};
+use spreadlet::{Backend, DeepImage, Method, Renderer, SynthOptions};
 
 use super::camera_flags::{load_camera, CameraFlags};
 use super::frames::{frame_jobs, FrameJob, FramePaths};
@@ -27,7 +27,9 @@ pub(crate) struct SynthArgs {
     /// Blender file with several view layers is a layered input (every layer with Combined
     /// and Depth, or those of --view-layers); several --input files are the render layers of
     /// one frame: every layer's pixels are blurred with their own depth and motion, so what a
-    /// blurred foreground hides is the background layer's real pixels.
+    /// blurred foreground hides is the background layer's real pixels. A deep OpenEXR (deep
+    /// scanline: R, G, B, A, Z, optionally ZBack and motion.x/motion.y) is read as such: every
+    /// deep sample is blurred with its own depth and motion.
     #[arg(long, required = true)]
     pub(crate) input: Vec<PathBuf>,
     /// The view layers to use from a multi-view-layer file, comma-separated (default: every
@@ -231,6 +233,90 @@ fn read_layers(args: &SynthArgs, job: &FrameJob) -> Result<Vec<ViewLayer>> {
     Ok(layers)
 }
 
+/// The deep image of `job`'s frame; the flags that pick channels or layers of flat files are
+/// errors with it.
+fn read_deep(args: &SynthArgs, job: &FrameJob) -> Result<DeepImage> {
+    if args.input.len() > 1 {
+        bail!(
+            "{} is a deep image, which holds every layer of its frame: give it as the only --input",
+            job.input.display()
+        );
+    }
+    if args.view_layers.is_some()
+        || !args.still_layers.is_empty()
+        || args.layer.is_some()
+        || args.layout != Layout::Auto
+        || args.depth_channel.is_some()
+        || args.motion_channels.is_some()
+        || args.motion_y_up
+    {
+        bail!(
+            "{} is a deep image (channels R, G, B, A, Z, optionally ZBack and motion.x/motion.y):              --view-layers, --still-layers, --layer, --layout and the channel flags do not apply",
+            job.input.display()
+        );
+    }
+    if !matches!(args.method.as_str(), "spreadlet" | "dense") {
+        bail!(
+            "a deep input works with the spreadlet and dense methods, not {}",
+            args.method
+        );
+    }
+    Ok(DeepImage::read(&job.input)?)
+}
+
+/// One frame of a deep input through the renderer.
+fn deep_frame(
+    args: &SynthArgs,
+    job: &FrameJob,
+    deep: &DeepImage,
+    camera: &spreadlet::Camera,
+    renderer: &mut Renderer,
+    read_ms: f64,
+    started: Instant,
+) -> Result<()> {
+    let options = args.synth_options();
+    options.validate()?;
+    let frame = renderer.synthesize_deep(deep, camera, &options)?;
+    let (image, stats) = (&frame.image, &frame.stats);
+    write_frame_outputs(job, image, |write_ms| {
+        if !args.quiet {
+            eprintln!(
+                "{}x{} from a deep image ({} samples, up to {} per pixel): {} sparse, {} dense, \
+                 {} copied; {} of {} layers; {:.1} ms",
+                stats.width,
+                stats.height,
+                deep.samples.len(),
+                deep.max_samples_per_pixel(),
+                stats.counts.sparse,
+                stats.counts.dense,
+                stats.counts.copied,
+                stats.layers_used,
+                stats.layers,
+                stats.times.total_ms,
+            );
+        }
+        if let Some(p) = &job.stats {
+            let json = serde_json::json!({
+                "input": args.input,
+                "deep": {
+                    "samples": deep.samples.len(),
+                    "max_samples_per_pixel": deep.max_samples_per_pixel(),
+                    "dropped_samples": deep.dropped_samples,
+                    "channels": deep.channels_present,
+                },
+                "output": job.out,
+                "backend": frame.device,
+                "effects": { "defocus": stats.defocus, "motion": stats.motion },
+                "databases": frame.databases,
+                "synthesis": stats,
+                "times_ms": times_json(read_ms, frame.database_ms, write_ms, started),
+            });
+            write_json(p, &json)?;
+        }
+        Ok(())
+    })
+}
+
 /// One frame of a layered input through the renderer.
 fn layered_frame(
     args: &SynthArgs,
@@ -370,6 +456,10 @@ fn synth_frame(args: &SynthArgs, job: &FrameJob, renderer: &mut Renderer) -> Res
     let started = Instant::now();
     let camera = load_camera(job.camera.as_deref(), &args.camera_flags)?;
     let t = Instant::now();
+    if spreadlet::formats::deep::is_deep_exr_file(&job.input) {
+        let deep = read_deep(args, job)?;
+        return deep_frame(args, job, &deep, &camera, renderer, ms_since(t), started);
+    }
     let mut layers = read_layers(args, job)?;
     let read_ms = ms_since(t);
     let options = args.synth_options();

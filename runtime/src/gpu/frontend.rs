@@ -58,6 +58,23 @@ pub fn synthesize_layers_gpu(
     )
 }
 
+/// [`crate::synth::synthesize_deep`] with the splat, integrate and composite stages on the
+/// GPU (classification on the CPU).
+pub fn synthesize_deep_gpu(
+    gpu: &mut GpuSynthesizer,
+    deep: &formats::DeepImage,
+    camera: &Camera,
+    dbs: &DbSet,
+    options: &SynthOptions,
+) -> Result<(RgbaImage, SynthStats, GpuStageTimes), GpuError> {
+    synthesize_input_gpu(
+        gpu,
+        |o| crate::synth::classify_deep_for_synthesis(deep, camera, dbs, o),
+        dbs,
+        options,
+    )
+}
+
 /// The GPU stages after `classify` has run on the CPU.
 fn synthesize_input_gpu(
     gpu: &mut GpuSynthesizer,

@@ -33,7 +33,7 @@ pub use ::shaders::shader_sources_for_validation;
 pub use context::{GpuContext, REQUIRE_GPU_ENV};
 pub use error::GpuError;
 pub use filter::{filter_gpu, GpuFilter};
-pub use frontend::{reconstruct_gpu, synthesize_gpu, synthesize_layers_gpu};
+pub use frontend::{reconstruct_gpu, synthesize_deep_gpu, synthesize_gpu, synthesize_layers_gpu};
 pub use pyramid::{GpuPyramid, PyramidLevels};
 pub use synth::{
     AtomicMode, GpuStageTimes, GpuSynthOptions, GpuSynthesizer, SplatMode, SplatPlanes,

@@ -74,6 +74,11 @@ struct RenderArgs {
     /// them).
     #[arg(long, value_delimiter = ',')]
     foreground: Vec<String>,
+    /// The G-buffer as a deep OpenEXR (deep scanline, ZIPS): each pixel's --aa sub-samples
+    /// merged per surface into deep samples with their own colour, alpha, depth and motion,
+    /// front to back; flattened it is the G-buffer's colour.
+    #[arg(long)]
+    deep: Option<PathBuf>,
     /// Stochastic frames EXR (docs/STOCHASTIC.md).
     #[arg(long)]
     stochastic: Option<PathBuf>,
@@ -134,11 +139,12 @@ fn png_beside(path: &Path) -> PathBuf {
 fn render(args: RenderArgs) -> Result<()> {
     if args.gbuffer.is_none()
         && args.view_layers.is_none()
+        && args.deep.is_none()
         && args.stochastic.is_none()
         && args.reference.is_none()
         && args.camera_out.is_none()
     {
-        bail!("nothing to do: give --gbuffer, --view-layers, --stochastic, --reference and/or --camera-out");
+        bail!("nothing to do: give --gbuffer, --view-layers, --deep, --stochastic, --reference and/or --camera-out");
     }
     let scene = load_scene(&args.scene)?;
     let options = RenderOptions {
@@ -166,6 +172,19 @@ fn render(args: RenderArgs) -> Result<()> {
         eprintln!(
             "view layers Background, Foreground ({} aa): {} in {:.2} s",
             args.aa,
+            path.display(),
+            start.elapsed().as_secs_f64()
+        );
+    }
+    if let Some(path) = &args.deep {
+        let start = Instant::now();
+        let deep = scene::render_deep(&scene, args.aa, &options)?;
+        deep.write(path, formats::DeepCompression::Zips)?;
+        eprintln!(
+            "deep image ({} aa, {} samples, up to {} per pixel): {} in {:.2} s",
+            args.aa,
+            deep.samples.len(),
+            deep.max_samples_per_pixel(),
             path.display(),
             start.elapsed().as_secs_f64()
         );

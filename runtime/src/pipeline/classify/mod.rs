@@ -17,12 +17,14 @@
 //! background part (its own), the foreground fraction estimated by projecting its colour onto
 //! the segment between the foreground neighbour's colour and the background colour opposite.
 
+mod deep;
 mod edge_split;
 mod frame_edges;
 mod hidden;
 
 use psf_db::{PsfDatabase, PsfModel};
 
+pub use deep::{check_deep_size, classify_deep, deep_effects, deep_fragments};
 use edge_split::edge_split;
 use frame_edges::{distance_to, extend_beyond};
 pub use frame_edges::{DataWindow, FrameEdges};
@@ -268,6 +270,11 @@ pub struct Fragment {
     pub depth: f32,
     /// Motion over the shutter, pixels (x right, y down).
     pub motion: [f32; 2],
+    /// Which input surface of its pixel it comes from: the render layer, or the deep sample's
+    /// index; 0 for a single input. Where fragments of one pixel from different sources fall
+    /// into the same depth layer, the nearer ones occlude the farther ("over" within the
+    /// layer), as compositing them would.
+    pub source: u32,
 }
 
 /// Checks that the camera and the G-buffer's frame (without its overscan) agree about the
@@ -385,7 +392,7 @@ pub fn classify_layers(
     let model = resolve_model(effects, dbs)?;
     let mut counts = PathCounts::default();
     let mut fragments = Vec::new();
-    for layer in layers {
+    for (source, layer) in (0u32..).zip(layers) {
         check_passes(&layer.gbuffer, camera, Some(&layer.name), layer.still)?;
         counts.dropped += layer.gbuffer.dropped_pixels;
         let repaired = with_edge_depths(&layer.gbuffer);
@@ -395,15 +402,19 @@ pub fn classify_layers(
             motion: effects.motion && gbuffer.motion.is_some(),
             ..effects
         };
-        fragments.extend(pixel_fragments(
-            gbuffer,
-            camera,
-            layer_effects,
-            model,
-            options,
-            options.edge_split && opaque,
-            &mut counts,
-        ));
+        fragments.extend(
+            pixel_fragments(
+                gbuffer,
+                camera,
+                layer_effects,
+                model,
+                options,
+                options.edge_split && opaque,
+                &mut counts,
+            )
+            .into_iter()
+            .map(|f| Fragment { source, ..f }),
+        );
     }
     classify_fragments(
         &fragments,
@@ -570,6 +581,7 @@ fn pixel_fragments(
                 parallax: parallax_of(d),
                 depth: d,
                 motion: motion_at(i),
+                source: 0,
             };
             let split = if split_edges && model.is_some() {
                 edge_split(
@@ -623,6 +635,7 @@ fn pixel_fragments(
                 parallax: parallax_of(depth_at(i)),
                 depth: depth_at(i),
                 motion: motion_at(i),
+                source: 0,
             });
         counts.hidden_filled += filled.len();
         fragments.extend(filled);
@@ -706,10 +719,24 @@ pub fn classify_fragments(
         }
     };
 
+    // Layer weights: hard, or blended near the boundary between two layer centres. A sharp
+    // fragment is not split: its PSF barely differs between the two layers, and a surface
+    // split across two layers lets what lies behind it show through (up to a quarter where
+    // the weights are even).
+    let targets_of = |frag: &Fragment| {
+        let coc = signed_coc(frag.depth).abs();
+        let m = frag.motion;
+        let motion_len = (m[0] * m[0] + m[1] * m[1]).sqrt();
+        let sharp = coc.max(motion_len) < options.soft_layers_min_blur_px;
+        let band = options.soft_layers.filter(|_| !sharp);
+        layer_targets(layer_coord(frag.parallax), n_layers, band)
+    };
+    let transmission = occlusion_within_layers(fragments, n_layers, &targets_of);
+
     // Records per layer, then concatenated (deterministic order).
     let mut per_layer: Vec<Vec<SplatRecord>> = vec![Vec::new(); n_layers];
     let centre = [w as f32 * 0.5, h as f32 * 0.5];
-    for frag in fragments {
+    for (index, frag) in fragments.iter().enumerate() {
         if frag.weight <= 0.0 {
             continue;
         }
@@ -748,18 +775,15 @@ pub fn classify_fragments(
             (path, psf_index)
         };
 
-        // Layer weights: hard, or blended near the boundary between two layer centres. A sharp
-        // fragment is not split: its PSF barely differs between the two layers, and a surface
-        // split across two layers lets what lies behind it show through (up to a quarter where
-        // the weights are even).
-        let sharp = coc.max(motion_len) < options.soft_layers_min_blur_px;
-        let band = options.soft_layers.filter(|_| !sharp);
-        let (targets, n_targets) = layer_targets(layer_coord(frag.parallax), n_layers, band);
+        let (targets, n_targets) = targets_of(frag);
         if n_targets == 2 {
             counts.soft_split += 1;
         }
-        for &(layer, lw) in &targets[..n_targets] {
-            let weight = frag.weight * lw;
+        for (t, &(layer, lw)) in targets[..n_targets].iter().enumerate() {
+            let weight = match &transmission {
+                Some(kept) => frag.weight * lw * kept[index][t],
+                None => frag.weight * lw,
+            };
             // Frame coordinates for now; shifted by the padding once it is known.
             per_layer[layer].push(SplatRecord {
                 center_x: x,
@@ -964,6 +988,73 @@ fn lookup_psf(
 /// The layers a fragment at layer coordinate `u` (0 at the far edge, `n_layers` at the near
 /// edge) goes to, with their weights, and how many (1 or 2). With a soft band (layer units),
 /// a fragment near the boundary between two layer centres is split between them.
+/// For fragments from several sources (render layers, deep samples), the share of each
+/// fragment's weight in each of its target layers that the nearer sources of its pixel let
+/// through in that same layer: `prod (1 - coverage)` over the nearer sources, a source's
+/// coverage in a layer being the sum of its fragments' alpha x weight x layer weight there
+/// (capped at one). Fragments of one source (an edge split's two parts) do not occlude each
+/// other: their weights already share the pixel. Across layers compositing does the
+/// occluding. `None` when every fragment comes from one source (nothing to do).
+fn occlusion_within_layers(
+    fragments: &[Fragment],
+    n_layers: usize,
+    targets_of: &dyn Fn(&Fragment) -> ([(usize, f32); 2], usize),
+) -> Option<Vec<[f32; 2]>> {
+    let first_source = fragments.first()?.source;
+    if fragments.iter().all(|f| f.source == first_source) {
+        return None;
+    }
+    let mut kept = vec![[1.0f32; 2]; fragments.len()];
+    // Fragments by pixel, each pixel's in input order (a stable sort).
+    let mut order: Vec<u32> = (0..fragments.len() as u32).collect();
+    order.sort_by_key(|&i| {
+        let f = &fragments[i as usize];
+        (f.y, f.x)
+    });
+    let mut through = vec![1.0f32; n_layers];
+    let mut coverage = vec![0.0f32; n_layers];
+    let mut touched: Vec<usize> = Vec::new();
+    // (nearest depth of the fragment's source in this pixel, source, fragment)
+    let mut entries: Vec<(f32, u32, u32)> = Vec::new();
+    let key = |i: u32| (fragments[i as usize].y, fragments[i as usize].x);
+    for pixel in order.chunk_by(|&a, &b| key(a) == key(b)) {
+        let source_of = |i: u32| fragments[i as usize].source;
+        if pixel.iter().all(|&i| source_of(i) == source_of(pixel[0])) {
+            continue;
+        }
+        entries.clear();
+        entries.extend(
+            pixel
+                .iter()
+                .map(|&i| (fragments[i as usize].depth, source_of(i), i)),
+        );
+        entries.sort_by_key(|e| (e.1, e.2));
+        for run in entries.chunk_by_mut(|a, b| a.1 == b.1) {
+            let nearest = run.iter().map(|e| e.0).fold(f32::INFINITY, f32::min);
+            run.iter_mut().for_each(|e| e.0 = nearest);
+        }
+        entries.sort_by(|a, b| a.0.total_cmp(&b.0).then((a.1, a.2).cmp(&(b.1, b.2))));
+        through.iter_mut().for_each(|t| *t = 1.0);
+        for run in entries.chunk_by(|a, b| a.1 == b.1) {
+            for &(_, _, i) in run {
+                let frag = &fragments[i as usize];
+                let (targets, n) = targets_of(frag);
+                let alpha = frag.color[3].clamp(0.0, 1.0) * frag.weight.max(0.0);
+                for (t, &(layer, lw)) in targets[..n].iter().enumerate() {
+                    kept[i as usize][t] = through[layer];
+                    coverage[layer] += alpha * lw;
+                    touched.push(layer);
+                }
+            }
+            for layer in touched.drain(..) {
+                through[layer] *= 1.0 - coverage[layer].min(1.0);
+                coverage[layer] = 0.0;
+            }
+        }
+    }
+    Some(kept)
+}
+
 fn layer_targets(u: f32, n_layers: usize, band: Option<f32>) -> ([(usize, f32); 2], usize) {
     let mut targets = [(0usize, 0.0f32); 2];
     match band {

@@ -1,0 +1,206 @@
+//! Deep images as input: every deep sample is a fragment with its own colour, alpha, depth and
+//! motion, so an anti-aliased edge's sub-pixel surfaces and every layer of a semi-transparent
+//! one blur with their own PSFs. A pixel's samples are composited "over" one another front to
+//! back (OpenEXR's deep semantics): where two of them land in the same depth layer the nearer
+//! occludes the farther there ([`Fragment::source`] is the sample's index), across layers the
+//! compositing does.
+
+use formats::DeepImage;
+
+use super::{
+    classify_fragments, resolve_model, Classified, ClassifyError, ClassifyOptions, DataWindow,
+    Effects, Fragment, PathCounts,
+};
+use crate::camera::Camera;
+use crate::dbset::DbSet;
+
+/// What `camera` and `deep` call for: depth of field from the lens, motion blur when the
+/// shutter is open and some sample moves.
+pub fn deep_effects(deep: &DeepImage, camera: &Camera) -> Effects {
+    Effects {
+        defocus: camera.has_lens(),
+        motion: camera.has_shutter()
+            && deep.has_motion
+            && deep
+                .samples
+                .iter()
+                .any(|s| s.motion[0] != 0.0 || s.motion[1] != 0.0),
+    }
+}
+
+/// Checks that the deep image's frame (without its overscan) is the camera's.
+pub fn check_deep_size(deep: &DeepImage, camera: &Camera) -> Result<(), ClassifyError> {
+    let (fw, fh) = (deep.frame_width(), deep.frame_height());
+    if camera.width as usize != fw || camera.height as usize != fh {
+        return Err(ClassifyError::SizeMismatch {
+            cam_w: camera.width,
+            cam_h: camera.height,
+            img_w: fw,
+            img_h: fh,
+        });
+    }
+    Ok(())
+}
+
+/// The fragments of a deep image: one per sample, at its pixel (frame coordinates), with the
+/// depth of its front (`Z`) and its motion over the shutter.
+pub fn deep_fragments(deep: &DeepImage, camera: &Camera, effects: Effects) -> Vec<Fragment> {
+    let shutter = camera.shutter_frames as f32;
+    let (left, top) = (deep.overscan.left as i32, deep.overscan.top as i32);
+    let mut fragments = Vec::with_capacity(deep.samples.len());
+    for y in 0..deep.height {
+        for x in 0..deep.width {
+            for (k, s) in (0u32..).zip(deep.pixel(x, y)) {
+                if s.color == [0.0; 4] {
+                    continue;
+                }
+                let motion = if effects.motion {
+                    [s.motion[0] * shutter, s.motion[1] * shutter]
+                } else {
+                    [0.0; 2]
+                };
+                fragments.push(Fragment {
+                    x: x as i32 - left,
+                    y: y as i32 - top,
+                    color: s.color,
+                    weight: 1.0,
+                    parallax: if s.depth.is_finite() {
+                        1.0 / s.depth
+                    } else {
+                        0.0
+                    },
+                    depth: s.depth,
+                    motion,
+                    source: k,
+                });
+            }
+        }
+    }
+    fragments
+}
+
+/// The background hidden behind sharper occluders, continued from the visible background
+/// beside them, as for a flat G-buffer ([`super::hidden::hidden_background`]): deep data holds
+/// what shows through an edge or a transparent surface, not what an opaque one hides. Each
+/// pixel stands for its dominant sample (the one contributing most after "over") when deciding
+/// what is nearer and sharper; a pixel with several visible samples (an edge) is treated as
+/// a split edge pixel; the copies are of a background pixel's farthest sample, behind every
+/// sample of the pixels they fill (their source is past any sample index).
+fn hidden_behind_deep(deep: &DeepImage, camera: &Camera, effects: Effects) -> Vec<Fragment> {
+    let n = deep.width * deep.height;
+    let lens = camera.thin_lens();
+    let signed_coc = |d: f32| -> f32 { lens.map_or(0.0, |l| l.signed_coc_px(f64::from(d)) as f32) };
+    let flat = deep.flatten();
+    let mut depth = vec![f32::INFINITY; n];
+    let mut several = vec![false; n];
+    for i in 0..n {
+        let samples = &deep.samples[deep.offsets[i]..deep.offsets[i + 1]];
+        let mut through = 1.0f32;
+        let mut best = (0.0f32, f32::INFINITY);
+        let mut visible = 0;
+        for s in samples {
+            let share = through * s.color[3];
+            if share > 0.02 {
+                visible += 1;
+            }
+            if share > best.0 {
+                best = (share, s.depth);
+            }
+            through *= 1.0 - s.color[3];
+        }
+        depth[i] = best.1;
+        several[i] = visible > 1;
+    }
+    let proxy = crate::gbuffer::GBuffer {
+        width: deep.width,
+        height: deep.height,
+        overscan: deep.overscan,
+        color: flat,
+        depth: None,
+        motion: None,
+        dropped_pixels: 0,
+        channels_present: Vec::new(),
+    };
+    let fragments_of = deep_fragments(deep, camera, effects);
+    // Each pixel's farthest fragment (deep_fragments keeps pixel order, front to back).
+    let mut farthest = vec![usize::MAX; n];
+    let (left, top) = (deep.overscan.left as i32, deep.overscan.top as i32);
+    for (k, f) in fragments_of.iter().enumerate() {
+        let i = (f.y + top) as usize * deep.width + (f.x + left) as usize;
+        farthest[i] = k;
+    }
+    let depth_at = |i: usize| depth[i];
+    let own = |i: usize| {
+        let base = fragments_of[farthest[i]];
+        Fragment {
+            source: u32::MAX,
+            ..base
+        }
+    };
+    // Only pixels with a fragment can be sources of walks; the others are transparent black
+    // in the proxy's colour and skipped there.
+    super::hidden::hidden_background(&proxy, &several, &signed_coc, &depth_at, &|i| {
+        if farthest[i] == usize::MAX {
+            Fragment {
+                weight: 0.0,
+                ..own_or_empty()
+            }
+        } else {
+            own(i)
+        }
+    })
+}
+
+fn own_or_empty() -> Fragment {
+    Fragment {
+        x: 0,
+        y: 0,
+        color: [0.0; 4],
+        weight: 0.0,
+        parallax: 0.0,
+        depth: f32::INFINITY,
+        motion: [0.0; 2],
+        source: u32::MAX,
+    }
+}
+
+/// Classifies a deep image: its samples as fragments ([`deep_fragments`]), layered and
+/// turned into splat records as a G-buffer's pixels are.
+pub fn classify_deep(
+    deep: &DeepImage,
+    camera: &Camera,
+    dbs: &DbSet,
+    options: &ClassifyOptions,
+) -> Result<Classified, ClassifyError> {
+    check_deep_size(deep, camera)?;
+    let effects = deep_effects(deep, camera);
+    let model = resolve_model(effects, dbs)?;
+    let mut fragments = deep_fragments(deep, camera, effects);
+    let mut counts = PathCounts {
+        dropped: deep.dropped_samples,
+        ..PathCounts::default()
+    };
+    if options.fill_hidden && model.is_some() {
+        let filled = hidden_behind_deep(deep, camera, effects);
+        counts.hidden_filled += filled.len();
+        fragments.extend(filled);
+    }
+    let o = deep.overscan;
+    let data = DataWindow {
+        x0: -(o.left as i32),
+        y0: -(o.top as i32),
+        x1: (deep.width - o.left) as i32 - 1,
+        y1: (deep.height - o.top) as i32 - 1,
+    };
+    classify_fragments(
+        &fragments,
+        deep.frame_width(),
+        deep.frame_height(),
+        data,
+        camera,
+        dbs,
+        model,
+        options,
+        counts,
+    )
+}
