@@ -729,7 +729,7 @@ fn precompute_merge_rejects_corrupt_parts() {
 #[ignore = "regenerates fuzz/seeds; not a check"]
 fn write_fuzz_seeds() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz/seeds");
-    for sub in ["db_loader", "gbuffer_exr", "camera_json"] {
+    for sub in ["db_loader", "gbuffer_exr", "camera_json", "deep_exr"] {
         std::fs::create_dir_all(root.join(sub)).expect("dir");
     }
     for model in [PsfModel::ThinLens, PsfModel::LensMotion] {
@@ -772,4 +772,26 @@ fn write_fuzz_seeds() {
         camera_json(false, 0.0),
     )
     .expect("w");
+    // 3x2 pixels holding 0 to 2 samples, with motion and one volume sample.
+    let sample = |a: f32, z: f32| spreadlet::formats::DeepSample {
+        color: [0.5 * a, 0.25 * a, 0.125 * a, a],
+        depth: z,
+        depth_back: z,
+        motion: [1.0, -0.5],
+    };
+    let mut samples = vec![sample(0.5, 1.0), sample(1.0, 2.0), sample(1.0, 3.0)];
+    samples.push(sample(0.25, 1.5));
+    samples[3].depth_back = 1.75;
+    samples.extend([sample(1.0, 2.5), sample(0.75, 4.0)]);
+    let deep =
+        spreadlet::formats::DeepImage::from_samples(3, 2, vec![0, 2, 3, 3, 5, 6, 6], samples, true)
+            .expect("valid deep image");
+    for (name, compression) in [
+        ("none", spreadlet::formats::DeepCompression::None),
+        ("rle", spreadlet::formats::DeepCompression::Rle),
+        ("zips", spreadlet::formats::DeepCompression::Zips),
+    ] {
+        deep.write(&root.join(format!("deep_exr/{name}.exr")), compression)
+            .expect("w");
+    }
 }

@@ -326,6 +326,12 @@ fn own_scenes_as_view_layers_beat_the_flat_input() {
         s2 > s1 + 0.005 && f2 < 0.7 * f1,
         "single {s1}/{f1}, layered {s2}/{f2}"
     );
+    // A car with lamps crossing a road: the road behind the streak's ends is real with the
+    // layers.
+    let car = Path::new(env!("CARGO_MANIFEST_DIR")).join("scene/scenes/hard/car-on-road.json");
+    let dir3 = tempfile::tempdir().expect("temp dir");
+    let (s1, f1, s2, f2) = own_scene_scores(dir3.path(), &p(&car), "car,lamp front,lamp back");
+    assert!(s2 > s1 && f2 < f1, "single {s1}/{f1}, layered {s2}/{f2}");
     let d = |n: &str| p(&dir.path().join(n));
     let bad = run(
         "spreadlet-scene",

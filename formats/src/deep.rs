@@ -94,6 +94,17 @@ pub enum DeepCompression {
 }
 
 impl DeepCompression {
+    /// The most bytes one packed byte can unpack to: RLE's repeat of 128 bytes from 2, zlib's
+    /// deflate limit of 1032 to 1, none 1. A chunk that claims more is refused before
+    /// anything is unpacked.
+    fn max_expansion(self) -> usize {
+        match self {
+            DeepCompression::None => 1,
+            DeepCompression::Rle => 64,
+            DeepCompression::Zips => 1032,
+        }
+    }
+
     fn code(self) -> u8 {
         match self {
             DeepCompression::None => 0,
@@ -250,7 +261,7 @@ impl DeepImage {
     /// The bytes [`DeepImage::write`] writes.
     pub fn to_bytes(&self, compression: DeepCompression) -> Vec<u8> {
         let volumes = self.samples.iter().any(|s| s.depth_back != s.depth);
-        let mut channels: Vec<(&str, fn(&DeepSample) -> f32)> = vec![
+        let mut channels: Vec<WrittenChannel> = vec![
             ("A", |s| s.color[3]),
             ("B", |s| s.color[2]),
             ("G", |s| s.color[1]),
@@ -414,6 +425,9 @@ impl DeepImage {
         Ok(())
     }
 }
+
+/// A channel the writer writes: its name and how to get its value from a sample.
+type WrittenChannel = (&'static str, fn(&DeepSample) -> f32);
 
 /// Sample value types of OpenEXR channels.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -650,8 +664,9 @@ impl<'a> Reader<'a> {
 
         let sample_bytes: usize = channels.iter().map(|(_, t)| t.bytes()).sum();
         let mut counts = vec![0u32; width * height];
-        // Per scanline: its unpacked sample data.
-        let mut rows: Vec<Option<Vec<u8>>> = vec![None; height];
+        // First pass, per scanline: where its packed samples are, and how many bytes they
+        // unpack to; the samples are decoded once every count (and so every offset) is known.
+        let mut rows: Vec<Option<(usize, usize, usize)>> = vec![None; height];
         let mut total_samples: usize = 0;
         for (c, &start) in chunk_starts.iter().enumerate() {
             let Some(start) = usize::try_from(start)
@@ -716,10 +731,14 @@ impl<'a> Reader<'a> {
                      samples of {sample_bytes} bytes need {expected}"
                 )));
             }
-            let data = self.take(packed_data as usize, "sample data")?;
-            let data = uncompress(compression, data, expected)
-                .map_err(|m| self.error(format!("scanline {y}'s sample data: {m}")))?;
-            rows[row] = Some(data);
+            let packed_data = packed_data as usize;
+            if expected > packed_data.saturating_mul(compression.max_expansion()) {
+                return Err(self.error(format!(
+                    "scanline {y} claims {expected} bytes of samples from {packed_data} packed \
+                     bytes, more than {compression:?} can unpack"
+                )));
+            }
+            rows[row] = Some((self.at, packed_data, expected));
         }
 
         let mut offsets = Vec::with_capacity(width * height + 1);
@@ -736,8 +755,20 @@ impl<'a> Reader<'a> {
             };
             total_samples
         ];
-        for (row, data) in rows.iter().enumerate() {
-            let data = data.as_deref().unwrap_or(&[]);
+        // Every scanline was stored once: height distinct chunks, each for a scanline inside
+        // the data window.
+        for (row, place) in rows.iter().enumerate() {
+            let Some((at, packed, expected)) = *place else {
+                return Err(self.error(format!(
+                    "scanline {} is missing",
+                    i64::from(y0) + row as i64
+                )));
+            };
+            let data =
+                uncompress(compression, &self.bytes[at..at + packed], expected).map_err(|m| {
+                    let y = i64::from(y0) + row as i64;
+                    self.error(format!("scanline {y}'s sample data: {m}"))
+                })?;
             let first = offsets[row * width];
             let n = offsets[(row + 1) * width] - first;
             let mut at = 0;
@@ -767,10 +798,6 @@ impl<'a> Reader<'a> {
         }
         if map.depth_back.is_none() {
             samples.iter_mut().for_each(|s| s.depth_back = s.depth);
-        }
-        let missing_rows = rows.iter().filter(|r| r.is_none()).count();
-        if missing_rows > 0 {
-            return Err(self.error(format!("{missing_rows} scanlines are missing")));
         }
         Ok(DeepImage {
             width,
@@ -1085,8 +1112,8 @@ mod tests {
         let s = [sample(1.0, 0.5, 1.0), sample(2.0, 1.0, 2.0)];
         let img = DeepImage::from_samples(1, 1, vec![0, 2], s.to_vec(), false).expect("valid");
         let flat = img.flatten()[0];
-        for k in 0..4 {
-            assert!((flat[k] - (s[0].color[k] + 0.5 * s[1].color[k])).abs() < 1e-6);
+        for (k, v) in flat.iter().enumerate() {
+            assert!((v - (s[0].color[k] + 0.5 * s[1].color[k])).abs() < 1e-6);
         }
     }
 

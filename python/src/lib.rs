@@ -404,6 +404,30 @@ impl PyRenderer {
         })?;
         frame_result(py, &frame, stats)
     }
+
+    /// Depth of field and motion blur from a deep OpenEXR file (deep scanline: R, G, B, A, Z,
+    /// optionally ZBack and motion.x/motion.y in pixels per frame): every deep sample is
+    /// blurred with its own depth and motion. Returns the image (height, width, 4) float32,
+    /// or (image, stats) with `stats=True`; `progress` as for `synthesize`.
+    #[pyo3(signature = (path, camera, stats=false, progress=None))]
+    fn synthesize_deep(
+        &mut self,
+        py: Python<'_>,
+        path: PathBuf,
+        camera: &PyCamera,
+        stats: bool,
+        progress: Option<Py<PyAny>>,
+    ) -> PyResult<PyObject> {
+        let deep = py
+            .allow_threads(|| formats::DeepImage::read(&path))
+            .map_err(value_error)?;
+        let camera = camera.inner.clone();
+        let renderer = &mut self.inner;
+        let frame = self.progress.around(py, progress, || {
+            renderer.synthesize_deep(&deep, &camera, &renderer::SynthOptions::default())
+        })?;
+        frame_result(py, &frame, stats)
+    }
 }
 
 /// Stochastic frames from an array (h, w, spp, 12) of samples' channels.

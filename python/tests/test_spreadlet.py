@@ -29,7 +29,8 @@ def scene(tmp_path_factory):
     d = tmp_path_factory.mktemp("scene")
     g, cam = str(d / "g.exr"), str(d / "camera.json")
     subprocess.run([binary("SPREADLET_SCENE_BIN", "spreadlet-scene"), "render", "crossing",
-                    "--width", "64", "--gbuffer", g, "--aa", "4", "--stochastic",
+                    "--width", "64", "--gbuffer", g, "--aa", "4", "--deep", str(d / "deep.exr"),
+                    "--stochastic",
                     str(d / "frames.exr"), "--spp", "2", "--camera-out", cam, "--quiet"],
                    check=True)
     return d, g, cam
@@ -145,3 +146,17 @@ def test_an_exception_in_the_progress_callback_is_raised(scene, tmp_path):
         r.synthesize(gbuffer.color, gbuffer.depth, gbuffer.motion, camera, progress=cancel)
     with pytest.raises(ValueError, match="callable"):
         r.synthesize(gbuffer.color, gbuffer.depth, gbuffer.motion, camera, progress=3)
+
+
+def test_synthesize_deep_writes_what_the_cli_writes(scene):
+    d, _, cam = scene
+    deep, out = str(d / "deep.exr"), str(d / "cli-deep.exr")
+    subprocess.run([binary("SPREADLET_BIN", "spreadlet"), "synth", "--input", deep,
+                    "--camera", cam, "--out", out, "--backend", "cpu", "-q"], check=True)
+    camera = spreadlet.Camera.from_json(cam)
+    r = spreadlet.Renderer(backend="cpu")
+    image, stats = r.synthesize_deep(deep, camera, stats=True)
+    assert np.array_equal(image, spreadlet.read_gbuffer(out).color), "the module and the CLI differ"
+    assert stats["defocus"] and stats["motion"]
+    with pytest.raises(ValueError, match="(?i)deep"):
+        r.synthesize_deep(os.path.join(d, "g.exr"), camera)

@@ -1169,6 +1169,25 @@ fn readers_survive_seeded_mutations_of_the_fuzz_seeds() {
             }
         }
     }
+    let deep = seeds("deep_exr");
+    assert!(!deep.is_empty(), "deep fuzz seeds missing");
+    for seed in &deep {
+        for _ in 0..3000 {
+            let bytes = mutate(seed);
+            total += 1;
+            if let Ok(d) = spreadlet::formats::DeepImage::read_bytes(&bytes, "mutant") {
+                loaded += 1;
+                let n = d.width * d.height;
+                assert_eq!(d.offsets.len(), n + 1);
+                assert_eq!(d.offsets[n], d.samples.len());
+                for s in &d.samples {
+                    assert!(s.depth > 0.0 && s.depth_back >= s.depth);
+                    assert!(s.color.iter().all(|v| v.is_finite()));
+                    assert!((0.0..=1.0).contains(&s.color[3]));
+                }
+            }
+        }
+    }
     for seed in &cams {
         for _ in 0..3000 {
             let bytes = mutate(seed);

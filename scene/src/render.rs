@@ -160,9 +160,7 @@ pub fn render_deep(
                 let index = (y * width + x) as u64;
                 let mut rng = pixel_rng(options.seed, Stream::GBuffer, index);
                 let set = latin_hypercube(&mut rng, aa_samples, 2);
-                // Per surface (object index; None = miss): count, colour sum, depth sum,
-                // motion sum.
-                let mut groups: Vec<(Option<usize>, usize, [f64; 4], f64, DVec2)> = Vec::new();
+                let mut groups: Vec<Surface> = Vec::new();
                 for i in 0..aa_samples {
                     let pixel = DVec2::new(x as f64 + set[i], y as f64 + set[aa_samples + i]);
                     let trace = scene.trace(&camera.ray(pixel, DVec2::ZERO, 0.0));
@@ -171,30 +169,37 @@ pub fn render_deep(
                         let now = scene.image_position(&hit, 0.0).unwrap_or(pixel);
                         scene.image_position(&hit, 1.0).unwrap_or(now) - now
                     });
-                    let k = match groups.iter().position(|g| g.0 == object) {
+                    let k = match groups.iter().position(|g| g.object == object) {
                         Some(k) => k,
                         None => {
-                            groups.push((object, 0, [0.0; 4], 0.0, DVec2::ZERO));
+                            groups.push(Surface {
+                                object,
+                                count: 0,
+                                color: [0.0; 4],
+                                depth: 0.0,
+                                motion: DVec2::ZERO,
+                            });
                             groups.len() - 1
                         }
                     };
                     let g = &mut groups[k];
-                    g.1 += 1;
-                    for (s, c) in g.2.iter_mut().zip(trace.color) {
+                    g.count += 1;
+                    for (s, c) in g.color.iter_mut().zip(trace.color) {
                         *s += f64::from(c);
                     }
-                    g.3 += trace.depth;
-                    g.4 += motion;
+                    g.depth += trace.depth;
+                    g.motion += motion;
                 }
                 let n = aa_samples as f64;
                 let mut samples: Vec<DeepSample> = groups
                     .iter()
-                    .map(|&(_, count, color, depth, motion)| {
-                        let m = motion / count as f64;
+                    .map(|g| {
+                        let m = g.motion / g.count as f64;
+                        let depth = (g.depth / g.count as f64) as f32;
                         DeepSample {
-                            color: color.map(|c| (c / n) as f32),
-                            depth: (depth / count as f64) as f32,
-                            depth_back: (depth / count as f64) as f32,
+                            color: g.color.map(|c| (c / n) as f32),
+                            depth,
+                            depth_back: depth,
                             motion: [m.x as f32, m.y as f32],
                         }
                     })
@@ -222,6 +227,19 @@ pub fn render_deep(
     }
     formats::DeepImage::from_samples(width, height, offsets, samples, true)
         .map_err(|e| invalid("deep image", e.to_string()))
+}
+
+/// The sub-samples of one pixel that hit one surface (an object, or nothing), summed.
+struct Surface {
+    /// Index into [`Scene::objects`]; `None` for the sub-samples that miss.
+    object: Option<usize>,
+    count: usize,
+    /// Premultiplied RGBA, summed.
+    color: [f64; 4],
+    /// Planar depth, metres, summed.
+    depth: f64,
+    /// Forward motion per frame, pixels, summed.
+    motion: DVec2,
 }
 
 fn render_gbuffer_with(

@@ -86,7 +86,10 @@ pub fn deep_fragments(deep: &DeepImage, camera: &Camera, effects: Effects) -> Ve
 /// what is nearer and sharper; a pixel with several visible samples (an edge) is treated as
 /// a split edge pixel; the copies are of a background pixel's farthest sample, behind every
 /// sample of the pixels they fill (their source is past any sample index).
-fn hidden_behind_deep(deep: &DeepImage, camera: &Camera, effects: Effects) -> Vec<Fragment> {
+fn hidden_behind_deep(deep: &DeepImage, camera: &Camera, fragments: &[Fragment]) -> Vec<Fragment> {
+    if fragments.is_empty() {
+        return Vec::new();
+    }
     let n = deep.width * deep.height;
     let lens = camera.thin_lens();
     let signed_coc = |d: f32| -> f32 { lens.map_or(0.0, |l| l.signed_coc_px(f64::from(d)) as f32) };
@@ -121,47 +124,28 @@ fn hidden_behind_deep(deep: &DeepImage, camera: &Camera, effects: Effects) -> Ve
         dropped_pixels: 0,
         channels_present: Vec::new(),
     };
-    let fragments_of = deep_fragments(deep, camera, effects);
-    // Each pixel's farthest fragment (deep_fragments keeps pixel order, front to back).
-    let mut farthest = vec![usize::MAX; n];
+    // Each pixel's farthest fragment ([`deep_fragments`] keeps pixel order, front to back).
+    let mut farthest: Vec<Option<usize>> = vec![None; n];
     let (left, top) = (deep.overscan.left as i32, deep.overscan.top as i32);
-    for (k, f) in fragments_of.iter().enumerate() {
+    for (k, f) in fragments.iter().enumerate() {
         let i = (f.y + top) as usize * deep.width + (f.x + left) as usize;
-        farthest[i] = k;
+        farthest[i] = Some(k);
     }
     let depth_at = |i: usize| depth[i];
-    let own = |i: usize| {
-        let base = fragments_of[farthest[i]];
-        Fragment {
+    // Walks start only at pixels with colour, which have a fragment; a pixel without one
+    // would give a fragment of no weight.
+    let own = |i: usize| match farthest[i] {
+        Some(k) => Fragment {
             source: u32::MAX,
-            ..base
-        }
+            ..fragments[k]
+        },
+        None => Fragment {
+            weight: 0.0,
+            source: u32::MAX,
+            ..fragments[0]
+        },
     };
-    // Only pixels with a fragment can be sources of walks; the others are transparent black
-    // in the proxy's colour and skipped there.
-    super::hidden::hidden_background(&proxy, &several, &signed_coc, &depth_at, &|i| {
-        if farthest[i] == usize::MAX {
-            Fragment {
-                weight: 0.0,
-                ..own_or_empty()
-            }
-        } else {
-            own(i)
-        }
-    })
-}
-
-fn own_or_empty() -> Fragment {
-    Fragment {
-        x: 0,
-        y: 0,
-        color: [0.0; 4],
-        weight: 0.0,
-        parallax: 0.0,
-        depth: f32::INFINITY,
-        motion: [0.0; 2],
-        source: u32::MAX,
-    }
+    super::hidden::hidden_background(&proxy, &several, &signed_coc, &depth_at, &own)
 }
 
 /// Classifies a deep image: its samples as fragments ([`deep_fragments`]), layered and
@@ -181,7 +165,7 @@ pub fn classify_deep(
         ..PathCounts::default()
     };
     if options.fill_hidden && model.is_some() {
-        let filled = hidden_behind_deep(deep, camera, effects);
+        let filled = hidden_behind_deep(deep, camera, &fragments);
         counts.hidden_filled += filled.len();
         fragments.extend(filled);
     }

@@ -998,7 +998,7 @@ fn lookup_psf(
 fn occlusion_within_layers(
     fragments: &[Fragment],
     n_layers: usize,
-    targets_of: &dyn Fn(&Fragment) -> ([(usize, f32); 2], usize),
+    targets_of: &dyn Fn(&Fragment) -> LayerTargets,
 ) -> Option<Vec<[f32; 2]>> {
     let first_source = fragments.first()?.source;
     if fragments.iter().all(|f| f.source == first_source) {
@@ -1055,7 +1055,10 @@ fn occlusion_within_layers(
     Some(kept)
 }
 
-fn layer_targets(u: f32, n_layers: usize, band: Option<f32>) -> ([(usize, f32); 2], usize) {
+/// A fragment's depth layers and its weight in each: one or two (soft layers) of the pair.
+type LayerTargets = ([(usize, f32); 2], usize);
+
+fn layer_targets(u: f32, n_layers: usize, band: Option<f32>) -> LayerTargets {
     let mut targets = [(0usize, 0.0f32); 2];
     match band {
         Some(band) if band > 0.0 && n_layers > 1 => {
