@@ -80,6 +80,8 @@ def camera_dict(scene, camera_object=None, use_dof=None, use_motion_blur=None):
         "focus_distance": focus_distance(obj) if lens else None,
         "aperture_blades": blades,
         "aperture_rotation_deg": aperture_rotation_deg(dof) if blades else 0.0,
+        # The same squeeze as Cycles' (the aperture's width divided by it, after the turn).
+        "aperture_ratio": dof.aperture_ratio if lens else 1.0,
         "shutter_frames": shutter,
         # Cycles sizes the aperture as lens (mm) * 1e-3 scene units: a scene unit is a metre.
         "scene_unit_mm": 1000.0,

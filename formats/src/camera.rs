@@ -93,6 +93,11 @@ pub struct Camera {
     /// vertex points right (+x). Ignored for a circular aperture.
     #[serde(default)]
     pub aperture_rotation_deg: f64,
+    /// Anamorphic squeeze, as Blender's camera `aperture_ratio`: the aperture's width is
+    /// divided by it after the blade rotation, so 2 gives bokeh twice as tall as wide; 1 (the
+    /// default) is round. At least 1 (wider than round bokeh is not supported yet).
+    #[serde(default = "default_aperture_ratio")]
+    pub aperture_ratio: f64,
     /// Exposure as a fraction of the frame interval, centred on the frame; 0 = no motion blur.
     #[serde(default)]
     pub shutter_frames: f64,
@@ -100,6 +105,13 @@ pub struct Camera {
     #[serde(default = "default_scene_unit_mm")]
     pub scene_unit_mm: f64,
 }
+
+fn default_aperture_ratio() -> f64 {
+    1.0
+}
+
+/// Largest anamorphic squeeze a camera may ask for.
+pub const MAX_APERTURE_RATIO: f64 = 16.0;
 
 fn default_scene_unit_mm() -> f64 {
     1000.0
@@ -150,6 +162,7 @@ impl Camera {
                 check_field::<Option<f64>>(obj, "focus_distance")?;
                 check_field::<u32>(obj, "aperture_blades")?;
                 check_field::<f64>(obj, "aperture_rotation_deg")?;
+                check_field::<f64>(obj, "aperture_ratio")?;
                 check_field::<f64>(obj, "shutter_frames")?;
                 check_field::<f64>(obj, "scene_unit_mm")?;
                 return Err(CameraError::Text { source });
@@ -238,6 +251,15 @@ impl Camera {
             return bad(format!(
                 "aperture_rotation_deg must be a number of degrees, got {}",
                 self.aperture_rotation_deg
+            ));
+        }
+        if !(self.aperture_ratio.is_finite()
+            && (1.0..=MAX_APERTURE_RATIO).contains(&self.aperture_ratio))
+        {
+            return bad(format!(
+                "aperture_ratio must lie in [1, {MAX_APERTURE_RATIO}] (1 = round bokeh, 2 = twice as \
+                 tall as wide), got {}; a ratio below 1 (bokeh wider than round) is not supported",
+                self.aperture_ratio
             ));
         }
         if self.aperture_blades == 1 || self.aperture_blades == 2 {

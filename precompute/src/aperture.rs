@@ -90,6 +90,31 @@ impl ApertureShape {
     }
 }
 
+/// The aperture the thin-lens tracers sample: an outline squeezed horizontally by an
+/// anamorphic ratio after its rotation, as Cycles does (`bokeh.x /= aperture_ratio`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LensAperture {
+    /// The outline, in units of the aperture radius.
+    pub shape: ApertureShape,
+    /// The squeeze: x is divided by it (1 = none).
+    pub ratio: f64,
+}
+
+impl LensAperture {
+    /// A point uniform over the squeezed outline, in units of the aperture radius (see
+    /// [`ApertureShape::sample`]).
+    #[inline]
+    pub fn sample(&self, u0: f64, u1: f64) -> [f64; 2] {
+        let [x, y] = self.shape.sample(u0, u1);
+        [x / self.ratio, y]
+    }
+
+    /// True when `p` (in units of the radius) lies inside the squeezed outline.
+    pub fn contains(&self, p: [f64; 2]) -> bool {
+        self.shape.contains([p[0] * self.ratio, p[1]])
+    }
+}
+
 /// Shirley and Chiu's concentric map from the unit square to the unit disk (area-preserving).
 #[inline]
 pub fn concentric_disk(u0: f64, u1: f64) -> [f64; 2] {

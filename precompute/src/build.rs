@@ -14,7 +14,7 @@ use psf_db::{
 };
 use rayon::prelude::*;
 
-use crate::aperture::ApertureShape;
+use crate::aperture::{ApertureShape, LensAperture};
 use crate::config::{BuildConfig, LensOptions};
 use crate::image::PsfImage;
 use crate::prefilter::ParamBox;
@@ -56,7 +56,10 @@ impl BuildPlan {
                 cfg.model.dims()
             ))
         })?;
-        let aperture = ApertureShape::from_blades(cfg.blades, f64::from(cfg.blade_rotation_rad));
+        let aperture = LensAperture {
+            shape: ApertureShape::from_blades(cfg.blades, f64::from(cfg.blade_rotation_rad)),
+            ratio: f64::from(cfg.aperture_ratio),
+        };
         let mut notes = vec![("procedure".to_string(), cfg.procedure.name().to_string())];
         if cfg.model == PsfModel::LensMotion {
             let shutter = if cfg.analytic_shutter {
@@ -456,6 +459,7 @@ fn build_database_impl(
     header.aperture = Aperture {
         blades: cfg.blades,
         rotation_rad: cfg.blade_rotation_rad,
+        ratio: cfg.aperture_ratio,
     };
     header.lens = plan.lens.clone();
     header.shard = range;

@@ -263,6 +263,9 @@ pub struct BuildConfig {
     pub blades: u32,
     /// Rotation of the bladed aperture, radians.
     pub blade_rotation_rad: f32,
+    /// Anamorphic squeeze of the thin-lens and lens-motion aperture: its width divided by it
+    /// after the rotation (1 = round; at least 1, so the PSF stays within its CoC radius).
+    pub aperture_ratio: f32,
     /// Lens for physical-lens (`None` = [`LensOptions::default`]).
     pub lens: Option<LensOptions>,
     /// Sparsification procedure (default: [`Procedure::Refit`]; [`Procedure::Paper`] for the
@@ -317,6 +320,7 @@ impl BuildConfig {
             prefilter: true,
             blades: 0,
             blade_rotation_rad: 0.0,
+            aperture_ratio: 1.0,
             lens: None,
             procedure: Procedure::default(),
             analytic_shutter: true,
@@ -366,6 +370,12 @@ impl BuildConfig {
         }
         if !self.blade_rotation_rad.is_finite() {
             return bad("blade rotation must be finite".into());
+        }
+        if !(self.aperture_ratio.is_finite() && (1.0..=16.0).contains(&self.aperture_ratio)) {
+            return bad(format!(
+                "aperture ratio must lie in [1, 16], got {}",
+                self.aperture_ratio
+            ));
         }
         if let Some(l) = self.budget_tradeoff {
             if !(l.is_finite() && l >= 0.0) {

@@ -51,6 +51,10 @@ struct Args {
     /// Rotation of the bladed aperture, radians.
     #[arg(long, default_value_t = 0.0)]
     blade_rotation: f32,
+    /// Anamorphic squeeze for thin-lens and lens-motion: the aperture's width divided by it
+    /// after the rotation (Blender's aperture_ratio; 1 = round, at least 1).
+    #[arg(long, default_value_t = 1.0)]
+    aperture_ratio: f32,
     /// Sparsification: refit (default: the paper's steps, then least-squares values), paper,
     /// or improved (sign-separated cells + least-squares values).
     #[arg(long, default_value = "refit")]
@@ -193,6 +197,7 @@ fn main() -> Result<()> {
     cfg.prefilter = !args.no_prefilter;
     cfg.blades = args.blades;
     cfg.blade_rotation_rad = args.blade_rotation;
+    cfg.aperture_ratio = args.aperture_ratio;
     cfg.procedure = procedure;
     cfg.ablation = args.ablation;
     cfg.analytic_shutter = !args.sampled_shutter;

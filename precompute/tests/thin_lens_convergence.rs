@@ -4,7 +4,7 @@
 //! disk of radius r (pixel-area integral of the indicator), estimated by 96 x 96 midpoint
 //! supersampling per pixel, normalised to sum 1.
 
-use precompute::aperture::ApertureShape;
+use precompute::aperture::{ApertureShape, LensAperture};
 use precompute::prefilter::ParamBox;
 use precompute::sampler::psf_rng;
 use precompute::trace::thin_lens::ThinLensTracer;
@@ -49,7 +49,10 @@ fn thin_lens_psf_converges_to_the_analytic_disk() {
     let space = ParamSpace::for_model(PsfModel::ThinLens, &[[0.0, 16.0]], 20).unwrap();
     let params = ParamBox::fixed(&space, [r, 0.0]);
     let tracer = ThinLensTracer {
-        aperture: ApertureShape::Circle,
+        aperture: LensAperture {
+            shape: ApertureShape::Circle,
+            ratio: 1.0,
+        },
     };
     let mut errors = Vec::new();
     for rays in [4_000u64, 40_000, 400_000, 4_000_000] {
@@ -81,7 +84,9 @@ fn bladed_aperture_is_a_polygon() {
     let space = ParamSpace::for_model(PsfModel::ThinLens, &[[0.0, 16.0]], 20).unwrap();
     let params = ParamBox::fixed(&space, [r, 0.0]);
     let shape = ApertureShape::from_blades(6, 0.0);
-    let tracer = ThinLensTracer { aperture: shape };
+    let tracer = ThinLensTracer {
+        aperture: LensAperture { shape, ratio: 1.0 },
+    };
     let mut rng = psf_rng(3, 0, 0);
     let (img, _) = trace_psf(&tracer, &params, RayCount::Fixed(1_000_000), &mut rng, 0).unwrap();
     // Pixels at least half covered approximate the area (the support also counts the
@@ -103,4 +108,47 @@ fn bladed_aperture_is_a_polygon() {
     let (s, c) = (std::f64::consts::PI / 6.0).sin_cos();
     let d = apothem + 1.5;
     assert_eq!(at((d * c).round() as i64, -(d * s).round() as i64), 0.0);
+}
+
+#[test]
+fn anamorphic_aperture_is_an_ellipse_squeezed_in_x() {
+    // Ratio 2 on a round aperture: an ellipse of semi-axes r / 2 (x) and r (y), whose uniform
+    // light has second moments r^2 / 16 and r^2 / 4 and area pi r^2 / 2.
+    let r = 12.0;
+    let space = ParamSpace::for_model(PsfModel::ThinLens, &[[0.0, 16.0]], 20).unwrap();
+    let params = ParamBox::fixed(&space, [r, 0.0]);
+    let tracer = ThinLensTracer {
+        aperture: LensAperture {
+            shape: ApertureShape::Circle,
+            ratio: 2.0,
+        },
+    };
+    let mut rng = psf_rng(3, 0, 0);
+    let (img, _) = trace_psf(&tracer, &params, RayCount::Fixed(1_000_000), &mut rng, 0).unwrap();
+    let (mut m, mut mx, mut my, mut mxx, mut myy) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    for y in 0..img.height {
+        for x in 0..img.width {
+            let v = f64::from(img.planes[0][y * img.width + x]);
+            let (px, py) = (x as f64 + 0.5, y as f64 + 0.5);
+            m += v;
+            mx += v * px;
+            my += v * py;
+            mxx += v * px * px;
+            myy += v * py * py;
+        }
+    }
+    let (cx, cy) = (mx / m, my / m);
+    let var_x = mxx / m - cx * cx;
+    let var_y = myy / m - cy * cy;
+    // A pixel's own width adds 1/12 to each (the light is binned into pixels).
+    let (ex, ey) = (r * r / 16.0 + 1.0 / 12.0, r * r / 4.0 + 1.0 / 12.0);
+    assert!((var_x - ex).abs() < 0.03 * ex, "var x {var_x} vs {ex}");
+    assert!((var_y - ey).abs() < 0.03 * ey, "var y {var_y} vs {ey}");
+    let full = img.max_value();
+    let area = img.planes[0].iter().filter(|&&v| v >= 0.5 * full).count() as f64;
+    let expected = std::f64::consts::PI * r * r / 2.0;
+    assert!(
+        (area - expected).abs() < 0.06 * expected,
+        "{area} vs {expected}"
+    );
 }

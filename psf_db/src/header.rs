@@ -15,6 +15,8 @@ pub struct Aperture {
     pub blades: u32,
     /// Rotation of the polygon, radians (counter-clockwise on the image, y down).
     pub rotation_rad: f32,
+    /// Anamorphic squeeze: the aperture's width divided by it after the rotation (1 = round).
+    pub ratio: f32,
 }
 
 impl Default for Aperture {
@@ -22,6 +24,7 @@ impl Default for Aperture {
         Aperture {
             blades: 0,
             rotation_rad: 0.0,
+            ratio: 1.0,
         }
     }
 }

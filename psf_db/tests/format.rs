@@ -15,6 +15,7 @@ fn small_db() -> PsfDatabase {
     header.aperture = Aperture {
         blades: 6,
         rotation_rad: 0.25,
+        ratio: 1.5,
     };
     header.build.profile = "test".into();
     let mut b = DatabaseBuilder::new(header);

@@ -29,7 +29,7 @@ struct PyCamera {
 #[pymethods]
 impl PyCamera {
     #[new]
-    #[pyo3(signature = (width, height, focal_length_mm, sensor_width_mm, f_stop=None, focus_distance=None, aperture_blades=0, shutter_frames=0.0, scene_unit_mm=1000.0, aperture_rotation_deg=0.0))]
+    #[pyo3(signature = (width, height, focal_length_mm, sensor_width_mm, f_stop=None, focus_distance=None, aperture_blades=0, shutter_frames=0.0, scene_unit_mm=1000.0, aperture_rotation_deg=0.0, aperture_ratio=1.0))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         width: u32,
@@ -42,6 +42,7 @@ impl PyCamera {
         shutter_frames: f64,
         scene_unit_mm: f64,
         aperture_rotation_deg: f64,
+        aperture_ratio: f64,
     ) -> PyResult<Self> {
         let inner = renderer::Camera {
             width,
@@ -52,6 +53,7 @@ impl PyCamera {
             focus_distance,
             aperture_blades,
             aperture_rotation_deg,
+            aperture_ratio,
             shutter_frames,
             scene_unit_mm,
         };
@@ -97,6 +99,10 @@ impl PyCamera {
     #[getter]
     fn aperture_rotation_deg(&self) -> f64 {
         self.inner.aperture_rotation_deg
+    }
+    #[getter]
+    fn aperture_ratio(&self) -> f64 {
+        self.inner.aperture_ratio
     }
     #[getter]
     fn shutter_frames(&self) -> f64 {

@@ -55,11 +55,12 @@ pub enum Source<'a> {
 
 /// The aperture `camera`'s databases are traced with: its blades and their rotation (radians,
 /// counter-clockwise on the image, reduced to one blade's turn, so that rotations a blade
-/// apart share a database; 0 for a circle).
+/// apart share a database; 0 for a circle) and its anamorphic squeeze.
 pub fn aperture_of(camera: &crate::Camera) -> psf_db::Aperture {
     psf_db::Aperture {
         blades: camera.aperture_blades,
         rotation_rad: camera.aperture_rotation_rad() as f32,
+        ratio: camera.aperture_ratio as f32,
     }
 }
 
@@ -153,6 +154,7 @@ pub fn load(
             for model in models_for(needed) {
                 let mut cfg = dbcache::build_config(model, profile, request.aperture.blades);
                 cfg.blade_rotation_rad = request.aperture.rotation_rad;
+                cfg.aperture_ratio = request.aperture.ratio;
                 if let Some(adjust) = request.adjust {
                     cfg = adjust(cfg);
                 }
@@ -207,5 +209,16 @@ mod tests {
             dbcache::cache_file_name(&cfg)
         };
         assert_ne!(file(turned), file(aperture_of(&camera(5, 0.0))));
+        // And with the anamorphic squeeze.
+        let mut squeezed = camera(0, 0.0);
+        squeezed.aperture_ratio = 2.0;
+        let squeezed = aperture_of(&squeezed);
+        assert_eq!(squeezed.ratio, 2.0);
+        let file = |a: psf_db::Aperture| {
+            let mut cfg = dbcache::build_config(PsfModel::ThinLens, Profile::Quick, a.blades);
+            cfg.aperture_ratio = a.ratio;
+            dbcache::cache_file_name(&cfg)
+        };
+        assert_ne!(file(squeezed), file(aperture_of(&camera(0, 0.0))));
     }
 }

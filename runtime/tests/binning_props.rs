@@ -21,6 +21,7 @@ fn camera(w: u32) -> Camera {
         focus_distance: Some(1.0),
         aperture_blades: 0,
         aperture_rotation_deg: 0.0,
+        aperture_ratio: 1.0,
         shutter_frames: 0.0,
         scene_unit_mm: 1000.0,
     }

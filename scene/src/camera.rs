@@ -198,11 +198,13 @@ impl Camera {
         let lens = if !self.spec.has_lens() {
             DVec2::ZERO
         } else {
-            sample_aperture(
+            // Anamorphic squeeze after the rotation, as Cycles does.
+            let p = sample_aperture(
                 self.spec.aperture_blades,
                 self.spec.aperture_rotation_rad(),
                 xi,
-            )
+            );
+            DVec2::new(p.x / self.spec.aperture_ratio, p.y)
         };
         (self.ray(pixel, lens, time), lens)
     }
@@ -242,6 +244,7 @@ mod tests {
             focus_distance: Some(1.0),
             aperture_blades: 0,
             aperture_rotation_deg: 0.0,
+            aperture_ratio: 1.0,
             shutter_frames: 0.5,
             scene_unit_mm: 1000.0,
         }

@@ -34,6 +34,10 @@ pub(crate) struct CameraFlags {
     /// points right).
     #[arg(long)]
     pub(crate) aperture_rotation_deg: Option<f64>,
+    /// Anamorphic squeeze, as Blender's aperture_ratio (the aperture's width divided by it;
+    /// 2 = bokeh twice as tall as wide; at least 1).
+    #[arg(long)]
+    pub(crate) aperture_ratio: Option<f64>,
     /// Shutter as a fraction of the frame (0 = no motion blur).
     #[arg(long)]
     pub(crate) shutter_frames: Option<f64>,
@@ -72,6 +76,7 @@ pub(crate) fn load_camera(path: Option<&Path>, f: &CameraFlags) -> Result<Camera
         "aperture_rotation_deg",
         f.aperture_rotation_deg.map(Into::into),
     );
+    set("aperture_ratio", f.aperture_ratio.map(Into::into));
     set("shutter_frames", f.shutter_frames.map(Into::into));
     set("scene_unit_mm", f.scene_unit_mm.map(Into::into));
     let camera = Camera::from_json_str(&value.to_string()).map_err(|e| match path {

@@ -8,14 +8,14 @@
 //! which removes the time dimension's Monte Carlo noise (the same PSF in expectation).
 
 use super::{Bounds, Hit, LightTracer};
-use crate::aperture::ApertureShape;
+use crate::aperture::LensAperture;
 use crate::prefilter::ParamBox;
 
 /// Light tracer of the `lens-motion` model; `s = [CoC radius px, motion length px]`.
 #[derive(Clone, Copy, Debug)]
 pub struct LensMotionTracer {
     /// Aperture shape.
-    pub aperture: ApertureShape,
+    pub aperture: LensAperture,
     /// Integrate the box shutter exactly (each ray a segment) instead of sampling its time.
     pub analytic_shutter: bool,
 }

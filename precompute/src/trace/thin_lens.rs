@@ -2,14 +2,14 @@
 //! scaled by `r` (a disk of radius r, or the bladed polygon inscribed in it).
 
 use super::{Bounds, Hit, LightTracer};
-use crate::aperture::ApertureShape;
+use crate::aperture::LensAperture;
 use crate::prefilter::ParamBox;
 
 /// Light tracer of the `thin-lens` model; `s = [CoC radius px, -]`.
 #[derive(Clone, Copy, Debug)]
 pub struct ThinLensTracer {
     /// Aperture shape.
-    pub aperture: ApertureShape,
+    pub aperture: LensAperture,
 }
 
 impl LightTracer for ThinLensTracer {

@@ -54,6 +54,7 @@ pub fn camera(w: u32, h: u32, lens: bool, shutter: f64) -> Camera {
         focus_distance: lens.then_some(1.0),
         aperture_blades: 0,
         aperture_rotation_deg: 0.0,
+        aperture_ratio: 1.0,
         shutter_frames: shutter,
         scene_unit_mm: 1000.0,
     }
