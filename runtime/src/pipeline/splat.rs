@@ -264,6 +264,13 @@ impl Band {
     ) {
         let rx = r.rot_cos * ox - r.rot_sin * oy;
         let ry = r.rot_sin * ox + r.rot_cos * oy;
+        // Every placement lands within a pixel and a half of the rotated offset: one that
+        // lands two rows or more outside the band adds nothing here, so skip its taps (a
+        // record spanning several bands is visited by each).
+        let y = r.center_y as f32 + ry;
+        if y < (self.y0 - 2) as f32 || y >= (self.y1 + 2) as f32 {
+            return;
+        }
         match sampling {
             RotationSampling::Nearest => {
                 self.add(
@@ -360,11 +367,18 @@ fn splat_sparse(
             );
         }
     } else {
+        let (y_lo, y_hi) = ((band.y0 - 2) as f32, (band.y1 + 2) as f32);
         for (k, p) in positions.iter().enumerate() {
+            let (ox, oy) = (f32::from(p[0]), f32::from(p[1]));
+            // The band test of `add_rotated`, before the spreadlet's value is weighted.
+            let y = r.center_y as f32 + (r.rot_sin * ox + r.rot_cos * oy);
+            if y < y_lo || y >= y_hi {
+                continue;
+            }
             band.add_rotated(
                 r,
-                f32::from(p[0]),
-                f32::from(p[1]),
+                ox,
+                oy,
                 weighted(r.color, &values[k * ch..(k + 1) * ch]),
                 sampling,
             );
