@@ -32,6 +32,7 @@ fn run_addon_test(mut command: Command, which: &str) {
         .lines()
         .filter(|l| {
             l.contains("SSIM")
+                || l.contains("PSNR")
                 || l.contains("camera.json")
                 || l.contains("Error")
                 || l.contains("Traceback")

@@ -10,7 +10,7 @@ use std::process::Command;
 
 use spreadlet::formats::{DeepCompression, DeepImage, DeepSample};
 use spreadlet::GBuffer;
-use spreadlet_e2e::{assert_clean_failure, assert_success, cache_dir, run};
+use spreadlet_e2e::{assert_clean_failure, assert_success, cache_dir, compare_scores, run};
 
 fn p(path: &Path) -> String {
     path.to_str().expect("utf-8 path").to_string()
@@ -189,21 +189,6 @@ fn synth(input: &Path, camera: &Path, out: &Path, backend: &str) -> std::process
     )
 }
 
-/// SSIM and FLIP mean of `image` against `reference`.
-fn scores(image: &Path, reference: &Path) -> (f64, f64) {
-    let out = run(
-        "spreadlet",
-        &["compare", &p(image), &p(reference), "--json"],
-        &cache_dir(),
-    );
-    let json: serde_json::Value =
-        serde_json::from_str(&assert_success(&out)).expect("compare writes JSON");
-    (
-        json["ssim"].as_f64().expect("ssim"),
-        json["flip_mean"].as_f64().expect("flip"),
-    )
-}
-
 #[test]
 fn a_deep_render_flattens_to_its_gbuffer_and_blurs_better_than_it() {
     let dir = tempfile::tempdir().expect("temp dir");
@@ -245,8 +230,8 @@ fn a_deep_render_flattens_to_its_gbuffer_and_blurs_better_than_it() {
         "cpu",
     ));
     let reference = dir.path().join("ref.exr");
-    let (s1, f1) = scores(&from_flat, &reference);
-    let (s2, f2) = scores(&from_deep, &reference);
+    let (s1, f1) = compare_scores(&from_flat, &reference);
+    let (s2, f2) = compare_scores(&from_deep, &reference);
     eprintln!("bokeh 128 px: flat SSIM {s1:.4} FLIP {f1:.4}; deep SSIM {s2:.4} FLIP {f2:.4}");
     assert!(s2 > s1 && f2 < f1, "flat {s1}/{f1}, deep {s2}/{f2}");
 

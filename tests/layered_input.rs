@@ -9,7 +9,9 @@ use std::path::{Path, PathBuf};
 
 use spreadlet::formats::exr_io::write_channels;
 use spreadlet::{GBuffer, ViewLayer};
-use spreadlet_e2e::{assert_clean_failure, assert_success, cache_dir, run, shared_examples};
+use spreadlet_e2e::{
+    assert_clean_failure, assert_success, cache_dir, compare_scores, run, shared_examples,
+};
 
 fn p(path: &Path) -> String {
     path.to_str().expect("utf-8 path").to_string()
@@ -31,21 +33,6 @@ fn synth(inputs: &[&Path], camera: &Path, out: &Path, extra: &[&str]) -> std::pr
     args.extend(extra.iter().map(|s| s.to_string()));
     let refs: Vec<&str> = args.iter().map(String::as_str).collect();
     run("spreadlet", &refs, &cache_dir())
-}
-
-/// SSIM and FLIP mean of `image` against `reference` (`spreadlet compare`).
-fn scores(image: &Path, reference: &Path) -> (f64, f64) {
-    let out = run(
-        "spreadlet",
-        &["compare", &p(image), &p(reference), "--json"],
-        &cache_dir(),
-    );
-    let json: serde_json::Value =
-        serde_json::from_str(&assert_success(&out)).expect("compare writes JSON");
-    (
-        json["ssim"].as_f64().expect("ssim"),
-        json["flip_mean"].as_f64().expect("flip"),
-    )
 }
 
 /// Writes `layer` as a one-view-layer Blender G-buffer (`ViewLayer.*`), optionally without
@@ -98,8 +85,8 @@ fn fence_from_view_layers_sees_the_wall_through_the_blurred_bars() {
         &layered,
         &["--stats", &p(&stats)],
     ));
-    let (s1, f1) = scores(&single, &reference);
-    let (s2, f2) = scores(&layered, &reference);
+    let (s1, f1) = compare_scores(&single, &reference);
+    let (s2, f2) = compare_scores(&layered, &reference);
     eprintln!(
         "fence: single layer SSIM {s1:.4} FLIP {f1:.4}; view layers SSIM {s2:.4} FLIP {f2:.4}"
     );
@@ -192,8 +179,8 @@ fn comets_from_view_layers_are_as_good_as_from_the_flat_input() {
         &layered,
         &[],
     ));
-    let (s1, f1) = scores(&single, &reference);
-    let (s2, f2) = scores(&layered, &reference);
+    let (s1, f1) = compare_scores(&single, &reference);
+    let (s2, f2) = compare_scores(&layered, &reference);
     eprintln!(
         "comets: single layer SSIM {s1:.4} FLIP {f1:.4}; view layers SSIM {s2:.4} FLIP {f2:.4}"
     );
@@ -297,8 +284,8 @@ fn own_scene_scores(dir: &Path, scene: &str, foreground: &str) -> (f64, f64, f64
     assert_success(&synth(&[&dir.join("g.exr")], &camera, &single, &[]));
     assert_success(&synth(&[&dir.join("layers.exr")], &camera, &layered, &[]));
     let reference = dir.join("ref.exr");
-    let (s1, f1) = scores(&single, &reference);
-    let (s2, f2) = scores(&layered, &reference);
+    let (s1, f1) = compare_scores(&single, &reference);
+    let (s2, f2) = compare_scores(&layered, &reference);
     eprintln!(
         "{scene} 128 px: single SSIM {s1:.4} FLIP {f1:.4}; view layers SSIM {s2:.4} FLIP {f2:.4}"
     );

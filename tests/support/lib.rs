@@ -99,6 +99,22 @@ pub fn assert_success(out: &Output) -> String {
     String::from_utf8_lossy(&out.stdout).into_owned()
 }
 
+/// SSIM and FLIP mean of `image` against `reference`, by `spreadlet compare --json`.
+pub fn compare_scores(image: &Path, reference: &Path) -> (f64, f64) {
+    let path = |p: &Path| p.to_str().expect("utf-8 path").to_string();
+    let out = run(
+        "spreadlet",
+        &["compare", &path(image), &path(reference), "--json"],
+        &cache_dir(),
+    );
+    let json: serde_json::Value =
+        serde_json::from_str(&assert_success(&out)).expect("compare writes JSON");
+    (
+        json["ssim"].as_f64().expect("ssim"),
+        json["flip_mean"].as_f64().expect("flip"),
+    )
+}
+
 /// Runs `name args...` like [`run`], but kills it after `limit` and fails the test then (a
 /// hang is a failure). Returns its output.
 pub fn run_with_timeout(

@@ -296,7 +296,7 @@ fn deep_frame(
             );
         }
         if let Some(p) = &job.stats {
-            let json = serde_json::json!({
+            let input = serde_json::json!({
                 "input": args.input,
                 "deep": {
                     "samples": deep.samples.len(),
@@ -305,13 +305,9 @@ fn deep_frame(
                     "channels": deep.channels_present,
                 },
                 "output": job.out,
-                "backend": frame.device,
-                "effects": { "defocus": stats.defocus, "motion": stats.motion },
-                "databases": frame.databases,
-                "synthesis": stats,
-                "times_ms": times_json(read_ms, frame.database_ms, write_ms, started),
             });
-            write_json(p, &json)?;
+            let times = times_json(read_ms, frame.database_ms, write_ms, started);
+            write_json(p, &frame_json(input, &frame, times))?;
         }
         Ok(())
     })
@@ -347,21 +343,44 @@ fn layered_frame(
             );
         }
         if let Some(p) = &job.stats {
-            let json = serde_json::json!({
+            let input = serde_json::json!({
                 "input": args.input,
                 "view_layers": names,
                 "still_layers": layers.iter().filter(|l| l.still).map(|l| l.name.as_str()).collect::<Vec<_>>(),
                 "output": job.out,
-                "backend": frame.device,
-                "effects": { "defocus": stats.defocus, "motion": stats.motion },
-                "databases": frame.databases,
-                "synthesis": stats,
-                "times_ms": times_json(read_ms, frame.database_ms, write_ms, started),
             });
-            write_json(p, &json)?;
+            let times = times_json(read_ms, frame.database_ms, write_ms, started);
+            write_json(p, &frame_json(input, &frame, times))?;
         }
         Ok(())
     })
+}
+
+/// A layered or deep frame's statistics: `input` (an object saying what was read) with the
+/// frame's device, effects, databases, synthesis statistics and `times`.
+fn frame_json(
+    mut input: serde_json::Value,
+    frame: &spreadlet::Frame,
+    times: serde_json::Value,
+) -> serde_json::Value {
+    let stats = &frame.stats;
+    if let Some(obj) = input.as_object_mut() {
+        obj.insert("backend".into(), frame.device.clone().into());
+        obj.insert(
+            "effects".into(),
+            serde_json::json!({ "defocus": stats.defocus, "motion": stats.motion }),
+        );
+        obj.insert(
+            "databases".into(),
+            serde_json::to_value(&frame.databases).unwrap_or_default(),
+        );
+        obj.insert(
+            "synthesis".into(),
+            serde_json::to_value(stats).unwrap_or_default(),
+        );
+        obj.insert("times_ms".into(), times);
+    }
+    input
 }
 
 /// The `times_ms` of a frame's statistics.

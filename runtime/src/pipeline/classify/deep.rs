@@ -30,16 +30,7 @@ pub fn deep_effects(deep: &DeepImage, camera: &Camera) -> Effects {
 
 /// Checks that the deep image's frame (without its overscan) is the camera's.
 pub fn check_deep_size(deep: &DeepImage, camera: &Camera) -> Result<(), ClassifyError> {
-    let (fw, fh) = (deep.frame_width(), deep.frame_height());
-    if camera.width as usize != fw || camera.height as usize != fh {
-        return Err(ClassifyError::SizeMismatch {
-            cam_w: camera.width,
-            cam_h: camera.height,
-            img_w: fw,
-            img_h: fh,
-        });
-    }
-    Ok(())
+    super::check_frame_size(deep.frame_width(), deep.frame_height(), camera)
 }
 
 /// The fragments of a deep image: one per sample, at its pixel (frame coordinates), with the

@@ -280,7 +280,11 @@ pub struct Fragment {
 /// Checks that the camera and the G-buffer's frame (without its overscan) agree about the
 /// image size.
 pub fn classify_sizes(gbuffer: &GBuffer, camera: &Camera) -> Result<(), ClassifyError> {
-    let (fw, fh) = (gbuffer.frame_width(), gbuffer.frame_height());
+    check_frame_size(gbuffer.frame_width(), gbuffer.frame_height(), camera)
+}
+
+/// Checks that a frame of `fw x fh` pixels is the camera's.
+pub(crate) fn check_frame_size(fw: usize, fh: usize, camera: &Camera) -> Result<(), ClassifyError> {
     if camera.width as usize != fw || camera.height as usize != fh {
         return Err(ClassifyError::SizeMismatch {
             cam_w: camera.width,
