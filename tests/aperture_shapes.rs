@@ -1,14 +1,17 @@
 //! Aperture shapes end to end: one bright pixel, defocused, splats to the aperture's shape.
 //! An anamorphic ratio of 2 gives an ellipse half as wide as tall (second moments r^2 / 16
 //! and r^2 / 4 for CoC radius r); a rotated pentagon reaches as far along x and y as the
-//! rotated polygon does. Measured on the synthesised image, through the quick databases.
+//! rotated polygon does, turned half a turn in front of the focus plane. Measured on the synthesised image, through the quick databases.
 
 use spreadlet::{Backend, Camera, GBuffer, Renderer, RendererOptions, SynthOptions};
 use spreadlet_e2e::cache_dir;
 
 const SIZE: usize = 192;
-/// Depth of the bright pixel, metres (the camera focuses at 1 m): a CoC of about 15 px.
+/// Depth of the bright pixel, metres (the camera focuses at 1 m): in front of the focus
+/// plane, a CoC of about 14 px.
 const DEPTH: f32 = 0.5;
+/// A depth behind the focus plane: a CoC of about 10 px.
+const BEHIND: f32 = 3.0;
 
 fn camera(extra: &str) -> Camera {
     Camera::from_json_str(&format!(
@@ -18,13 +21,19 @@ fn camera(extra: &str) -> Camera {
     .expect("camera")
 }
 
-/// The image of one bright pixel at the frame's centre, everything else transparent black at
-/// the same depth, and the CoC radius in pixels there.
+/// The image of one bright pixel at the frame's centre at [`DEPTH`] ([`splat_at`]).
 fn splat(camera: &Camera) -> (Vec<[f32; 4]>, f64) {
+    splat_at(camera, DEPTH)
+}
+
+/// The image of one bright pixel at the frame's centre, everything else transparent black at
+/// the same depth, and the signed CoC radius in pixels there (negative in front of the focus
+/// plane).
+fn splat_at(camera: &Camera, depth: f32) -> (Vec<[f32; 4]>, f64) {
     let n = SIZE * SIZE;
     let mut color = vec![[0.0f32; 4]; n];
     color[(SIZE / 2) * SIZE + SIZE / 2] = [100.0, 100.0, 100.0, 1.0];
-    let g = GBuffer::from_planes(SIZE, SIZE, color, Some(vec![DEPTH; n]), None).expect("g");
+    let g = GBuffer::from_planes(SIZE, SIZE, color, Some(vec![depth; n]), None).expect("g");
     let mut renderer = Renderer::new(RendererOptions {
         backend: Backend::Cpu,
         databases: spreadlet::DbSource::Cache {
@@ -38,10 +47,7 @@ fn splat(camera: &Camera) -> (Vec<[f32; 4]>, f64) {
         .synthesize(&g, camera, &SynthOptions::default())
         .expect("synthesis");
     let lens = camera.thin_lens().expect("a lens");
-    (
-        frame.image.pixels,
-        lens.signed_coc_px(f64::from(DEPTH)).abs(),
-    )
+    (frame.image.pixels, lens.signed_coc_px(f64::from(depth)))
 }
 
 /// Mean-centred second moments (x, y) of the red channel, pixels^2.
@@ -86,6 +92,7 @@ fn an_anamorphic_ratio_of_two_splats_an_ellipse_half_as_wide() {
     let (round, r) = splat(&camera(""));
     let (squeezed, r2) = splat(&camera(r#", "aperture_ratio": 2.0"#));
     assert_eq!(r, r2);
+    let r = r.abs();
     assert!(r > 12.0, "CoC {r} px is too small to measure a shape");
     let (rx, ry) = second_moments(&round);
     let (sx, sy) = second_moments(&squeezed);
@@ -113,17 +120,21 @@ fn an_anamorphic_ratio_of_two_splats_an_ellipse_half_as_wide() {
 }
 
 #[test]
-fn a_rotated_pentagon_reaches_as_far_as_the_rotated_polygon() {
-    for rotation in [0.0f64, 20.0] {
-        let (image, r) = splat(&camera(&format!(
-            r#", "aperture_blades": 5, "aperture_rotation_deg": {rotation}"#
-        )));
-        // Vertices at angles rotation + 72 k degrees, counter-clockwise on the image (y down):
-        // the polygon's extent along each axis is the largest vertex projection.
+fn a_rotated_pentagon_reaches_as_far_as_the_rotated_polygon_turned_in_front_of_the_focus() {
+    for (rotation, depth) in [(0.0f64, DEPTH), (20.0, DEPTH), (20.0, BEHIND)] {
+        let (image, signed) = splat_at(
+            &camera(&format!(
+                r#", "aperture_blades": 5, "aperture_rotation_deg": {rotation}"#
+            )),
+            depth,
+        );
+        // Vertices at angles rotation + 72 k degrees, counter-clockwise on the image (y down),
+        // scaled by the signed CoC: in front of the focus plane the lens images its aperture
+        // turned half a turn. The extent along each axis is the largest vertex projection.
         let vertices: Vec<(f64, f64)> = (0..5)
             .map(|k| {
                 let a = (rotation + 72.0 * f64::from(k)).to_radians();
-                (r * a.cos(), -r * a.sin())
+                (signed * a.cos(), -signed * a.sin())
             })
             .collect();
         let analytic = [
@@ -134,10 +145,73 @@ fn a_rotated_pentagon_reaches_as_far_as_the_rotated_polygon() {
         ];
         let measured = reach(&image);
         eprintln!(
-            "pentagon at {rotation} deg, CoC {r:.2}: reach {measured:?}, analytic {analytic:?}"
+            "pentagon at {rotation} deg, signed CoC {signed:.2}: reach {measured:?}, analytic {analytic:?}"
+        );
+        assert!(
+            signed.abs() > 9.0,
+            "CoC {signed} px is too small to measure a shape"
         );
         for (m, a) in measured.iter().zip(&analytic) {
             assert!((m - a).abs() <= 1.5, "reach {measured:?} vs {analytic:?}");
         }
     }
+}
+
+#[test]
+fn a_drawn_aperture_is_upright_behind_the_focus_and_turned_in_front() {
+    // A PNG lit in its top half only: behind the focus plane the bokeh lies above the
+    // pixel (y down: a negative mean), in front of it below; its width is the whole CoC
+    // diameter, its height half of it. A rectangle of r x 2r has variances r^2 / 3 (x) and
+    // r^2 / 12 (y).
+    let dir = tempfile::tempdir().expect("temp dir");
+    let png = dir.path().join("top-half.png");
+    let mut img = image::GrayImage::new(64, 64);
+    for (_, y, p) in img.enumerate_pixels_mut() {
+        p.0 = [if y < 32 { 255 } else { 0 }];
+    }
+    img.save(&png).expect("png");
+    let extra = format!(r#", "aperture_image": {:?}"#, png.to_str().expect("utf-8"));
+    for depth in [BEHIND, DEPTH] {
+        let (image, signed) = splat_at(&camera(&extra), depth);
+        let r = signed.abs();
+        let (mut m, mut my) = (0.0, 0.0);
+        for (i, p) in image.iter().enumerate() {
+            let v = f64::from(p[0].max(0.0));
+            m += v;
+            my += v * ((i / SIZE) as f64 - (SIZE / 2) as f64);
+        }
+        let mean_y = my / m;
+        let (vx, vy) = second_moments(&image);
+        eprintln!(
+            "top-half aperture, signed CoC {signed:.2}: mean y {mean_y:.2} (analytic {:.2}), \
+             var {vx:.2} / {vy:.2} (analytic {:.2} / {:.2})",
+            -signed / 2.0,
+            r * r / 3.0,
+            r * r / 12.0
+        );
+        assert!(
+            (mean_y + signed / 2.0).abs() < 1.0,
+            "mean y {mean_y} for CoC {signed}"
+        );
+        let near = |v: f64, e: f64| (v - e).abs() < 0.1 * e + 0.5;
+        assert!(near(vx, r * r / 3.0) && near(vy, r * r / 12.0), "{vx} {vy}");
+    }
+    // A missing image is a clean error, not a round aperture.
+    let missing = camera(r#", "aperture_image": "/no/such/aperture.png""#);
+    let n = SIZE * SIZE;
+    let g =
+        GBuffer::from_planes(SIZE, SIZE, vec![[1.0; 4]; n], Some(vec![DEPTH; n]), None).expect("g");
+    let mut renderer = Renderer::new(RendererOptions {
+        backend: Backend::Cpu,
+        databases: spreadlet::DbSource::Cache {
+            dir: cache_dir(),
+            profile: precompute::Profile::Quick,
+        },
+        ..Default::default()
+    })
+    .expect("renderer");
+    let e = renderer
+        .synthesize(&g, &missing, &SynthOptions::default())
+        .expect_err("a missing aperture image");
+    assert!(e.to_string().contains("aperture image"), "{e}");
 }

@@ -41,6 +41,7 @@ pub fn cached_dbs_with(
         source: spreadlet::databases::Source::Cache { dir: &dir, profile },
         needed: effects.cheapest_model(),
         aperture,
+        mask: None,
         condition: true,
         adjust: Some(build),
         transform: keep_sparse.then_some(&strip as &dyn Fn(_) -> _),

@@ -98,6 +98,11 @@ pub struct Camera {
     /// default) is round. At least 1 (wider than round bokeh is not supported yet).
     #[serde(default = "default_aperture_ratio")]
     pub aperture_ratio: f64,
+    /// A user-drawn aperture: a greyscale PNG whose brightness is the lens' transmission
+    /// ([`crate::ApertureMask`]; the blades are then ignored, the ratio still squeezes it).
+    /// A relative path is relative to the `camera.json` it is written in.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub aperture_image: Option<std::path::PathBuf>,
     /// Exposure as a fraction of the frame interval, centred on the frame; 0 = no motion blur.
     #[serde(default)]
     pub shutter_frames: f64,
@@ -124,13 +129,28 @@ impl Camera {
             path: path.display().to_string(),
             source,
         })?;
-        Self::from_json_str(&text).map_err(|e| match e {
+        let mut camera = Self::from_json_str(&text).map_err(|e| match e {
             CameraError::Json { source, .. } | CameraError::Text { source } => CameraError::Json {
                 path: path.display().to_string(),
                 source,
             },
             other => other,
-        })
+        })?;
+        if let (Some(image), Some(dir)) = (&camera.aperture_image, path.parent()) {
+            if image.is_relative() {
+                camera.aperture_image = Some(dir.join(image));
+            }
+        }
+        Ok(camera)
+    }
+
+    /// The camera's aperture image, read ([`crate::ApertureMask::read_png`]); `None` without
+    /// one.
+    pub fn aperture_mask(&self) -> Result<Option<crate::ApertureMask>, crate::MaskError> {
+        self.aperture_image
+            .as_deref()
+            .map(crate::ApertureMask::read_png)
+            .transpose()
     }
 
     /// Parses and validates camera JSON text. A field of the wrong type is named

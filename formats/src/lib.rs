@@ -18,6 +18,7 @@
 //! - [`write_atomically`]: every output appears complete or not at all, with the permissions
 //!   any new file gets (0666 less the umask).
 
+pub mod aperture_mask;
 pub mod atomic;
 pub mod camera;
 pub mod deep;
@@ -29,6 +30,7 @@ pub mod limits;
 pub mod srgb;
 pub mod stochastic;
 
+pub use aperture_mask::{ApertureMask, MaskError, MaskSampler};
 pub use atomic::write_atomically;
 pub use camera::{Camera, CameraError, ThinLens};
 pub use deep::{DeepCompression, DeepError, DeepImage, DeepSample};

@@ -90,28 +90,48 @@ impl ApertureShape {
     }
 }
 
-/// The aperture the thin-lens tracers sample: an outline squeezed horizontally by an
-/// anamorphic ratio after its rotation, as Cycles does (`bokeh.x /= aperture_ratio`).
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// The aperture the thin-lens tracers sample: an outline (or a user-drawn image, which
+/// replaces it) squeezed horizontally by an anamorphic ratio after its rotation, as Cycles
+/// does (`bokeh.x /= aperture_ratio`).
+#[derive(Clone, Debug, PartialEq)]
 pub struct LensAperture {
     /// The outline, in units of the aperture radius.
     pub shape: ApertureShape,
     /// The squeeze: x is divided by it (1 = none).
     pub ratio: f64,
+    /// A user-drawn aperture, sampled instead of `shape`.
+    pub mask: Option<std::sync::Arc<formats::MaskSampler>>,
 }
 
 impl LensAperture {
-    /// A point uniform over the squeezed outline, in units of the aperture radius (see
-    /// [`ApertureShape::sample`]).
+    /// The disk, unsqueezed.
+    pub fn round() -> Self {
+        LensAperture {
+            shape: ApertureShape::Circle,
+            ratio: 1.0,
+            mask: None,
+        }
+    }
+
+    /// A point over the squeezed outline or image, in units of the aperture radius (see
+    /// [`ApertureShape::sample`]), uniform over the outline, with the image's density over
+    /// an image.
     #[inline]
     pub fn sample(&self, u0: f64, u1: f64) -> [f64; 2] {
-        let [x, y] = self.shape.sample(u0, u1);
+        let [x, y] = match &self.mask {
+            Some(mask) => mask.sample(u0, u1),
+            None => self.shape.sample(u0, u1),
+        };
         [x / self.ratio, y]
     }
 
-    /// True when `p` (in units of the radius) lies inside the squeezed outline.
+    /// True when `p` (in units of the radius) lets light through.
     pub fn contains(&self, p: [f64; 2]) -> bool {
-        self.shape.contains([p[0] * self.ratio, p[1]])
+        let q = [p[0] * self.ratio, p[1]];
+        match &self.mask {
+            Some(mask) => mask.transmission(q) > 0.0,
+            None => self.shape.contains(q),
+        }
     }
 }
 

@@ -59,6 +59,10 @@ impl BuildPlan {
         let aperture = LensAperture {
             shape: ApertureShape::from_blades(cfg.blades, f64::from(cfg.blade_rotation_rad)),
             ratio: f64::from(cfg.aperture_ratio),
+            mask: cfg
+                .aperture_mask
+                .clone()
+                .map(|m| std::sync::Arc::new(formats::MaskSampler::new(m))),
         };
         let mut notes = vec![("procedure".to_string(), cfg.procedure.name().to_string())];
         if cfg.model == PsfModel::LensMotion {
@@ -88,7 +92,9 @@ impl BuildPlan {
                     None => ParamSpace::for_model(cfg.model, &ranges, n)?,
                 };
                 let tracer: Box<dyn LightTracer> = if cfg.model == PsfModel::ThinLens {
-                    Box::new(ThinLensTracer { aperture })
+                    Box::new(ThinLensTracer {
+                        aperture: aperture.clone(),
+                    })
                 } else {
                     Box::new(LensMotionTracer {
                         aperture,
@@ -460,6 +466,7 @@ fn build_database_impl(
         blades: cfg.blades,
         rotation_rad: cfg.blade_rotation_rad,
         ratio: cfg.aperture_ratio,
+        image_hash: cfg.aperture_mask.as_ref().map_or(0, |m| m.content_hash()),
     };
     header.lens = plan.lens.clone();
     header.shard = range;

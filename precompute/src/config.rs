@@ -266,6 +266,8 @@ pub struct BuildConfig {
     /// Anamorphic squeeze of the thin-lens and lens-motion aperture: its width divided by it
     /// after the rotation (1 = round; at least 1, so the PSF stays within its CoC radius).
     pub aperture_ratio: f32,
+    /// A user-drawn aperture for thin-lens and lens-motion (the blades are then ignored).
+    pub aperture_mask: Option<formats::ApertureMask>,
     /// Lens for physical-lens (`None` = [`LensOptions::default`]).
     pub lens: Option<LensOptions>,
     /// Sparsification procedure (default: [`Procedure::Refit`]; [`Procedure::Paper`] for the
@@ -321,6 +323,7 @@ impl BuildConfig {
             blades: 0,
             blade_rotation_rad: 0.0,
             aperture_ratio: 1.0,
+            aperture_mask: None,
             lens: None,
             procedure: Procedure::default(),
             analytic_shutter: true,

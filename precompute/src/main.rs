@@ -55,6 +55,10 @@ struct Args {
     /// after the rotation (Blender's aperture_ratio; 1 = round, at least 1).
     #[arg(long, default_value_t = 1.0)]
     aperture_ratio: f32,
+    /// A user-drawn aperture for thin-lens and lens-motion: a greyscale PNG whose brightness
+    /// is the lens' transmission (replaces the blades).
+    #[arg(long)]
+    aperture_image: Option<std::path::PathBuf>,
     /// Sparsification: refit (default: the paper's steps, then least-squares values), paper,
     /// or improved (sign-separated cells + least-squares values).
     #[arg(long, default_value = "refit")]
@@ -198,6 +202,11 @@ fn main() -> Result<()> {
     cfg.blades = args.blades;
     cfg.blade_rotation_rad = args.blade_rotation;
     cfg.aperture_ratio = args.aperture_ratio;
+    cfg.aperture_mask = args
+        .aperture_image
+        .as_deref()
+        .map(formats::ApertureMask::read_png)
+        .transpose()?;
     cfg.procedure = procedure;
     cfg.ablation = args.ablation;
     cfg.analytic_shutter = !args.sampled_shutter;

@@ -49,10 +49,7 @@ fn thin_lens_psf_converges_to_the_analytic_disk() {
     let space = ParamSpace::for_model(PsfModel::ThinLens, &[[0.0, 16.0]], 20).unwrap();
     let params = ParamBox::fixed(&space, [r, 0.0]);
     let tracer = ThinLensTracer {
-        aperture: LensAperture {
-            shape: ApertureShape::Circle,
-            ratio: 1.0,
-        },
+        aperture: LensAperture::round(),
     };
     let mut errors = Vec::new();
     for rays in [4_000u64, 40_000, 400_000, 4_000_000] {
@@ -85,7 +82,10 @@ fn bladed_aperture_is_a_polygon() {
     let params = ParamBox::fixed(&space, [r, 0.0]);
     let shape = ApertureShape::from_blades(6, 0.0);
     let tracer = ThinLensTracer {
-        aperture: LensAperture { shape, ratio: 1.0 },
+        aperture: LensAperture {
+            shape,
+            ..LensAperture::round()
+        },
     };
     let mut rng = psf_rng(3, 0, 0);
     let (img, _) = trace_psf(&tracer, &params, RayCount::Fixed(1_000_000), &mut rng, 0).unwrap();
@@ -119,8 +119,8 @@ fn anamorphic_aperture_is_an_ellipse_squeezed_in_x() {
     let params = ParamBox::fixed(&space, [r, 0.0]);
     let tracer = ThinLensTracer {
         aperture: LensAperture {
-            shape: ApertureShape::Circle,
             ratio: 2.0,
+            ..LensAperture::round()
         },
     };
     let mut rng = psf_rng(3, 0, 0);

@@ -17,6 +17,9 @@ pub struct Aperture {
     pub rotation_rad: f32,
     /// Anamorphic squeeze: the aperture's width divided by it after the rotation (1 = round).
     pub ratio: f32,
+    /// Content hash of a user-drawn aperture image (`formats::ApertureMask::content_hash`);
+    /// 0 for the blade polygon or the disk.
+    pub image_hash: u64,
 }
 
 impl Default for Aperture {
@@ -25,6 +28,7 @@ impl Default for Aperture {
             blades: 0,
             rotation_rad: 0.0,
             ratio: 1.0,
+            image_hash: 0,
         }
     }
 }

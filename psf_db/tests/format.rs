@@ -16,6 +16,7 @@ fn small_db() -> PsfDatabase {
         blades: 6,
         rotation_rad: 0.25,
         ratio: 1.5,
+        image_hash: 0x1234_5678_9abc_def0,
     };
     header.build.profile = "test".into();
     let mut b = DatabaseBuilder::new(header);

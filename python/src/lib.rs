@@ -29,7 +29,7 @@ struct PyCamera {
 #[pymethods]
 impl PyCamera {
     #[new]
-    #[pyo3(signature = (width, height, focal_length_mm, sensor_width_mm, f_stop=None, focus_distance=None, aperture_blades=0, shutter_frames=0.0, scene_unit_mm=1000.0, aperture_rotation_deg=0.0, aperture_ratio=1.0))]
+    #[pyo3(signature = (width, height, focal_length_mm, sensor_width_mm, f_stop=None, focus_distance=None, aperture_blades=0, shutter_frames=0.0, scene_unit_mm=1000.0, aperture_rotation_deg=0.0, aperture_ratio=1.0, aperture_image=None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         width: u32,
@@ -43,6 +43,7 @@ impl PyCamera {
         scene_unit_mm: f64,
         aperture_rotation_deg: f64,
         aperture_ratio: f64,
+        aperture_image: Option<PathBuf>,
     ) -> PyResult<Self> {
         let inner = renderer::Camera {
             width,
@@ -54,6 +55,7 @@ impl PyCamera {
             aperture_blades,
             aperture_rotation_deg,
             aperture_ratio,
+            aperture_image,
             shutter_frames,
             scene_unit_mm,
         };

@@ -61,6 +61,19 @@ pub fn aperture_of(camera: &crate::Camera) -> psf_db::Aperture {
         blades: camera.aperture_blades,
         rotation_rad: camera.aperture_rotation_rad() as f32,
         ratio: camera.aperture_ratio as f32,
+        // Filled in by `with_mask` once the camera's aperture image is read.
+        image_hash: 0,
+    }
+}
+
+/// `aperture` for a user-drawn aperture image: its content hash keys the databases.
+pub fn with_mask(
+    aperture: psf_db::Aperture,
+    mask: Option<&formats::ApertureMask>,
+) -> psf_db::Aperture {
+    psf_db::Aperture {
+        image_hash: mask.map_or(0, |m| m.content_hash()),
+        ..aperture
     }
 }
 
@@ -72,6 +85,9 @@ pub struct Request<'a> {
     pub needed: Option<PsfModel>,
     /// The aperture's blades (0 = circular) and their rotation ([`aperture_of`] a camera).
     pub aperture: psf_db::Aperture,
+    /// A user-drawn aperture the databases are traced with (its hash is in `aperture`:
+    /// [`with_mask`]).
+    pub mask: Option<&'a formats::ApertureMask>,
     /// Conditioning (monopole removal, energy normalisation) before use.
     pub condition: bool,
     /// Changes the runtime's build settings before the cache is asked (the baselines store
@@ -155,6 +171,7 @@ pub fn load(
                 let mut cfg = dbcache::build_config(model, profile, request.aperture.blades);
                 cfg.blade_rotation_rad = request.aperture.rotation_rad;
                 cfg.aperture_ratio = request.aperture.ratio;
+                cfg.aperture_mask = request.mask.cloned();
                 if let Some(adjust) = request.adjust {
                     cfg = adjust(cfg);
                 }

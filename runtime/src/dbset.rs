@@ -167,13 +167,14 @@ const TWIN_SPLITS: u32 = 3;
 
 /// The dense twins of `db`'s sparse PSFs (see [`DbSet::hdr_twins`]): per PSF its cell and the
 /// twins of its sub-cells in row-major order; `None` where a PSF is empty, of a model or
-/// aperture the analytic PSF does not describe (bladed or anamorphic), or where a twin would reach beyond
+/// aperture the analytic PSF does not describe (bladed, anamorphic or drawn), or where a twin would reach beyond
 /// `bound` px from the centre (the database's PSF resolution).
 fn dense_twins(db: &PsfDatabase, bound: i32) -> Vec<Option<(TwinCell, Vec<DenseImage>)>> {
     use rayon::prelude::*;
     let analytic = matches!(db.model(), PsfModel::ThinLens | PsfModel::LensMotion)
         && db.header().aperture.blades == 0
-        && db.header().aperture.ratio == 1.0;
+        && db.header().aperture.ratio == 1.0
+        && db.header().aperture.image_hash == 0;
     let motion = db.model() == PsfModel::LensMotion;
     (0..db.psf_count())
         .into_par_iter()

@@ -25,6 +25,9 @@ pub enum Error {
     /// Reading or writing a file failed.
     #[error(transparent)]
     Format(#[from] formats::Error),
+    /// The camera's aperture image is unreadable or cannot be an aperture.
+    #[error(transparent)]
+    ApertureImage(#[from] formats::MaskError),
     /// The GPU path failed (no adapter when one was required, a device limit, a wgpu error).
     #[cfg(feature = "gpu")]
     #[error(transparent)]

@@ -311,10 +311,16 @@ impl Renderer {
     fn databases_for(&mut self, effects: Effects, camera: &Camera) -> Result<Selected, Error> {
         let started = Instant::now();
         let needed = effects.cheapest_model();
+        // A user-drawn aperture shapes the thin-lens and lens-motion PSFs; read it only when
+        // there is a lens to shape.
+        let mask = if effects.defocus {
+            camera.aperture_mask()?
+        } else {
+            None
+        };
+        let aperture = databases::with_mask(databases::aperture_of(camera), mask.as_ref());
         if let Some(held) = &self.databases {
-            if held.aperture == databases::aperture_of(camera)
-                && databases::serves(held.model, needed)
-            {
+            if held.aperture == aperture && databases::serves(held.model, needed) {
                 return Ok(Selected {
                     set: held.set.clone(),
                     used: Vec::new(),
@@ -357,7 +363,8 @@ impl Renderer {
         let request = databases::Request {
             source,
             needed,
-            aperture: databases::aperture_of(camera),
+            aperture,
+            mask: mask.as_ref(),
             condition: self.options.condition,
             // The baselines draw the pre-filtered PSFs the spreadlets were fitted to.
             adjust: (method != Method::Spreadlet && !is_file).then_some(&adjust as &dyn Fn(_) -> _),
@@ -368,7 +375,7 @@ impl Renderer {
         let set = Arc::new(loaded.set);
         self.databases = Some(HeldDatabases {
             model: needed,
-            aperture: databases::aperture_of(camera),
+            aperture,
             set: set.clone(),
         });
         self.loads += 1;

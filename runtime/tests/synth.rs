@@ -191,6 +191,7 @@ fn one_pixel_reproduces_physical_lens_psfs() {
             aperture_blades: 0,
             aperture_rotation_deg: 0.0,
             aperture_ratio: 1.0,
+            aperture_image: None,
             shutter_frames: 0.0,
             scene_unit_mm: lens.scene_unit_mm,
         };

@@ -100,6 +100,8 @@ pub struct Camera {
     right: DVec3,
     down: DVec3,
     forward: DVec3,
+    /// The user-drawn aperture of `spec.aperture_image`, read once.
+    mask: Option<std::sync::Arc<formats::MaskSampler>>,
 }
 
 impl Camera {
@@ -129,12 +131,17 @@ impl Camera {
             ));
         }
         let down = forward.cross(right);
+        let mask = spec
+            .aperture_mask()
+            .map_err(|e| invalid(format!("{context}: camera"), e.to_string()))?
+            .map(|m| std::sync::Arc::new(formats::MaskSampler::new(m)));
         Ok(Self {
             spec,
             pose,
             right,
             down,
             forward,
+            mask,
         })
     }
 
@@ -198,12 +205,19 @@ impl Camera {
         let lens = if !self.spec.has_lens() {
             DVec2::ZERO
         } else {
-            // Anamorphic squeeze after the rotation, as Cycles does.
-            let p = sample_aperture(
-                self.spec.aperture_blades,
-                self.spec.aperture_rotation_rad(),
-                xi,
-            );
+            // A drawn aperture replaces the blades; the anamorphic squeeze comes after the
+            // rotation, as Cycles does.
+            let p = match &self.mask {
+                Some(mask) => {
+                    let [x, y] = mask.sample(xi.x, xi.y);
+                    DVec2::new(x, y)
+                }
+                None => sample_aperture(
+                    self.spec.aperture_blades,
+                    self.spec.aperture_rotation_rad(),
+                    xi,
+                ),
+            };
             DVec2::new(p.x / self.spec.aperture_ratio, p.y)
         };
         (self.ray(pixel, lens, time), lens)
@@ -245,6 +259,7 @@ mod tests {
             aperture_blades: 0,
             aperture_rotation_deg: 0.0,
             aperture_ratio: 1.0,
+            aperture_image: None,
             shutter_frames: 0.5,
             scene_unit_mm: 1000.0,
         }

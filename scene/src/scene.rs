@@ -186,7 +186,22 @@ impl Scene {
             path: path.to_path_buf(),
             source,
         })?;
-        Self::from_json(&text, &path.display().to_string())
+        let name = path.display().to_string();
+        let mut description: SceneDescription =
+            serde_json::from_str(&text).map_err(|source| Error::Json {
+                source_name: name.clone(),
+                source,
+            })?;
+        // An aperture image named relative to the scene file.
+        if let (Some(image), Some(dir)) = (&description.camera.aperture_image, path.parent()) {
+            if image.is_relative() {
+                // Absolute, so the camera.json written beside the renders finds it anywhere.
+                let joined = dir.join(image);
+                let absolute = std::fs::canonicalize(&joined).unwrap_or(joined);
+                description.camera.aperture_image = Some(absolute);
+            }
+        }
+        Self::new(description, &name)
     }
 
     /// Validates a parsed description.

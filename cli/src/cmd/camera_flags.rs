@@ -38,6 +38,10 @@ pub(crate) struct CameraFlags {
     /// 2 = bokeh twice as tall as wide; at least 1).
     #[arg(long)]
     pub(crate) aperture_ratio: Option<f64>,
+    /// A user-drawn aperture: a greyscale PNG whose brightness is the lens' transmission
+    /// (upright in background bokeh; replaces the blades).
+    #[arg(long)]
+    pub(crate) aperture_image: Option<std::path::PathBuf>,
     /// Shutter as a fraction of the frame (0 = no motion blur).
     #[arg(long)]
     pub(crate) shutter_frames: Option<f64>,
@@ -79,9 +83,26 @@ pub(crate) fn load_camera(path: Option<&Path>, f: &CameraFlags) -> Result<Camera
     set("aperture_ratio", f.aperture_ratio.map(Into::into));
     set("shutter_frames", f.shutter_frames.map(Into::into));
     set("scene_unit_mm", f.scene_unit_mm.map(Into::into));
-    let camera = Camera::from_json_str(&value.to_string()).map_err(|e| match path {
+    // The flag's path is the command line's (relative to here), the file's is the file's.
+    let from_file = f.aperture_image.is_none();
+    set(
+        "aperture_image",
+        f.aperture_image
+            .as_ref()
+            .map(|p| p.display().to_string().into()),
+    );
+    let mut camera = Camera::from_json_str(&value.to_string()).map_err(|e| match path {
         Some(p) => anyhow::anyhow!("{}: {e}", p.display()),
         None => anyhow::anyhow!("{e} (give --camera or the camera flags)"),
     })?;
+    if let (true, Some(dir), Some(image)) = (
+        from_file,
+        path.and_then(Path::parent),
+        camera.aperture_image.as_ref(),
+    ) {
+        if image.is_relative() {
+            camera.aperture_image = Some(dir.join(image));
+        }
+    }
     Ok(camera)
 }

@@ -12,7 +12,7 @@ use crate::aperture::LensAperture;
 use crate::prefilter::ParamBox;
 
 /// Light tracer of the `lens-motion` model; `s = [CoC radius px, motion length px]`.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 pub struct LensMotionTracer {
     /// Aperture shape.
     pub aperture: LensAperture,

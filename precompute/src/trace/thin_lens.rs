@@ -6,7 +6,7 @@ use crate::aperture::LensAperture;
 use crate::prefilter::ParamBox;
 
 /// Light tracer of the `thin-lens` model; `s = [CoC radius px, -]`.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 pub struct ThinLensTracer {
     /// Aperture shape.
     pub aperture: LensAperture,

@@ -736,6 +736,7 @@ pub fn classify_fragments(
         layer_targets(layer_coord(frag.parallax), n_layers, band)
     };
     let transmission = occlusion_within_layers(fragments, n_layers, &targets_of);
+    let flip_front = front_turns_the_aperture(dbs);
 
     // Records per layer, then concatenated (deterministic order).
     let mut per_layer: Vec<Vec<SplatRecord>> = vec![Vec::new(); n_layers];
@@ -746,15 +747,16 @@ pub fn classify_fragments(
         }
         let (x, y) = (frag.x, frag.y);
         let color = frag.color;
-        let coc = signed_coc(frag.depth).abs();
+        let signed = signed_coc(frag.depth);
+        let coc = signed.abs();
         let m = frag.motion;
         let motion_len = (m[0] * m[0] + m[1] * m[1]).sqrt();
         let Lookup {
             path,
             psf_index,
             clamped,
-            rot_cos,
-            rot_sin,
+            mut rot_cos,
+            mut rot_sin,
         } = lookup_psf(
             frag,
             coc,
@@ -765,6 +767,12 @@ pub fn classify_fragments(
             model,
             options,
         );
+        // In front of the focus plane the lens images its aperture turned half a turn: the
+        // databases hold the PSF behind it (see `front_turns_the_aperture`).
+        if flip_front && signed < 0.0 && model != Some(PsfModel::PhysicalLens) {
+            rot_cos = -rot_cos;
+            rot_sin = -rot_sin;
+        }
         counts.clamped += usize::from(clamped);
         let bright = color[..3]
             .iter()
@@ -1059,6 +1067,19 @@ fn occlusion_within_layers(
     Some(kept)
 }
 
+/// Whether the databases' aperture looks different turned half a turn (an odd number of
+/// blades, or a drawn image): then a fragment in front of the focus plane, whose PSF is the
+/// aperture's image point-reflected, draws its PSF turned by pi. Disks, even polygons and
+/// their anamorphic squeezes are symmetric under that turn and are drawn as they are (the
+/// turn would only cost the exact pixel placement).
+fn front_turns_the_aperture(dbs: &DbSet) -> bool {
+    let db = dbs.thin_lens.as_ref().or(dbs.main.as_ref());
+    db.is_some_and(|db| {
+        let a = &db.header().aperture;
+        (a.blades >= 3 && a.blades % 2 == 1) || a.image_hash != 0
+    })
+}
+
 /// A fragment's depth layers and its weight in each: one or two (soft layers) of the pair.
 type LayerTargets = ([(usize, f32); 2], usize);
 
@@ -1110,6 +1131,7 @@ mod tests {
             aperture_blades: 0,
             aperture_rotation_deg: 0.0,
             aperture_ratio: 1.0,
+            aperture_image: None,
             shutter_frames: shutter,
             scene_unit_mm: 1000.0,
         }
