@@ -21,6 +21,19 @@ fn camera(extra: &str) -> Camera {
     .expect("camera")
 }
 
+/// A CPU renderer on the quick databases of the test cache.
+fn cpu_renderer() -> Renderer {
+    Renderer::new(RendererOptions {
+        backend: Backend::Cpu,
+        databases: spreadlet::DbSource::Cache {
+            dir: cache_dir(),
+            profile: precompute::Profile::Quick,
+        },
+        ..Default::default()
+    })
+    .expect("renderer")
+}
+
 /// The image of one bright pixel at the frame's centre at [`DEPTH`] ([`splat_at`]).
 fn splat(camera: &Camera) -> (Vec<[f32; 4]>, f64) {
     splat_at(camera, DEPTH)
@@ -34,15 +47,7 @@ fn splat_at(camera: &Camera, depth: f32) -> (Vec<[f32; 4]>, f64) {
     let mut color = vec![[0.0f32; 4]; n];
     color[(SIZE / 2) * SIZE + SIZE / 2] = [100.0, 100.0, 100.0, 1.0];
     let g = GBuffer::from_planes(SIZE, SIZE, color, Some(vec![depth; n]), None).expect("g");
-    let mut renderer = Renderer::new(RendererOptions {
-        backend: Backend::Cpu,
-        databases: spreadlet::DbSource::Cache {
-            dir: cache_dir(),
-            profile: precompute::Profile::Quick,
-        },
-        ..Default::default()
-    })
-    .expect("renderer");
+    let mut renderer = cpu_renderer();
     let frame = renderer
         .synthesize(&g, camera, &SynthOptions::default())
         .expect("synthesis");
@@ -201,15 +206,7 @@ fn a_drawn_aperture_is_upright_behind_the_focus_and_turned_in_front() {
     let n = SIZE * SIZE;
     let g =
         GBuffer::from_planes(SIZE, SIZE, vec![[1.0; 4]; n], Some(vec![DEPTH; n]), None).expect("g");
-    let mut renderer = Renderer::new(RendererOptions {
-        backend: Backend::Cpu,
-        databases: spreadlet::DbSource::Cache {
-            dir: cache_dir(),
-            profile: precompute::Profile::Quick,
-        },
-        ..Default::default()
-    })
-    .expect("renderer");
+    let mut renderer = cpu_renderer();
     let e = renderer
         .synthesize(&g, &missing, &SynthOptions::default())
         .expect_err("a missing aperture image");

@@ -10,7 +10,9 @@ use std::process::Command;
 
 use spreadlet::formats::{DeepCompression, DeepImage, DeepSample};
 use spreadlet::GBuffer;
-use spreadlet_e2e::{assert_clean_failure, assert_success, cache_dir, compare_scores, run};
+use spreadlet_e2e::{
+    assert_clean_failure, assert_success, cache_dir, compare_scores, render_scene_128, run,
+};
 
 fn p(path: &Path) -> String {
     path.to_str().expect("utf-8 path").to_string()
@@ -141,35 +143,6 @@ fn openexr_and_spreadlet_read_each_others_deep_files_exactly() {
     }
 }
 
-/// Renders `scene` at 128 px as a flat G-buffer, a deep image and a reference into `dir`.
-fn render_scene(dir: &Path, scene: &str) {
-    let d = |n: &str| p(&dir.join(n));
-    let out = run(
-        "spreadlet-scene",
-        &[
-            "render",
-            scene,
-            "--width",
-            "128",
-            "--height",
-            "128",
-            "--gbuffer",
-            &d("g.exr"),
-            "--deep",
-            &d("deep.exr"),
-            "--reference",
-            &d("ref.exr"),
-            "--ref-spp",
-            "256",
-            "--camera-out",
-            &d("cam.json"),
-            "--quiet",
-        ],
-        &cache_dir(),
-    );
-    assert_success(&out);
-}
-
 fn synth(input: &Path, camera: &Path, out: &Path, backend: &str) -> std::process::Output {
     run(
         "spreadlet",
@@ -194,7 +167,8 @@ fn a_deep_render_flattens_to_its_gbuffer_and_blurs_better_than_it() {
     let dir = tempfile::tempdir().expect("temp dir");
     // Small bright lights far behind and close in front of the focus plane around a sharp
     // sphere before a textured wall.
-    render_scene(dir.path(), "bokeh");
+    let deep_path = p(&dir.path().join("deep.exr"));
+    render_scene_128(dir.path(), "bokeh", &["--deep", &deep_path]);
     let deep = DeepImage::read(&dir.path().join("deep.exr")).expect("deep");
     let flat = GBuffer::read_exr(&dir.path().join("g.exr"), &Default::default()).expect("flat");
     assert!(

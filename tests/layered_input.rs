@@ -10,7 +10,8 @@ use std::path::{Path, PathBuf};
 use spreadlet::formats::exr_io::write_channels;
 use spreadlet::{GBuffer, ViewLayer};
 use spreadlet_e2e::{
-    assert_clean_failure, assert_success, cache_dir, compare_scores, run, shared_examples,
+    assert_clean_failure, assert_success, cache_dir, compare_scores, render_scene_128, run,
+    shared_examples,
 };
 
 fn p(path: &Path) -> String {
@@ -252,33 +253,12 @@ fn layers_that_do_not_line_up_or_lack_vectors_are_errors_naming_the_layer() {
 /// objects), synthesises both and scores them against the scene's own reference: (flat
 /// SSIM, flat FLIP, layered SSIM, layered FLIP).
 fn own_scene_scores(dir: &Path, scene: &str, foreground: &str) -> (f64, f64, f64, f64) {
-    let d = |n: &str| p(&dir.join(n));
-    let out = run(
-        "spreadlet-scene",
-        &[
-            "render",
-            scene,
-            "--width",
-            "128",
-            "--height",
-            "128",
-            "--gbuffer",
-            &d("g.exr"),
-            "--view-layers",
-            &d("layers.exr"),
-            "--foreground",
-            foreground,
-            "--reference",
-            &d("ref.exr"),
-            "--ref-spp",
-            "256",
-            "--camera-out",
-            &d("cam.json"),
-            "--quiet",
-        ],
-        &cache_dir(),
+    let layers = p(&dir.join("layers.exr"));
+    render_scene_128(
+        dir,
+        scene,
+        &["--view-layers", &layers, "--foreground", foreground],
     );
-    assert_success(&out);
     let camera = dir.join("cam.json");
     let (single, layered) = (dir.join("single.exr"), dir.join("lay.exr"));
     assert_success(&synth(&[&dir.join("g.exr")], &camera, &single, &[]));

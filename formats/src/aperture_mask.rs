@@ -66,6 +66,7 @@ impl ApertureMask {
             .map_err(|e| read(e.to_string()))?
             .with_guessed_format()
             .map_err(|e| read(e.to_string()))?;
+        // The header first: a huge image is refused before anything is decoded.
         let (w, h) = reader.into_dimensions().map_err(|e| read(e.to_string()))?;
         let (w, h) = (w as usize, h as usize);
         if w == 0 || h == 0 || w > MAX_MASK_EDGE || h > MAX_MASK_EDGE {

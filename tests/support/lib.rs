@@ -99,6 +99,35 @@ pub fn assert_success(out: &Output) -> String {
     String::from_utf8_lossy(&out.stdout).into_owned()
 }
 
+/// Renders `scene` (a built-in name or a file) at 128 x 128 into `dir`: the flat G-buffer
+/// `g.exr`, the 256-spp reference `ref.exr` and the camera `cam.json`, plus whatever `extra`
+/// asks for (`--deep F`, `--view-layers F --foreground NAMES`).
+pub fn render_scene_128(dir: &Path, scene: &str, extra: &[&str]) {
+    let d = |n: &str| dir.join(n).to_str().expect("utf-8 path").to_string();
+    let (g, reference, camera) = (d("g.exr"), d("ref.exr"), d("cam.json"));
+    let mut args = vec![
+        "render",
+        scene,
+        "--width",
+        "128",
+        "--height",
+        "128",
+        "--gbuffer",
+        &g,
+    ];
+    args.extend_from_slice(extra);
+    args.extend([
+        "--reference",
+        &reference,
+        "--ref-spp",
+        "256",
+        "--camera-out",
+        &camera,
+        "--quiet",
+    ]);
+    assert_success(&run("spreadlet-scene", &args, &cache_dir()));
+}
+
 /// SSIM and FLIP mean of `image` against `reference`, by `spreadlet compare --json`.
 pub fn compare_scores(image: &Path, reference: &Path) -> (f64, f64) {
     let path = |p: &Path| p.to_str().expect("utf-8 path").to_string();

@@ -280,20 +280,12 @@ fn deep_frame(
     let (image, stats) = (&frame.image, &frame.stats);
     write_frame_outputs(job, image, |write_ms| {
         if !args.quiet {
-            eprintln!(
-                "{}x{} from a deep image ({} samples, up to {} per pixel): {} sparse, {} dense, \
-                 {} copied; {} of {} layers; {:.1} ms",
-                stats.width,
-                stats.height,
+            let source = format!(
+                "a deep image ({} samples, up to {} per pixel)",
                 deep.samples.len(),
-                deep.max_samples_per_pixel(),
-                stats.counts.sparse,
-                stats.counts.dense,
-                stats.counts.copied,
-                stats.layers_used,
-                stats.layers,
-                stats.times.total_ms,
+                deep.max_samples_per_pixel()
             );
+            report_frame(stats, &source);
         }
         if let Some(p) = &job.stats {
             let input = serde_json::json!({
@@ -329,18 +321,7 @@ fn layered_frame(
     let names: Vec<&str> = layers.iter().map(|l| l.name.as_str()).collect();
     write_frame_outputs(job, image, |write_ms| {
         if !args.quiet {
-            eprintln!(
-                "{}x{} from view layers {}: {} sparse, {} dense, {} copied; {} of {} layers; {:.1} ms",
-                stats.width,
-                stats.height,
-                names.join(", "),
-                stats.counts.sparse,
-                stats.counts.dense,
-                stats.counts.copied,
-                stats.layers_used,
-                stats.layers,
-                stats.times.total_ms,
-            );
+            report_frame(stats, &format!("view layers {}", names.join(", ")));
         }
         if let Some(p) = &job.stats {
             let input = serde_json::json!({
@@ -354,6 +335,22 @@ fn layered_frame(
         }
         Ok(())
     })
+}
+
+/// The one line a layered or deep frame prints: its size, `source`, the records per path,
+/// the layers used and the synthesis time.
+fn report_frame(stats: &spreadlet::SynthStats, source: &str) {
+    eprintln!(
+        "{}x{} from {source}: {} sparse, {} dense, {} copied; {} of {} layers; {:.1} ms",
+        stats.width,
+        stats.height,
+        stats.counts.sparse,
+        stats.counts.dense,
+        stats.counts.copied,
+        stats.layers_used,
+        stats.layers,
+        stats.times.total_ms,
+    );
 }
 
 /// A layered or deep frame's statistics: `input` (an object saying what was read) with the
