@@ -42,6 +42,7 @@ pub fn cached_dbs_with(
         needed: effects.cheapest_model(),
         aperture,
         mask: None,
+        lens: None,
         condition: true,
         adjust: Some(build),
         transform: keep_sparse.then_some(&strip as &dyn Fn(_) -> _),

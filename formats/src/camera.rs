@@ -103,6 +103,15 @@ pub struct Camera {
     /// A relative path is relative to the `camera.json` it is written in.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub aperture_image: Option<std::path::PathBuf>,
+    /// A real lens: a built-in prescription's name (`singlet-51mm`, `double-gauss-50mm`,
+    /// `wide-angle-22mm`) or a prescription file ([`optics::Prescription`]: JSON or pbrt's
+    /// table), relative to the `camera.json` it is written in. Defocus is then traced through
+    /// its glass (chromatic aberration, cat-eye vignetting) with the `physical-lens` model;
+    /// `f_stop` stops it down, `focus_distance` focuses it (from its entrance pupil, where the
+    /// pinhole G-buffer's camera sits), and `focal_length_mm` stays the thin-lens
+    /// approximation's. `None`: the thin lens.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lens: Option<String>,
     /// Exposure as a fraction of the frame interval, centred on the frame; 0 = no motion blur.
     #[serde(default)]
     pub shutter_frames: f64,
@@ -141,6 +150,12 @@ impl Camera {
                 camera.aperture_image = Some(dir.join(image));
             }
         }
+        if let (Some(lens), Some(dir)) = (&camera.lens, path.parent()) {
+            let file = Path::new(lens);
+            if optics::Prescription::builtin(lens).is_none() && file.is_relative() {
+                camera.lens = Some(dir.join(file).display().to_string());
+            }
+        }
         Ok(camera)
     }
 
@@ -150,6 +165,15 @@ impl Camera {
         self.aperture_image
             .as_deref()
             .map(crate::ApertureMask::read_png)
+            .transpose()
+    }
+
+    /// The camera's lens prescription, read ([`optics::Prescription::resolve`]); `None` for
+    /// the thin lens.
+    pub fn prescription(&self) -> Result<Option<optics::Prescription>, optics::PrescriptionError> {
+        self.lens
+            .as_deref()
+            .map(|l| optics::Prescription::resolve(l, None))
             .transpose()
     }
 
@@ -185,6 +209,7 @@ impl Camera {
                 check_field::<f64>(obj, "aperture_ratio")?;
                 check_field::<f64>(obj, "shutter_frames")?;
                 check_field::<f64>(obj, "scene_unit_mm")?;
+                check_field::<Option<String>>(obj, "lens")?;
                 return Err(CameraError::Text { source });
             }
         };
@@ -287,6 +312,22 @@ impl Camera {
                 "aperture_blades must be 0 (circular) or at least 3, got {}",
                 self.aperture_blades
             ));
+        }
+        if let Some(lens) = &self.lens {
+            let shaped = self.aperture_blades != 0
+                || self.aperture_ratio != 1.0
+                || self.aperture_image.is_some();
+            if shaped {
+                return bad(format!(
+                    "lens {lens:?}: a lens prescription's aperture is its stop; aperture_blades, \
+                     aperture_ratio and aperture_image apply to the thin lens only"
+                ));
+            }
+            if self.f_stop.is_none() || self.focus_distance.is_none() {
+                return bad(format!(
+                    "lens {lens:?} needs f_stop and focus_distance (a pinhole has no lens)"
+                ));
+            }
         }
         Ok(())
     }

@@ -15,7 +15,7 @@ use psf_db::{
 use rayon::prelude::*;
 
 use crate::aperture::{ApertureShape, LensAperture};
-use crate::config::{BuildConfig, LensOptions};
+use crate::config::BuildConfig;
 use crate::image::PsfImage;
 use crate::prefilter::ParamBox;
 use crate::quality::{integrate_spreadlets, l1, similarity};
@@ -107,14 +107,17 @@ impl BuildPlan {
                 let opts = cfg.lens.clone().unwrap_or_default();
                 opts.validate()?;
                 let width_px = opts.image_width_px.unwrap_or(spec.physical_image_width_px);
-                let mut singlet = opts.singlet();
-                let design_um = crate::optics::spectrum::LAMBDA_DESIGN_NM * 1e-3;
-                singlet.focus(opts.focus_distance * opts.scene_unit_mm, design_um)?;
+                let system = opts.focused_system()?;
+                let mm = opts.scene_unit_mm;
                 let tracer = PhysicalLensTracer::new(
-                    singlet.clone(),
-                    opts.scene_unit_mm,
+                    system.clone(),
+                    mm,
                     opts.sensor_width_mm / f64::from(width_px),
-                );
+                    opts.focus_distance * mm,
+                    [opts.depth_range[0] * mm, opts.depth_range[1] * mm],
+                    opts.max_eccentricity_mm,
+                )
+                .map_err(|e| PrecomputeError::InvalidLens(e.to_string()))?;
                 if !(tracer.pinhole_distance_mm.is_finite() && tracer.pinhole_distance_mm > 0.0) {
                     return Err(PrecomputeError::InvalidLens(
                         "the chief ray does not reach the sensor".into(),
@@ -124,9 +127,13 @@ impl BuildPlan {
                     "pinhole_distance_mm".into(),
                     format!("{:.6}", tracer.pinhole_distance_mm),
                 ));
-                let ranges = [opts.depth_range, [0.0, opts.max_eccentricity_mm]];
+                notes.push(("lens".into(), system.prescription.name.clone()));
+                // Inverse depth: the blur grows linearly in it, so a uniform grid spends its
+                // PSFs evenly over blur sizes.
+                let [near, far] = opts.depth_range;
+                let ranges = [[1.0 / far, 1.0 / near], [0.0, opts.max_eccentricity_mm]];
                 let space = ParamSpace::for_model(cfg.model, &ranges, n)?;
-                let presc = physical_prescription(&opts, &singlet, width_px);
+                let presc = opts.prescription(&system, tracer.pinhole_distance_mm, width_px);
                 (space, Box::new(tracer), Some(presc))
             }
         };
@@ -363,14 +370,6 @@ pub struct ProcessedPsf {
     pub spreadlets: Spreadlets,
     /// Its figures.
     pub report: PsfReport,
-}
-
-fn physical_prescription(
-    opts: &LensOptions,
-    singlet: &crate::optics::singlet::Singlet,
-    width_px: u32,
-) -> LensPrescription {
-    opts.prescription(singlet, width_px)
 }
 
 /// Builds the database `cfg` describes. `progress` shows a progress bar over PSFs on stderr.

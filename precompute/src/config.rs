@@ -6,10 +6,9 @@ use std::str::FromStr;
 use psf_db::{LensPrescription, PsfModel};
 use serde::{Deserialize, Serialize};
 
-use crate::optics::glass::BK7;
-use crate::optics::singlet::Singlet;
 use crate::sparsify::Procedure;
 use crate::PrecomputeError;
+use optics::{LensSystem, Prescription};
 
 /// How thoroughly a database is built.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -114,21 +113,29 @@ pub struct ProfileSpec {
 }
 
 /// The `physical-lens` model's lens, focus, sensor and parameter ranges.
+///
+/// The lens is `prescription` when given (a built-in lens or a prescription file,
+/// [`optics::Prescription`]), else the biconvex singlet the `*_mm` lens fields describe.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct LensOptions {
-    /// Signed radius of the front surface, mm (> 0).
+    /// A lens prescription; `None`: the singlet of the fields below.
+    pub prescription: Option<Prescription>,
+    /// Stops the lens down to this f-number (paraxial, focal length over entrance pupil
+    /// diameter); `None`: wide open.
+    pub f_stop: Option<f64>,
+    /// Singlet: signed radius of the front surface, mm (> 0).
     pub radius_front_mm: f64,
-    /// Signed radius of the back surface, mm (< 0).
+    /// Singlet: signed radius of the back surface, mm (< 0).
     pub radius_back_mm: f64,
-    /// Centre thickness, mm.
+    /// Singlet: centre thickness, mm.
     pub thickness_mm: f64,
-    /// Clear diameter of the lens (rim), mm.
+    /// Singlet: clear diameter of the lens (rim), mm.
     pub lens_diameter_mm: f64,
-    /// Diameter of the aperture stop, mm.
+    /// Singlet: diameter of the aperture stop, mm.
     pub stop_diameter_mm: f64,
-    /// Stop position relative to the front vertex, mm (<= 0: in front of the lens).
+    /// Singlet: stop position relative to the front vertex, mm (<= 0: in front of the lens).
     pub stop_position_mm: f64,
-    /// Distance in focus (from the stop), scene units.
+    /// Distance in focus (from the entrance pupil), scene units.
     pub focus_distance: f64,
     /// Millimetres per scene unit.
     pub scene_unit_mm: f64,
@@ -136,7 +143,7 @@ pub struct LensOptions {
     pub sensor_width_mm: f64,
     /// Image width, pixels; `None` takes the profile's.
     pub image_width_px: Option<u32>,
-    /// Depth range `[near, far]` sampled, scene units (from the stop).
+    /// Depth range `[near, far]` sampled, scene units (from the entrance pupil).
     pub depth_range: [f64; 2],
     /// Largest eccentricity sampled, mm on the sensor.
     pub max_eccentricity_mm: f64,
@@ -147,6 +154,8 @@ impl Default for LensOptions {
     /// 1 m, on a 36 mm wide sensor; depths 0.4-10 m, eccentricities up to 18 mm.
     fn default() -> Self {
         LensOptions {
+            prescription: None,
+            f_stop: None,
             radius_front_mm: 51.68,
             radius_back_mm: -51.68,
             thickness_mm: 6.0,
@@ -164,18 +173,30 @@ impl Default for LensOptions {
 }
 
 impl LensOptions {
-    /// The singlet (not yet focused).
-    pub fn singlet(&self) -> Singlet {
-        Singlet {
-            radius_front_mm: self.radius_front_mm,
-            radius_back_mm: self.radius_back_mm,
-            thickness_mm: self.thickness_mm,
-            rim_radius_mm: 0.5 * self.lens_diameter_mm,
-            stop_radius_mm: 0.5 * self.stop_diameter_mm,
-            stop_gap_mm: -self.stop_position_mm,
-            glass: BK7,
-            sensor_z_mm: 0.0,
+    /// The lens as given (wide open).
+    pub fn wide_open(&self) -> Prescription {
+        match &self.prescription {
+            Some(p) => p.clone(),
+            None => Prescription::singlet(
+                self.radius_front_mm,
+                self.radius_back_mm,
+                self.thickness_mm,
+                self.lens_diameter_mm,
+                self.stop_diameter_mm,
+                -self.stop_position_mm,
+            ),
         }
+    }
+
+    /// The lens stopped down to [`LensOptions::f_stop`] and focused at
+    /// [`LensOptions::focus_distance`] for the design wavelength.
+    pub fn focused_system(&self) -> Result<LensSystem, PrecomputeError> {
+        LensSystem::focused(
+            self.wide_open(),
+            self.f_stop,
+            self.focus_distance * self.scene_unit_mm,
+        )
+        .map_err(|e| PrecomputeError::InvalidLens(e.to_string()))
     }
 
     /// Checks ranges and units.
@@ -214,29 +235,67 @@ impl LensOptions {
         if self.image_width_px == Some(0) {
             return bad("image width must be > 0 px".into());
         }
-        self.singlet().validate()
+        if self.prescription.is_none() {
+            singlet_checks(self)?;
+        }
+        self.focused_system().map(|_| ())
     }
 
-    /// The prescription recorded in the database header, for a focused `singlet` and the
-    /// image width used.
-    pub fn prescription(&self, singlet: &Singlet, image_width_px: u32) -> LensPrescription {
+    /// The prescription recorded in the database header, for the focused `system`, its
+    /// pinhole distance and the image width used.
+    pub fn prescription(
+        &self,
+        system: &LensSystem,
+        pinhole_distance_mm: f64,
+        image_width_px: u32,
+    ) -> LensPrescription {
+        let design = optics::system::LAMBDA_DESIGN_UM;
         LensPrescription {
-            radius_front_mm: self.radius_front_mm,
-            radius_back_mm: self.radius_back_mm,
-            thickness_mm: self.thickness_mm,
-            lens_diameter_mm: self.lens_diameter_mm,
-            stop_diameter_mm: self.stop_diameter_mm,
-            stop_position_mm: self.stop_position_mm,
-            glass: "N-BK7".into(),
-            dispersion: singlet.glass.clone(),
+            lens: system.prescription.clone(),
             focus_distance: self.focus_distance,
             scene_unit_mm: self.scene_unit_mm,
-            focal_length_mm: singlet.focal_length(crate::optics::spectrum::LAMBDA_DESIGN_NM * 1e-3),
-            sensor_distance_mm: singlet.sensor_z_mm - singlet.stop_gap_mm - singlet.thickness_mm,
+            focal_length_mm: system.focal_length(design),
+            f_number: system.f_number(design).unwrap_or(f64::NAN),
+            sensor_distance_mm: system.sensor_z_mm - system.rear_vertex_z(),
+            pinhole_distance_mm,
             sensor_width_mm: self.sensor_width_mm,
             image_width_px,
         }
     }
+}
+
+/// The singlet's own limits, with messages in its terms: biconvex, edge thickness > 0.
+fn singlet_checks(o: &LensOptions) -> Result<(), PrecomputeError> {
+    let bad = |m: &str| Err(PrecomputeError::InvalidLens(m.to_string()));
+    let vals = [
+        o.radius_front_mm,
+        o.radius_back_mm,
+        o.thickness_mm,
+        o.lens_diameter_mm,
+        o.stop_diameter_mm,
+        o.stop_position_mm,
+    ];
+    if !vals.iter().all(|v| v.is_finite()) {
+        return bad("non-finite singlet value");
+    }
+    if !(o.radius_front_mm > 0.0 && o.radius_back_mm < 0.0) {
+        return bad("a biconvex lens needs radius_front > 0 and radius_back < 0");
+    }
+    if !(o.thickness_mm > 0.0 && o.lens_diameter_mm > 0.0 && o.stop_diameter_mm > 0.0) {
+        return bad("thickness, lens diameter and stop diameter must be positive");
+    }
+    if o.stop_position_mm > 0.0 {
+        return bad("the stop must lie in front of the lens (stop position <= 0)");
+    }
+    let rim = 0.5 * o.lens_diameter_mm;
+    if rim >= o.radius_front_mm.min(-o.radius_back_mm) {
+        return bad("the lens diameter exceeds a surface's sphere");
+    }
+    let sag = |r: f64| r.abs() - (r * r - rim * rim).sqrt();
+    if sag(o.radius_front_mm) + sag(o.radius_back_mm) >= o.thickness_mm {
+        return bad("the surfaces cross inside the lens diameter (edge thickness <= 0)");
+    }
+    Ok(())
 }
 
 /// The default `lambda` of [`BuildConfig::budget_tradeoff`]: 0.3, i.e. 3.3 % more spreadlets

@@ -18,7 +18,7 @@ pub mod build;
 pub mod config;
 pub mod error;
 pub mod image;
-pub mod optics;
+pub use optics;
 pub mod prefilter;
 pub mod quality;
 pub mod report;

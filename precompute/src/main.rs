@@ -83,6 +83,14 @@ struct Args {
     /// Override the profile's number of PSFs.
     #[arg(long)]
     psfs: Option<u32>,
+    /// physical-lens: a lens prescription, a built-in name (singlet-51mm, double-gauss-50mm,
+    /// wide-angle-22mm) or a file (JSON, or pbrt's `radius thickness index aperture [abbe]`
+    /// table); without it, the singlet of the --lens-* options.
+    #[arg(long)]
+    lens: Option<String>,
+    /// physical-lens: stop the lens down to this f-number (default: wide open).
+    #[arg(long)]
+    f_stop: Option<f64>,
     /// physical-lens: front radius, mm.
     #[arg(long)]
     lens_radius_front: Option<f64>,
@@ -244,6 +252,15 @@ fn main() -> Result<()> {
     set(&mut lens.max_eccentricity_mm, args.max_eccentricity);
     if let Some(w) = args.image_width {
         lens.image_width_px = Some(w);
+        lens_set = true;
+    }
+    if let Some(name) = &args.lens {
+        let p = precompute::optics::Prescription::resolve(name, None)?;
+        lens.prescription = Some(p);
+        lens_set = true;
+    }
+    if let Some(n) = args.f_stop {
+        lens.f_stop = Some(n);
         lens_set = true;
     }
     if lens_set {

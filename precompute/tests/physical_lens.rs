@@ -9,7 +9,7 @@ use precompute::{BuildConfig, BuildPlan, Profile, PsfImage};
 use psf_db::PsfModel;
 
 fn trace(plan: &BuildPlan, depth: f64, ecc: f64) -> (PsfImage, f64) {
-    let params = ParamBox::fixed(&plan.space, [depth, ecc]);
+    let params = ParamBox::fixed(&plan.space, [1.0 / depth, ecc]);
     let mut rng = psf_rng(1, 0, 0);
     let (img, stats) = trace_psf(
         plan.tracer.as_ref(),

@@ -33,53 +33,29 @@ impl Default for Aperture {
     }
 }
 
-/// Wavelength dependence of the glass's refractive index, wavelength in micrometres.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub enum Dispersion {
-    /// `n(l) = a + b / l^2`, `b` in um^2.
-    Cauchy {
-        /// Constant term.
-        a: f64,
-        /// Coefficient of `1 / l^2`, um^2.
-        b_um2: f64,
-    },
-    /// `n^2(l) = 1 + sum_i b_i l^2 / (l^2 - c_i)`, `c_i` in um^2 (BK7: b = 1.0396, 0.2318, 1.0105;
-    /// c = 0.0060, 0.0200, 103.56).
-    Sellmeier {
-        /// The three `B` coefficients.
-        b: [f64; 3],
-        /// The three `C` coefficients, um^2.
-        c_um2: [f64; 3],
-    },
-}
+/// Wavelength dependence of a glass's refractive index (defined by the optics crate).
+pub use optics::Dispersion;
 
 /// The physical lens a `physical-lens` database was traced through (filled by the precompute).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct LensPrescription {
-    /// Signed radius of curvature of the front surface, mm (positive: centre behind the surface).
-    pub radius_front_mm: f64,
-    /// Signed radius of curvature of the back surface, mm (biconvex: negative).
-    pub radius_back_mm: f64,
-    /// Centre thickness of the lens, mm.
-    pub thickness_mm: f64,
-    /// Clear diameter of the lens, mm.
-    pub lens_diameter_mm: f64,
-    /// Diameter of the aperture stop, mm.
-    pub stop_diameter_mm: f64,
-    /// Position of the stop along the axis relative to the front vertex, mm (negative: in front).
-    pub stop_position_mm: f64,
-    /// Glass name (e.g. "N-BK7").
-    pub glass: String,
-    /// The glass's dispersion formula.
-    pub dispersion: Dispersion,
-    /// Distance in focus, scene units.
+    /// The lens's surfaces, as traced (stopped down to the f-number the database was built
+    /// for).
+    pub lens: optics::Prescription,
+    /// Distance in focus, scene units from the entrance pupil.
     pub focus_distance: f64,
     /// Millimetres per scene unit.
     pub scene_unit_mm: f64,
-    /// Paraxial focal length, mm.
+    /// Paraxial focal length at the design wavelength, mm.
     pub focal_length_mm: f64,
-    /// Distance from the back vertex to the sensor, mm (set by focusing).
+    /// Paraxial f-number at the design wavelength (focal length over entrance pupil
+    /// diameter).
+    pub f_number: f64,
+    /// Distance from the last surface's vertex to the sensor, mm (set by focusing).
     pub sensor_distance_mm: f64,
+    /// Image distance of the equivalent pinhole camera at the entrance pupil, mm: a pinhole
+    /// G-buffer for this lens projects with it (it grows as the lens focuses closer).
+    pub pinhole_distance_mm: f64,
     /// Sensor width, mm.
     pub sensor_width_mm: f64,
     /// Image width, pixels (pixels per mm = image_width_px / sensor_width_mm).

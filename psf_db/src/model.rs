@@ -66,7 +66,7 @@ impl PsfModel {
         match self {
             PsfModel::ThinLens => &[2.0],
             PsfModel::LensMotion => &[2.0, 1.0],
-            PsfModel::PhysicalLens => &[2.5, 1.2],
+            PsfModel::PhysicalLens => &[1.0, 1.2],
         }
     }
 }
@@ -106,6 +106,6 @@ mod tests {
         assert_eq!(PsfModel::ThinLens.dims(), 1);
         assert_eq!(PsfModel::LensMotion.channels(), 1);
         assert_eq!(PsfModel::PhysicalLens.channels(), 3);
-        assert_eq!(PsfModel::PhysicalLens.default_beta(), &[2.5, 1.2]);
+        assert_eq!(PsfModel::PhysicalLens.default_beta(), &[1.0, 1.2]);
     }
 }

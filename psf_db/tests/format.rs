@@ -1,8 +1,8 @@
 //! Database file format: round trips and corruption handling (never a panic).
 
 use psf_db::{
-    Aperture, DatabaseBuilder, DbError, DbHeader, Dispersion, LensPrescription, ParamSpace,
-    PsfDatabase, PsfModel, PsfStats, FORMAT_VERSION,
+    Aperture, DatabaseBuilder, DbError, DbHeader, LensPrescription, ParamSpace, PsfDatabase,
+    PsfModel, PsfStats, FORMAT_VERSION,
 };
 
 /// A small thin-lens database: 4 PSFs, one of them dense.
@@ -45,21 +45,13 @@ fn physical_db() -> PsfDatabase {
     let n = space.psf_count();
     let mut header = DbHeader::new(PsfModel::PhysicalLens, space, 32);
     header.lens = Some(LensPrescription {
-        radius_front_mm: 50.0,
-        radius_back_mm: -50.0,
-        thickness_mm: 5.0,
-        lens_diameter_mm: 25.0,
-        stop_diameter_mm: 12.0,
-        stop_position_mm: -2.0,
-        glass: "N-BK7".into(),
-        dispersion: Dispersion::Sellmeier {
-            b: [1.039_612_12, 0.231_792_344, 1.010_469_45],
-            c_um2: [0.006_000_698_67, 0.020_017_914_4, 103.560_653],
-        },
+        lens: optics::Prescription::singlet(50.0, -50.0, 5.0, 25.0, 12.0, 2.0),
         focus_distance: 3.0,
         scene_unit_mm: 1000.0,
         focal_length_mm: 50.0,
+        f_number: 4.2,
         sensor_distance_mm: 51.0,
+        pinhole_distance_mm: 50.8,
         sensor_width_mm: 36.0,
         image_width_px: 1920,
     });

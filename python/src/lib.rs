@@ -29,7 +29,7 @@ struct PyCamera {
 #[pymethods]
 impl PyCamera {
     #[new]
-    #[pyo3(signature = (width, height, focal_length_mm, sensor_width_mm, f_stop=None, focus_distance=None, aperture_blades=0, shutter_frames=0.0, scene_unit_mm=1000.0, aperture_rotation_deg=0.0, aperture_ratio=1.0, aperture_image=None))]
+    #[pyo3(signature = (width, height, focal_length_mm, sensor_width_mm, f_stop=None, focus_distance=None, aperture_blades=0, shutter_frames=0.0, scene_unit_mm=1000.0, aperture_rotation_deg=0.0, aperture_ratio=1.0, aperture_image=None, lens=None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         width: u32,
@@ -44,6 +44,7 @@ impl PyCamera {
         aperture_rotation_deg: f64,
         aperture_ratio: f64,
         aperture_image: Option<PathBuf>,
+        lens: Option<String>,
     ) -> PyResult<Self> {
         let inner = renderer::Camera {
             width,
@@ -56,10 +57,13 @@ impl PyCamera {
             aperture_rotation_deg,
             aperture_ratio,
             aperture_image,
+            lens,
             shutter_frames,
             scene_unit_mm,
         };
         inner.validate().map_err(value_error)?;
+        // Read the lens now, so a misspelt name fails here rather than at the first frame.
+        inner.prescription().map_err(value_error)?;
         Ok(Self { inner })
     }
 

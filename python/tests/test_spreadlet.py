@@ -160,3 +160,12 @@ def test_synthesize_deep_writes_what_the_cli_writes(scene):
     assert stats["defocus"] and stats["motion"]
     with pytest.raises(ValueError, match="(?i)deep"):
         r.synthesize_deep(os.path.join(d, "g.exr"), camera)
+
+
+def test_camera_names_a_real_lens():
+    cam = spreadlet.Camera(width=64, height=64, focal_length_mm=50, sensor_width_mm=36,
+                           f_stop=2.8, focus_distance=1.2, lens="double-gauss-50mm")
+    assert cam.width == 64
+    with pytest.raises(ValueError, match="double-gauss-50mm"):
+        spreadlet.Camera(width=64, height=64, focal_length_mm=50, sensor_width_mm=36,
+                         f_stop=2.8, focus_distance=1.2, lens="no-such-lens")

@@ -28,6 +28,9 @@ pub struct DbUsed {
     pub path: PathBuf,
     /// True when it was built by this call.
     pub built_now: bool,
+    /// The lens prescription a physical-lens database was traced through (its name).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lens: Option<String>,
 }
 
 /// How a database was conditioned before use (see [`crate::condition`]).
@@ -77,6 +80,32 @@ pub fn with_mask(
     }
 }
 
+/// The physical lens `camera` names (`camera.json` `lens`), as the `physical-lens` build
+/// options: its prescription stopped down to the camera's f-number and focused at its focus
+/// distance, for the camera's sensor and image width. The database covers depths from a quarter
+/// of the focus distance (at least twice the focal length) to a thousand times it, and the
+/// whole sensor out to its corners; lookups beyond clamp. `None` for the thin lens.
+pub fn lens_of(camera: &crate::Camera) -> Result<Option<precompute::LensOptions>, Error> {
+    let Some(prescription) = camera.prescription()? else {
+        return Ok(None);
+    };
+    let focus = camera.focus_distance.unwrap_or(1.0);
+    let near = (0.25 * focus).max(2.0 * camera.focal_length_scene());
+    let mm_per_px = camera.sensor_width_mm / f64::from(camera.width);
+    let half_diagonal_px = 0.5 * f64::from(camera.width).hypot(f64::from(camera.height));
+    Ok(Some(precompute::LensOptions {
+        prescription: Some(prescription),
+        f_stop: camera.f_stop,
+        focus_distance: focus,
+        scene_unit_mm: camera.scene_unit_mm,
+        sensor_width_mm: camera.sensor_width_mm,
+        image_width_px: Some(camera.width),
+        depth_range: [near.min(0.5 * focus), 1000.0 * focus],
+        max_eccentricity_mm: half_diagonal_px * mm_per_px,
+        ..precompute::LensOptions::default()
+    }))
+}
+
 /// What one load needs.
 pub struct Request<'a> {
     /// Where the databases come from.
@@ -88,6 +117,9 @@ pub struct Request<'a> {
     /// A user-drawn aperture the databases are traced with (its hash is in `aperture`:
     /// [`with_mask`]).
     pub mask: Option<&'a formats::ApertureMask>,
+    /// The camera's physical lens ([`lens_of`]): every pixel is then drawn with a
+    /// `physical-lens` database built for it.
+    pub lens: Option<&'a precompute::LensOptions>,
     /// Conditioning (monopole removal, energy normalisation) before use.
     pub condition: bool,
     /// Changes the runtime's build settings before the cache is asked (the baselines store
@@ -162,6 +194,29 @@ pub fn load(
                 model: db.model().name(),
                 path: path.to_path_buf(),
                 built_now: false,
+                lens: db.header().lens.as_ref().map(|l| l.lens.name.clone()),
+            });
+            DbSet::single(prepare(db)?)?
+        }
+        Source::Cache { dir, profile } if request.lens.is_some() => {
+            if needed == PsfModel::LensMotion {
+                return Err(Error::Unsupported(
+                    "a physical lens (camera.json `lens`) with motion blur is not supported: \
+                     render still frames, or use the thin lens for moving ones"
+                        .into(),
+                ));
+            }
+            let mut cfg = dbcache::build_config(PsfModel::PhysicalLens, profile, 0);
+            cfg.lens = request.lens.cloned();
+            if let Some(adjust) = request.adjust {
+                cfg = adjust(cfg);
+            }
+            let (db, source) = dbcache::cached_database(&cfg, dir, request.progress, on_event)?;
+            used.push(DbUsed {
+                model: PsfModel::PhysicalLens.name(),
+                path: source.path,
+                built_now: source.built,
+                lens: db.header().lens.as_ref().map(|l| l.lens.name.clone()),
             });
             DbSet::single(prepare(db)?)?
         }
@@ -180,6 +235,7 @@ pub fn load(
                     model: model.name(),
                     path: source.path,
                     built_now: source.built,
+                    lens: None,
                 });
                 loaded.push(prepare(db)?);
             }

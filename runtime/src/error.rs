@@ -28,6 +28,12 @@ pub enum Error {
     /// The camera's aperture image is unreadable or cannot be an aperture.
     #[error(transparent)]
     ApertureImage(#[from] formats::MaskError),
+    /// The camera's lens prescription is unreadable or cannot be a lens.
+    #[error(transparent)]
+    Lens(#[from] precompute::optics::PrescriptionError),
+    /// The camera asks for something its lens cannot do (a physical lens with motion blur).
+    #[error("{0}")]
+    Unsupported(String),
     /// The GPU path failed (no adapter when one was required, a device limit, a wgpu error).
     #[cfg(feature = "gpu")]
     #[error(transparent)]

@@ -179,6 +179,7 @@ pub struct Frame {
 struct HeldDatabases {
     model: Option<PsfModel>,
     aperture: psf_db::Aperture,
+    lens: Option<precompute::LensOptions>,
     set: Arc<DbSet>,
 }
 
@@ -319,8 +320,16 @@ impl Renderer {
             None
         };
         let aperture = databases::with_mask(databases::aperture_of(camera), mask.as_ref());
+        let lens = if effects.defocus {
+            databases::lens_of(camera)?
+        } else {
+            None
+        };
         if let Some(held) = &self.databases {
-            if held.aperture == aperture && databases::serves(held.model, needed) {
+            if held.aperture == aperture
+                && held.lens == lens
+                && databases::serves(held.model, needed)
+            {
                 return Ok(Selected {
                     set: held.set.clone(),
                     used: Vec::new(),
@@ -365,6 +374,7 @@ impl Renderer {
             needed,
             aperture,
             mask: mask.as_ref(),
+            lens: lens.as_ref(),
             condition: self.options.condition,
             // The baselines draw the pre-filtered PSFs the spreadlets were fitted to.
             adjust: (method != Method::Spreadlet && !is_file).then_some(&adjust as &dyn Fn(_) -> _),
@@ -376,6 +386,7 @@ impl Renderer {
         self.databases = Some(HeldDatabases {
             model: needed,
             aperture,
+            lens,
             set: set.clone(),
         });
         self.loads += 1;

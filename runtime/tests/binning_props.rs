@@ -23,6 +23,7 @@ fn camera(w: u32) -> Camera {
         aperture_rotation_deg: 0.0,
         aperture_ratio: 1.0,
         aperture_image: None,
+        lens: None,
         shutter_frames: 0.0,
         scene_unit_mm: 1000.0,
     }

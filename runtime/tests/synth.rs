@@ -192,6 +192,7 @@ fn one_pixel_reproduces_physical_lens_psfs() {
             aperture_rotation_deg: 0.0,
             aperture_ratio: 1.0,
             aperture_image: None,
+            lens: None,
             shutter_frames: 0.0,
             scene_unit_mm: lens.scene_unit_mm,
         };
@@ -210,7 +211,7 @@ fn one_pixel_reproduces_physical_lens_psfs() {
             px,
             py,
             [1.0, 1.0, 1.0, 1.0],
-            s[0] as f32,
+            (1.0 / s[0]) as f32,
             [0.0; 2],
         );
         let (plane_r, pad, rec) = splat_one(&g, &cam, db, Integrator::Exact);

@@ -1,5 +1,6 @@
 //! The camera: the thin-lens model of `camera.json`, a pose that may move linearly over the
-//! shutter, ray generation and pinhole projection.
+//! shutter, ray generation and pinhole projection; or, when `camera.json` names a `lens`, that
+//! lens traced from the sensor through every surface ([`PhysicalCamera`]).
 //!
 //! Conventions (see `docs/STOCHASTIC.md`):
 //! - camera space: x right, y down (image rows), z forward along the viewing axis;
@@ -102,6 +103,105 @@ pub struct Camera {
     forward: DVec3,
     /// The user-drawn aperture of `spec.aperture_image`, read once.
     mask: Option<std::sync::Arc<formats::MaskSampler>>,
+    /// The lens `spec.lens` names, focused; `None`: the thin lens.
+    physical: Option<std::sync::Arc<PhysicalCamera>>,
+}
+
+/// Sensor-radius bins of a physical camera's exit pupil bounds.
+const EXIT_PUPIL_BINS: usize = 64;
+/// Lattice edge of the exit pupil bounds' search, rays.
+const EXIT_PUPIL_GRID: usize = 48;
+
+/// A camera through a real lens, traced as pbrt's realistic camera: a ray starts at a point
+/// of the sensor, aims at a point of the box that holds every ray passing the lens from that
+/// sensor radius (the exit pupil bounds, found once), and is refracted through every surface
+/// at its wavelength, blocked by every clear aperture. The equivalent pinhole (for G-buffers
+/// and projection) sits at the entrance pupil's centre with the lens's pinhole distance, so
+/// depths are measured from the entrance pupil, as the `physical-lens` PSFs are.
+#[derive(Debug, PartialEq)]
+pub struct PhysicalCamera {
+    /// The focused lens, lens coordinates in mm (light towards +z).
+    pub system: optics::LensSystem,
+    /// Image distance of the equivalent pinhole at the focus distance, mm.
+    pub pinhole_distance_mm: f64,
+    /// Axial position of the entrance pupil's centre, mm (lens coordinates).
+    pub pupil_z_mm: f64,
+    /// Exit pupil bounds on the last surface's vertex plane, per sensor radius.
+    pub exit_pupil: optics::PupilBounds,
+    /// Wavelength to RGB.
+    pub spectrum: optics::Spectrum,
+}
+
+impl PhysicalCamera {
+    /// The lens of `spec` (which names one), stopped down and focused as `spec` says.
+    pub fn new(spec: &CameraSpec, context: &str) -> Result<Option<Self>> {
+        let ctx = || format!("{context}: camera lens");
+        let Some(prescription) = spec
+            .prescription()
+            .map_err(|e| invalid(ctx(), e.to_string()))?
+        else {
+            return Ok(None);
+        };
+        let mm = spec.scene_unit_mm;
+        let focus_mm = spec.focus_distance.unwrap_or(1.0) * mm;
+        let system = optics::LensSystem::focused(prescription, spec.f_stop, focus_mm)
+            .map_err(|e| invalid(ctx(), e.to_string()))?;
+        let design = optics::system::LAMBDA_DESIGN_UM;
+        let pinhole_distance_mm = system.pinhole_distance(focus_mm, design);
+        let (pupil_z_mm, _) = system
+            .entrance_pupil(design)
+            .map_err(|e| invalid(ctx(), e.to_string()))?;
+        if !(pinhole_distance_mm.is_finite() && pinhole_distance_mm > 0.0) {
+            return Err(invalid(ctx(), "the chief ray does not reach the sensor"));
+        }
+        let mm_per_px = spec.sensor_width_mm / f64::from(spec.width);
+        let half_diagonal_mm =
+            0.5 * f64::from(spec.width).hypot(f64::from(spec.height)) * mm_per_px;
+        let sensor_z = system.sensor_z_mm;
+        let exit_pupil = optics::PupilBounds::build(
+            &system,
+            EXIT_PUPIL_BINS,
+            half_diagonal_mm * 1.01,
+            system.rear_vertex_z(),
+            1.5 * system.rear_aperture_radius(),
+            EXIT_PUPIL_GRID,
+            &|r| vec![DVec3::new(r, 0.0, sensor_z)],
+        );
+        Ok(Some(PhysicalCamera {
+            system,
+            pinhole_distance_mm,
+            pupil_z_mm,
+            exit_pupil,
+            spectrum: optics::Spectrum::new(),
+        }))
+    }
+
+    /// A ray from sensor point `sensor_mm` (lens coordinates) through the lens at
+    /// `lambda_nm`, aimed by two uniform numbers `xi` at the exit pupil bounds: the ray leaving
+    /// the front towards the scene and the area of the box sampled (mm^2, the ray's weight), or
+    /// `None` when the lens blocks it.
+    pub fn trace(
+        &self,
+        sensor_mm: DVec2,
+        xi: DVec2,
+        lambda_nm: f64,
+    ) -> Option<(optics::LensRay, f64)> {
+        let r = sensor_mm.length();
+        let b = self.exit_pupil.at(r)?;
+        let (c, s) = if r > 0.0 {
+            (sensor_mm.x / r, sensor_mm.y / r)
+        } else {
+            (1.0, 0.0)
+        };
+        let u = b[0] + xi.x * (b[1] - b[0]);
+        let v = b[2] + xi.y * (b[3] - b[2]);
+        let target = DVec3::new(c * u - s * v, s * u + c * v, self.exit_pupil.plane_z);
+        let origin = DVec3::new(sensor_mm.x, sensor_mm.y, self.system.sensor_z_mm);
+        let ray =
+            self.system
+                .trace_backward(origin, (target - origin).normalize(), lambda_nm * 1e-3)?;
+        Some((ray, (b[1] - b[0]) * (b[3] - b[2])))
+    }
 }
 
 impl Camera {
@@ -135,6 +235,7 @@ impl Camera {
             .aperture_mask()
             .map_err(|e| invalid(format!("{context}: camera"), e.to_string()))?
             .map(|m| std::sync::Arc::new(formats::MaskSampler::new(m)));
+        let physical = PhysicalCamera::new(&spec, context)?.map(std::sync::Arc::new);
         Ok(Self {
             spec,
             pose,
@@ -142,6 +243,7 @@ impl Camera {
             down,
             forward,
             mask,
+            physical,
         })
     }
 
@@ -165,10 +267,54 @@ impl Camera {
         self.pose.position + self.pose.velocity * time
     }
 
+    /// The real lens `camera.json` names, focused; `None` for the thin lens.
+    pub fn physical(&self) -> Option<&PhysicalCamera> {
+        self.physical.as_deref()
+    }
+
     /// Image scale in pixels per unit of `x / z` in camera space.
     fn scale_px(&self) -> f64 {
-        // Blender's convention: the projection distance is the focal length, focused or not.
-        self.spec.focal_length_mm * self.spec.pixels_per_mm()
+        match &self.physical {
+            // A real lens: its equivalent pinhole at the entrance pupil (focus breathes).
+            Some(p) => p.pinhole_distance_mm * self.spec.pixels_per_mm(),
+            // Blender's convention: the projection distance is the focal length, focused or not.
+            None => self.spec.focal_length_mm * self.spec.pixels_per_mm(),
+        }
+    }
+
+    /// A ray through the real lens from continuous pixel position `pixel` at `time`, aimed by
+    /// `xi` at the exit pupil, at wavelength `lambda_nm`: the world ray and its weight (the
+    /// area of the exit pupil box sampled, mm^2), or `None` when the lens blocks it or the
+    /// camera has no real lens.
+    pub fn physical_ray(
+        &self,
+        pixel: DVec2,
+        xi: DVec2,
+        lambda_nm: f64,
+        time: f64,
+    ) -> Option<(Ray, f64)> {
+        let p = self.physical.as_deref()?;
+        let half = DVec2::new(
+            0.5 * f64::from(self.spec.width),
+            0.5 * f64::from(self.spec.height),
+        );
+        // The lens turns the image by half a turn: pixel offset +d is sensor point -d.
+        let sensor_mm = -(pixel - half) / self.spec.pixels_per_mm();
+        let (ray, weight) = p.trace(sensor_mm, xi, lambda_nm)?;
+        // Lens coordinates (x, y, z towards the sensor) to camera space (x right, y down,
+        // z forward from the entrance pupil).
+        let origin_cam = DVec3::new(ray.origin.x, ray.origin.y, p.pupil_z_mm - ray.origin.z);
+        let dir_cam = DVec3::new(ray.dir.x, ray.dir.y, -ray.dir.z);
+        let to_world = |v: DVec3| self.right * v.x + self.down * v.y + self.forward * v.z;
+        let mm = self.spec.scene_unit_mm;
+        Some((
+            Ray {
+                origin: self.position_at(time) + to_world(origin_cam / mm),
+                direction: to_world(dir_cam).normalize(),
+                time,
+            },
+            weight,
+        ))
     }
 
     /// The ray through continuous pixel position `pixel` (pixels), lens point `lens` (unit
@@ -260,6 +406,7 @@ mod tests {
             aperture_rotation_deg: 0.0,
             aperture_ratio: 1.0,
             aperture_image: None,
+            lens: None,
             shutter_frames: 0.5,
             scene_unit_mm: 1000.0,
         }

@@ -310,6 +310,15 @@ pub fn render_stochastic(
 ) -> Result<StochasticFrames> {
     check_spp(spp, "stochastic frames")?;
     let camera = &scene.camera;
+    if camera.physical().is_some() {
+        // A sample's label is its point on the thin lens's unit aperture, which a real lens's
+        // rays have no counterpart of.
+        return Err(invalid(
+            "stochastic frames",
+            "a camera with a real lens (camera.json `lens`) has no thin-lens sample labels: \
+             render its reference and G-buffer, or use the thin lens",
+        ));
+    }
     let (width, height) = (camera.spec.width as usize, camera.spec.height as usize);
     let total = width * height * spp;
     if total > MAX_STOCHASTIC_SAMPLES {
@@ -373,6 +382,9 @@ pub fn render_reference(scene: &Scene, spp: usize, options: &RenderOptions) -> R
             .map(|x| {
                 let index = (y * width + x) as u64;
                 let mut rng = pixel_rng(options.seed, Stream::Reference, index);
+                if let Some(lens) = camera.physical() {
+                    return physical_pixel(scene, lens, x, y, spp, shutter, &mut rng);
+                }
                 let set = latin_hypercube(&mut rng, spp, 5);
                 let dim = |d: usize, i: usize| set[d * spp + i];
                 let mut sum = [0.0f64; 4];
@@ -394,6 +406,49 @@ pub fn render_reference(scene: &Scene, spp: usize, options: &RenderOptions) -> R
         width,
         height,
         pixels,
+    })
+}
+
+/// One reference pixel through a real lens: `spp` rays whose pixel position, exit pupil
+/// point, time and wavelength form a Latin hypercube, each channel the mean of the radiance the
+/// passing rays bring weighted by that channel's response at their wavelength (and by the
+/// exit pupil box each was drawn from). Normalising by the passing rays' weight, not by all
+/// rays, keeps a uniform scene uniform to the frame's corners, as the `physical-lens` PSFs
+/// (each of which keeps its point's light) do; alpha follows green.
+fn physical_pixel(
+    scene: &Scene,
+    lens: &crate::camera::PhysicalCamera,
+    x: usize,
+    y: usize,
+    spp: usize,
+    shutter: f64,
+    rng: &mut rand_chacha::ChaCha8Rng,
+) -> [f32; 4] {
+    let set = latin_hypercube(rng, spp, 6);
+    let dim = |d: usize, i: usize| set[d * spp + i];
+    let (mut sum, mut weight) = ([0.0f64; 4], [0.0f64; 4]);
+    for i in 0..spp {
+        let pixel = DVec2::new(x as f64 + dim(0, i), y as f64 + dim(1, i));
+        let xi = DVec2::new(dim(2, i), dim(3, i));
+        let time = (dim(4, i) - 0.5) * shutter;
+        let lambda = optics::Spectrum::wavelength_nm(dim(5, i));
+        let Some((ray, area)) = scene.camera.physical_ray(pixel, xi, lambda, time) else {
+            continue;
+        };
+        let rgb = lens.spectrum.rgb(lambda);
+        let w = [rgb[0] * area, rgb[1] * area, rgb[2] * area, rgb[1] * area];
+        let trace = scene.trace(&ray);
+        for c in 0..4 {
+            sum[c] += f64::from(trace.color[c]) * w[c];
+            weight[c] += w[c];
+        }
+    }
+    std::array::from_fn(|c| {
+        if weight[c] > 0.0 {
+            (sum[c] / weight[c]) as f32
+        } else {
+            0.0
+        }
     })
 }
 

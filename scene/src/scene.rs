@@ -141,7 +141,9 @@ pub enum ViewLayerPass {
 }
 
 /// Names of the scenes embedded in the library.
-pub const BUILTIN_NAMES: [&str; 5] = ["bokeh", "crossing", "occluder", "rotating", "physical"];
+pub const BUILTIN_NAMES: [&str; 6] = [
+    "bokeh", "crossing", "occluder", "rotating", "physical", "rain",
+];
 
 /// The JSON text of a builtin scene.
 pub fn builtin_json(name: &str) -> Option<&'static str> {
@@ -151,6 +153,7 @@ pub fn builtin_json(name: &str) -> Option<&'static str> {
         "occluder" => include_str!("../scenes/occluder.json"),
         "rotating" => include_str!("../scenes/rotating.json"),
         "physical" => include_str!("../scenes/physical.json"),
+        "rain" => include_str!("../scenes/rain.json"),
         _ => return None,
     })
 }
@@ -199,6 +202,15 @@ impl Scene {
                 let joined = dir.join(image);
                 let absolute = std::fs::canonicalize(&joined).unwrap_or(joined);
                 description.camera.aperture_image = Some(absolute);
+            }
+        }
+        // A lens prescription file named relative to the scene file (built-in names stay).
+        if let (Some(lens), Some(dir)) = (&description.camera.lens, path.parent()) {
+            let file = Path::new(lens);
+            if optics::Prescription::builtin(lens).is_none() && file.is_relative() {
+                let joined = dir.join(file);
+                let absolute = std::fs::canonicalize(&joined).unwrap_or(joined);
+                description.camera.lens = Some(absolute.display().to_string());
             }
         }
         Self::new(description, &name)

@@ -42,6 +42,11 @@ pub(crate) struct CameraFlags {
     /// (upright in background bokeh; replaces the blades).
     #[arg(long)]
     pub(crate) aperture_image: Option<std::path::PathBuf>,
+    /// A real lens, traced through its glass: a built-in prescription (singlet-51mm,
+    /// double-gauss-50mm, wide-angle-22mm) or a prescription file (JSON, or pbrt's
+    /// `radius thickness index aperture [abbe]` table).
+    #[arg(long)]
+    pub(crate) lens: Option<String>,
     /// Shutter as a fraction of the frame (0 = no motion blur).
     #[arg(long)]
     pub(crate) shutter_frames: Option<f64>,
@@ -85,6 +90,8 @@ pub(crate) fn load_camera(path: Option<&Path>, f: &CameraFlags) -> Result<Camera
     set("scene_unit_mm", f.scene_unit_mm.map(Into::into));
     // The flag's path is the command line's (relative to here), the file's is the file's.
     let from_file = f.aperture_image.is_none();
+    let lens_from_file = f.lens.is_none();
+    set("lens", f.lens.clone().map(Into::into));
     set(
         "aperture_image",
         f.aperture_image
@@ -102,6 +109,16 @@ pub(crate) fn load_camera(path: Option<&Path>, f: &CameraFlags) -> Result<Camera
     ) {
         if image.is_relative() {
             camera.aperture_image = Some(dir.join(image));
+        }
+    }
+    if let (true, Some(dir), Some(lens)) = (
+        lens_from_file,
+        path.and_then(Path::parent),
+        camera.lens.as_ref(),
+    ) {
+        let file = Path::new(lens);
+        if spreadlet::optics::Prescription::builtin(lens).is_none() && file.is_relative() {
+            camera.lens = Some(dir.join(file).display().to_string());
         }
     }
     Ok(camera)

@@ -56,6 +56,7 @@ pub fn camera(w: u32, h: u32, lens: bool, shutter: f64) -> Camera {
         aperture_rotation_deg: 0.0,
         aperture_ratio: 1.0,
         aperture_image: None,
+        lens: None,
         shutter_frames: shutter,
         scene_unit_mm: 1000.0,
     }

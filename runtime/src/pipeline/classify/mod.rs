@@ -964,7 +964,8 @@ fn lookup_psf(
                 rot_cos = dx / r;
                 rot_sin = dy / r;
             }
-            let (idx, cl) = db.lookup([frag.depth, r / pixels_per_mm]);
+            // The physical-lens space is over inverse depth (1 / scene units).
+            let (idx, cl) = db.lookup([1.0 / frag.depth, r / pixels_per_mm]);
             (path_of(all, idx + offset), idx + offset, cl)
         }
         (Some(_), _, Some(all))
@@ -1132,6 +1133,7 @@ mod tests {
             aperture_rotation_deg: 0.0,
             aperture_ratio: 1.0,
             aperture_image: None,
+            lens: None,
             shutter_frames: shutter,
             scene_unit_mm: 1000.0,
         }

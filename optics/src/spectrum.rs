@@ -15,7 +15,7 @@ const PEAKS_NM: [f64; 3] = [605.0, 545.0, 450.0];
 const WIDTHS_NM: [f64; 3] = [35.0, 35.0, 28.0];
 
 /// White-balanced channel sensitivities.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Spectrum {
     scale: [f64; 3],
 }
