@@ -35,7 +35,7 @@ enum Command {
 
 #[derive(Args)]
 struct SceneArgs {
-    /// Scene JSON file, or a builtin name (bokeh, crossing, occluder, rotating, physical).
+    /// Scene JSON file, or a builtin name (bokeh, crossing, occluder, rotating, physical, rain).
     scene: PathBuf,
     /// Image width in pixels (default: the scene's); the field of view is kept.
     #[arg(long)]
