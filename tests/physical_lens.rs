@@ -317,3 +317,20 @@ fn synth_follows_the_camera_lens() {
         "a failed run left an output"
     );
 }
+
+/// A sensor larger than the lens's image circle: the corner PSFs get no light, and the build
+/// says so instead of writing a database of empty (NaN-normalised) PSFs.
+#[test]
+fn points_outside_the_image_circle_are_a_clear_error() {
+    let mut cfg = BuildConfig::new(PsfModel::PhysicalLens, Profile::Test);
+    cfg.lens = Some(LensOptions {
+        prescription: Prescription::builtin("wide-angle-22mm"),
+        focus_distance: 1.2,
+        image_width_px: Some(256),
+        depth_range: [0.3, 100.0],
+        max_eccentricity_mm: 60.0,
+        ..LensOptions::default()
+    });
+    let err = precompute::build_database(&cfg, false).expect_err("the corners see no light");
+    assert!(err.to_string().contains("image circle"), "{err}");
+}

@@ -19,7 +19,11 @@ pub enum PrecomputeError {
     #[error("i/o: {0}")]
     Io(#[from] std::io::Error),
     /// A PSF came out empty (no ray reached the sensor), so it cannot be normalised.
-    #[error("PSF {index} is empty: no traced light reached the sensor")]
+    #[error(
+        "PSF {index} is empty: no traced light reached the sensor (through a real lens: the point \
+         lies outside the image circle, or every ray is vignetted; a smaller sensor or \
+         eccentricity range keeps to the circle)"
+    )]
     EmptyPsf {
         /// Index of the PSF in the database.
         index: u32,
