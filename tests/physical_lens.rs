@@ -302,6 +302,39 @@ fn synth_follows_the_camera_lens() {
         / a.pixels.len() as f64;
     assert!(diff > 1e-3, "the lens changed nothing: {diff}");
 
+    // Stochastic frames are labelled for the thin lens: reconstructing them through a real
+    // lens is refused, not silently wrong.
+    let thin_scene = std::fs::read_to_string(d("rain.json"))
+        .expect("scene")
+        .replace("\"lens\": \"singlet-51mm\",", "");
+    std::fs::write(d("rain-thin.json"), thin_scene).expect("write");
+    let frames_args = [
+        "render",
+        &d("rain-thin.json"),
+        "--width",
+        "48",
+        "--stochastic",
+        &d("frames.exr"),
+        "--quiet",
+    ];
+    assert_success(&run("spreadlet-scene", &frames_args, &cache));
+    let reconstruct = run(
+        "spreadlet",
+        &[
+            "reconstruct",
+            "--input",
+            &d("frames.exr"),
+            "--camera",
+            &d("cam.json"),
+            "--out",
+            &d("x.exr"),
+            "--db-profile",
+            "test",
+        ],
+        &cache,
+    );
+    assert_clean_failure(&reconstruct, "real lens");
+
     // Bad lenses.
     let mut unknown = cam.clone();
     unknown["lens"] = "no-such-lens".into();

@@ -303,6 +303,14 @@ impl Renderer {
         options: &SynthOptions,
     ) -> Result<Frame, Error> {
         options.validate()?;
+        if let Some(lens) = &camera.lens {
+            // A sample's label is a point on the thin lens's unit aperture: it says where the
+            // sample's pinhole image is only through the thin lens.
+            return Err(Error::Unsupported(format!(
+                "reconstruction through a real lens (camera.json lens {lens:?}) is not \
+                 supported: stochastic frames are labelled for the thin lens; remove `lens`"
+            )));
+        }
         let effects = crate::reconstruct::effects_of(camera, frames);
         let selected = self.databases_for(effects, camera)?;
         self.run(Work::Reconstruction(frames), camera, selected, options)
