@@ -150,11 +150,8 @@ impl Camera {
                 camera.aperture_image = Some(dir.join(image));
             }
         }
-        if let (Some(lens), Some(dir)) = (&camera.lens, path.parent()) {
-            let file = Path::new(lens);
-            if optics::Prescription::builtin(lens).is_none() && file.is_relative() {
-                camera.lens = Some(dir.join(file).display().to_string());
-            }
+        if let Some(dir) = path.parent() {
+            camera.resolve_lens_from(dir);
         }
         Ok(camera)
     }
@@ -166,6 +163,17 @@ impl Camera {
             .as_deref()
             .map(crate::ApertureMask::read_png)
             .transpose()
+    }
+
+    /// Takes a `lens` that names a prescription file by a relative path as relative to `dir`
+    /// (the folder of the file that names it); built-in lens names and absolute paths stay.
+    pub fn resolve_lens_from(&mut self, dir: &Path) {
+        if let Some(lens) = &self.lens {
+            let file = Path::new(lens);
+            if optics::Prescription::builtin(lens).is_none() && file.is_relative() {
+                self.lens = Some(dir.join(file).display().to_string());
+            }
+        }
     }
 
     /// The camera's lens prescription, read ([`optics::Prescription::resolve`]); `None` for

@@ -48,5 +48,3 @@ pub use synth::{SynthOptions, SynthStats};
 
 /// The file formats (images, stochastic frames, atomic writing), re-exported for embedders.
 pub use formats;
-/// The optics of physical lenses (prescriptions, tracing), re-exported for callers naming lenses.
-pub use precompute::optics;

@@ -204,14 +204,16 @@ impl Scene {
                 description.camera.aperture_image = Some(absolute);
             }
         }
-        // A lens prescription file named relative to the scene file (built-in names stay).
-        if let (Some(lens), Some(dir)) = (&description.camera.lens, path.parent()) {
-            let file = Path::new(lens);
-            if optics::Prescription::builtin(lens).is_none() && file.is_relative() {
-                let joined = dir.join(file);
-                let absolute = std::fs::canonicalize(&joined).unwrap_or(joined);
-                description.camera.lens = Some(absolute.display().to_string());
-            }
+        // A lens prescription file named relative to the scene file (built-in names stay),
+        // made absolute so the camera.json written beside the renders finds it anywhere.
+        if let Some(dir) = path.parent() {
+            let dir = if dir.as_os_str().is_empty() {
+                Path::new(".")
+            } else {
+                dir
+            };
+            let absolute = std::fs::canonicalize(dir).unwrap_or_else(|_| dir.to_path_buf());
+            description.camera.resolve_lens_from(&absolute);
         }
         Self::new(description, &name)
     }

@@ -111,15 +111,8 @@ pub(crate) fn load_camera(path: Option<&Path>, f: &CameraFlags) -> Result<Camera
             camera.aperture_image = Some(dir.join(image));
         }
     }
-    if let (true, Some(dir), Some(lens)) = (
-        lens_from_file,
-        path.and_then(Path::parent),
-        camera.lens.as_ref(),
-    ) {
-        let file = Path::new(lens);
-        if spreadlet::optics::Prescription::builtin(lens).is_none() && file.is_relative() {
-            camera.lens = Some(dir.join(file).display().to_string());
-        }
+    if let (true, Some(dir)) = (lens_from_file, path.and_then(Path::parent)) {
+        camera.resolve_lens_from(dir);
     }
     Ok(camera)
 }
