@@ -283,7 +283,7 @@ def check_anamorphic_ratio(binary):
 
 
 def shared_folder():
-    for d in (os.environ.get("SPREADLET_SHARED", ""), "/work/shared",
+    for d in (os.environ.get("SPREADLET_SHARED", ""),
               os.path.join(os.path.dirname(os.path.dirname(HERE)), "..", "shared")):
         if d and os.path.exists(os.path.join(d, "tools", "blender_refs.py")):
             return d

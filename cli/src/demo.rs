@@ -161,7 +161,10 @@ pub fn run(options: &DemoOptions) -> Result<Vec<(String, DemoStep)>> {
     let reference = scene::render_reference(&scene, options.reference_spp, &render)?;
     g.write_exr(&out.join("gbuffer.exr"))?;
     reference.write_exr(&out.join("reference.exr"))?;
-    std::fs::write(out.join("camera.json"), scene.camera_json())?;
+    formats::atomic::write_bytes_atomically(
+        &out.join("camera.json"),
+        scene.camera_json().as_bytes(),
+    )?;
 
     let (w, h) = (g.width, g.height);
     let gbuffer = crate::gbuffer_of(&g)?;

@@ -29,7 +29,15 @@ enum Command {
     /// Synthesise depth of field and motion blur from a pinhole G-buffer (OpenEXR).
     #[command(after_help = CACHE_HELP)]
     Synth(cmd::synth::SynthArgs),
-    /// SSIM and PSNR (sRGB, as DEVELOPERS.md defines them) of two OpenEXR images.
+    /// Scores an image against a reference: SSIM, PSNR, FLIP and brightness ratios.
+    ///
+    /// SSIM: Wang et al. 2004 (Gaussian window, sigma 1.5; mean over R, G and B) on
+    /// sRGB-encoded values clamped to [0, 1]; 1 is identical. PSNR: of the same values, in dB.
+    /// FLIP: NVIDIA's perceptual difference (LDR mode, 67 pixels per degree) on the same
+    /// values, its mean and 99th percentile; 0 is identical. Edge luminance ratio: the median
+    /// luminance of the outer 4 px of each frame edge over the reference's (below 1 is a dark
+    /// edge). Mean luminance ratio: the frame's mean linear luminance over the reference's
+    /// (away from 1, light was added or lost).
     Compare(cmd::compare::CompareArgs),
     /// Reconstruct depth of field and motion blur from noisy stochastic frames (each sample
     /// labelled with its lens position and time; layout in docs/STOCHASTIC.md).

@@ -146,13 +146,12 @@ pub fn default_sample_peers() -> Vec<(PeerMethod, usize)> {
 }
 
 /// The shared examples: `$SPREADLET_EXAMPLES`, else `../shared/examples` from the working
-/// directory or from the workspace, else `/work/shared/examples`; `None` when none exists.
+/// directory or from the workspace; `None` when none exists.
 fn find_examples() -> Option<PathBuf> {
     let candidates = [
         std::env::var_os("SPREADLET_EXAMPLES").map(PathBuf::from),
         Some(PathBuf::from("../shared/examples")),
         Some(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/examples")),
-        Some(PathBuf::from("/work/shared/examples")),
     ];
     candidates
         .into_iter()

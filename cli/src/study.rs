@@ -700,7 +700,7 @@ pub fn mark_pareto(rows: &mut [StudyRow]) {
     }
 }
 
-/// The figures the issue asks for, computed from the rows (CPU only).
+/// The headline figures of a study, computed from the rows (CPU only).
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct Findings {
     /// SSIM and ms of the dense splat (CPU, base settings).

@@ -51,7 +51,7 @@ fn tiny_study_writes_csv_markdown_and_plot() {
     assert_eq!(dense.db_spreadlets, 0);
     assert!(sparse.sparse > 0, "the spreadlet row draws spreadlets");
     // The dense splat is the method's upper bound: the sparsest spreadlets do no better, up to
-    // the "equal SSIM" tolerance of 0.005 (measured: 0.8836 dense, 0.8838 spreadlets
+    // the "equal SSIM" tolerance of 0.005 (measured: 0.8836 dense, 0.8838 spreadlets
     // at budget 0.5; 0.852 before the conditioning changes of the same day).
     assert!(
         dense.ssim >= sparse.ssim - 0.005,

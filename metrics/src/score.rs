@@ -1,8 +1,11 @@
 //! Every figure the project reports for a result against a reference, in one place: SSIM,
 //! PSNR, FLIP (mean and 99th percentile) and the brightness of the frame's edges.
 
+#[cfg(feature = "flip")]
 use crate::flip::{flip_rgb, FlipError};
-use crate::ssim::{psnr_rgb, rgb_channels, ssim_rgb};
+use crate::ssim::rgb_channels;
+#[cfg(feature = "flip")]
+use crate::ssim::{psnr_rgb, ssim_rgb};
 use crate::MetricsError;
 
 /// Width of the band along each frame edge that [`edge_luminance_ratios`] measures, px.
@@ -41,6 +44,7 @@ impl EdgeRatios {
 }
 
 /// The figures of a result against its reference.
+#[cfg(feature = "flip")]
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct Scores {
     /// SSIM (sRGB, clamped, sigma 1.5, mean over R, G, B); 1 is identical.
@@ -53,10 +57,14 @@ pub struct Scores {
     pub flip_p99: f64,
     /// Median luminance ratio over the outer [`EDGE_BAND_PX`] of each edge.
     pub edge_luminance_ratio: EdgeRatios,
+    /// The frame's mean linear luminance over the reference's ([`mean_luminance_ratio`]): 1
+    /// where the energy is kept; added or lost light shows as a value away from 1.
+    pub mean_luminance_ratio: f64,
 }
 
 /// Scores a linear RGB(A) `test` image against `reference` (interleaved, alpha ignored); also
 /// returns the FLIP error map.
+#[cfg(feature = "flip")]
 pub fn score_rgb(
     test: &[f32],
     reference: &[f32],
@@ -67,12 +75,14 @@ pub fn score_rgb(
     let psnr = psnr_rgb(test, reference, width, height)?;
     let flip = flip_rgb(test, reference, width, height)?;
     let edge = edge_luminance_ratios(test, reference, width, height, EDGE_BAND_PX)?;
+    let mean_ratio = mean_luminance_ratio(test, reference, width, height)?;
     let scores = Scores {
         ssim,
         psnr_db: psnr.is_finite().then_some(psnr),
         flip_mean: flip.mean,
         flip_p99: flip.p99,
         edge_luminance_ratio: edge,
+        mean_luminance_ratio: mean_ratio,
     };
     Ok((scores, flip))
 }
@@ -80,6 +90,27 @@ pub fn score_rgb(
 /// Rec. 709 luminance of linear RGB.
 fn luminance(p: &[f32]) -> f64 {
     0.2126 * f64::from(p[0]) + 0.7152 * f64::from(p[1]) + 0.0722 * f64::from(p[2])
+}
+
+/// Mean linear Rec. 709 luminance of `test` over that of `reference` (RGB(A), interleaved,
+/// alpha ignored), summed in f64; 1 when the reference is black everywhere and so is the test,
+/// infinite when only the reference is.
+pub fn mean_luminance_ratio(
+    test: &[f32],
+    reference: &[f32],
+    width: usize,
+    height: usize,
+) -> Result<f64, MetricsError> {
+    let channels = rgb_channels(test, reference, width, height)?;
+    let sum = |img: &[f32]| -> f64 { img.chunks_exact(channels).map(luminance).sum() };
+    let (t, r) = (sum(test), sum(reference));
+    Ok(if r > 0.0 {
+        t / r
+    } else if t > 0.0 {
+        f64::INFINITY
+    } else {
+        1.0
+    })
 }
 
 /// Median luminance ratio `test / reference` over the outer `band_px` pixels of each edge
@@ -126,6 +157,22 @@ pub fn edge_luminance_ratios(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_mean_ratio_is_the_ratio_of_summed_luminance() {
+        let (w, h) = (4, 2);
+        let reference = vec![0.5f32; w * h * 4];
+        let mut test = reference.clone();
+        // One pixel twice as bright: 9 halves over 8.
+        test[..3].fill(1.0);
+        let r = mean_luminance_ratio(&test, &reference, w, h).expect("ratio");
+        assert!((r - 9.0 / 8.0).abs() < 1e-12, "{r}");
+        let black = vec![0.0f32; w * h * 4];
+        assert_eq!(
+            mean_luminance_ratio(&black, &black, w, h).expect("ratio"),
+            1.0
+        );
+    }
 
     #[test]
     fn a_darkened_left_edge_shows_only_on_the_left() {

@@ -7,7 +7,6 @@
 
 use std::time::Instant;
 
-use indicatif::{ProgressBar, ProgressStyle};
 use psf_db::{
     Aperture, BuildInfo, DatabaseBuilder, DbHeader, LensPrescription, ParamSpace, PsfDatabase,
     PsfModel, PsfStats,
@@ -361,6 +360,64 @@ impl BuildPlan {
     }
 }
 
+/// The progress a build shows on stderr when asked to: an indicatif bar with the
+/// `progress-bar` feature (the `precompute` binary's), else one plain line per tenth of the
+/// PSFs, so that a library build needs no terminal crate.
+struct StderrProgress {
+    #[cfg(feature = "progress-bar")]
+    bar: indicatif::ProgressBar,
+    #[cfg(not(feature = "progress-bar"))]
+    label: Option<(String, u32)>,
+}
+
+impl StderrProgress {
+    fn new(show: bool, total: u32, label: String) -> Self {
+        #[cfg(feature = "progress-bar")]
+        {
+            let bar = if show {
+                let b = indicatif::ProgressBar::new(u64::from(total));
+                if let Ok(style) = indicatif::ProgressStyle::with_template(
+                    "{msg} [{elapsed_precise}] {wide_bar} {pos}/{len} PSFs (eta {eta})",
+                ) {
+                    b.set_style(style);
+                }
+                b.set_message(label);
+                b
+            } else {
+                indicatif::ProgressBar::hidden()
+            };
+            Self { bar }
+        }
+        #[cfg(not(feature = "progress-bar"))]
+        {
+            Self {
+                label: show.then_some((label, total)),
+            }
+        }
+    }
+
+    /// `finished` PSFs are done (from any worker thread).
+    fn tick(&self, finished: u32) {
+        #[cfg(feature = "progress-bar")]
+        {
+            let _ = finished;
+            self.bar.inc(1);
+        }
+        #[cfg(not(feature = "progress-bar"))]
+        if let Some((label, total)) = &self.label {
+            let tenth = (*total / 10).max(1);
+            if finished.is_multiple_of(tenth) || finished == *total {
+                eprintln!("{label}: {finished}/{total} PSFs");
+            }
+        }
+    }
+
+    fn finish(self) {
+        #[cfg(feature = "progress-bar")]
+        self.bar.finish_and_clear();
+    }
+}
+
 /// One processed PSF.
 #[derive(Clone, Debug)]
 pub struct ProcessedPsf {
@@ -372,7 +429,8 @@ pub struct ProcessedPsf {
     pub report: PsfReport,
 }
 
-/// Builds the database `cfg` describes. `progress` shows a progress bar over PSFs on stderr.
+/// Builds the database `cfg` describes. `progress` shows the progress over PSFs on stderr (a
+/// bar with the `progress-bar` feature, else a line per tenth).
 pub fn build_database(
     cfg: &BuildConfig,
     progress: bool,
@@ -422,18 +480,7 @@ fn build_database_impl(
     };
     let indices = range.map_or(0..plan.space.psf_count(), |r| r.indices());
     let n = indices.len() as u32;
-    let bar = if progress {
-        let b = ProgressBar::new(u64::from(n));
-        if let Ok(style) = ProgressStyle::with_template(
-            "{msg} [{elapsed_precise}] {wide_bar} {pos}/{len} PSFs (eta {eta})",
-        ) {
-            b.set_style(style);
-        }
-        b.set_message(format!("{} {}", cfg.model, cfg.profile));
-        b
-    } else {
-        ProgressBar::hidden()
-    };
+    let bar = StderrProgress::new(progress, n, format!("{} {}", cfg.model, cfg.profile));
     let done = std::sync::atomic::AtomicU32::new(0);
     // Report at every percent, not every PSF: a callback may cost a lock or an interpreter.
     let step = (n / 100).max(1);
@@ -441,8 +488,8 @@ fn build_database_impl(
         .into_par_iter()
         .map(|i| {
             let r = plan.process(i);
-            bar.inc(1);
             let finished = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+            bar.tick(finished);
             if let Some(report) = on_psf {
                 if finished.is_multiple_of(step) || finished == n {
                     report(finished, n);
@@ -451,7 +498,7 @@ fn build_database_impl(
             r
         })
         .collect();
-    bar.finish_and_clear();
+    bar.finish();
 
     let mut header = DbHeader::new(cfg.model, plan.space.clone(), 0);
     header.rays_per_psf = match plan.rays {

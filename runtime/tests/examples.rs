@@ -2,7 +2,7 @@
 //! run builds the quick databases (about a minute on 2 cores; cached in `$SPREADLET_CACHE` or
 //! `./.spreadlet-cache`). Run with `cargo test --release -p runtime --test examples -- --ignored`.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use psf_db::PsfModel;
 use spreadlet::camera::Camera;
@@ -24,14 +24,10 @@ fn ssim_against(image: &[[f32; 4]], reference: &Path, w: usize, h: usize) -> f64
 }
 
 fn run(scene: &str, min_ssim: f64) {
-    let dir = Path::new("/work/shared/examples").join(scene);
-    let dir = if dir.exists() {
-        dir
-    } else {
-        Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../../shared/examples")
-            .join(scene)
-    };
+    let dir = std::env::var_os("SPREADLET_EXAMPLES")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/examples"))
+        .join(scene);
     let g = GBuffer::read_exr(&dir.join("input.exr"), &ChannelOptions::default()).expect("input");
     let cam = Camera::from_json_file(&dir.join("camera.json")).expect("camera");
     let effects = Effects::of(&cam, &g);

@@ -217,14 +217,18 @@ pub fn files_in(dir: &Path) -> Vec<String> {
     names
 }
 
-/// The shared Blender examples (`../shared/examples`, else `/work/shared/examples`), or
-/// `None` when this checkout has none; with `SPREADLET_REQUIRE_SHARED=1` a missing folder is a
+/// The shared Blender examples (`$SPREADLET_EXAMPLES`, else `../shared/examples` beside the
+/// checkout), or `None` when this checkout has none; with `SPREADLET_REQUIRE_SHARED=1` a missing folder is a
 /// failure.
 pub fn shared_examples() -> Option<PathBuf> {
     let beside = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/examples");
-    let found = [beside, PathBuf::from("/work/shared/examples")]
-        .into_iter()
-        .find(|p| p.join("fence/layers.exr").exists());
+    let found = [
+        std::env::var_os("SPREADLET_EXAMPLES").map(PathBuf::from),
+        Some(beside),
+    ]
+    .into_iter()
+    .flatten()
+    .find(|p| p.join("fence/layers.exr").exists());
     if found.is_none() {
         assert!(
             std::env::var("SPREADLET_REQUIRE_SHARED").as_deref() != Ok("1"),

@@ -1,5 +1,5 @@
-//! `spreadlet compare`: SSIM, PSNR, FLIP and the frame edges' brightness of two EXR images, as
-//! `DEVELOPERS.md` defines them.
+//! `spreadlet compare`: SSIM, PSNR, FLIP and the brightness of the frame's edges and of the
+//! whole frame, of an EXR image against a reference (the terms are defined in `--help`).
 
 use std::path::{Path, PathBuf};
 
@@ -68,6 +68,7 @@ pub(crate) fn run(args: CompareArgs) -> Result<()> {
                 "flip_mean": scores.flip_mean,
                 "flip_p99": scores.flip_p99,
                 "edge_luminance_ratio": e,
+                "mean_luminance_ratio": scores.mean_luminance_ratio,
             })
         );
     } else {
@@ -76,8 +77,15 @@ pub(crate) fn run(args: CompareArgs) -> Result<()> {
             .map_or("inf".to_string(), |p| format!("{p:.2}"));
         println!(
             "SSIM {:.4}  PSNR {psnr} dB  FLIP mean {:.4} p99 {:.4}  edge luminance ratio \
-             (left, top, right, bottom) {:.3} {:.3} {:.3} {:.3}",
-            scores.ssim, scores.flip_mean, scores.flip_p99, e.left, e.top, e.right, e.bottom
+             (left, top, right, bottom) {:.3} {:.3} {:.3} {:.3}  mean luminance ratio {:.4}",
+            scores.ssim,
+            scores.flip_mean,
+            scores.flip_p99,
+            e.left,
+            e.top,
+            e.right,
+            e.bottom,
+            scores.mean_luminance_ratio
         );
     }
     Ok(())
