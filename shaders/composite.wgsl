@@ -1,20 +1,26 @@
 // Compositing back to front (mirror of runtime::pipeline::composite): one invocation per output
 // pixel, over the layers from 0 (farthest) to the nearest, "over" with premultiplied alpha; a
 // layer whose coverage exceeds one is normalised by it, and (flag bit 0) the result's coverage is
-// raised to the summed coverage, capped at one (Lee et al. 2008). Negative values clamp to 0.
+// raised to the summed coverage, capped at one (Lee et al. 2008), by scaling the pixel, or (bit 3)
+// made opaque with the colour "over" hid, O + (1 - O.a) (S - O) / (S.a - O.a) with S the layers'
+// plain sum (for reconstruction, whose samples already hold their visibility). Negative values
+// clamp to 0.
 // params.src: the layer images (padded layers); params.planes: layers; params.border: pad.
 // Frames too large for one binding come in chunks of layers, back to front: the running colour
-// and coverage stay in `output` and `coverage` between chunks (flags: bit 1 = first chunk, bit
-// 2 = last chunk, where the renormalisation and the clamp happen).
+// and the layers' running sum stay in `output` and `coverage` between chunks (flags: bit 1 =
+// first chunk, bit 2 = last chunk, where the renormalisation and the clamp happen).
 
 @group(0) @binding(0) var<uniform> params: PassParams;
 @group(0) @binding(1) var<storage, read> layer_images: array<f32>;
 @group(0) @binding(2) var<storage, read_write> output: array<vec4<f32>>;
-@group(0) @binding(3) var<storage, read_write> coverage: array<f32>;
+@group(0) @binding(3) var<storage, read_write> coverage: array<vec4<f32>>;
 
 const RENORMALIZE: u32 = 1u;
 const FIRST_CHUNK: u32 = 2u;
 const LAST_CHUNK: u32 = 4u;
+const RESTORE_OCCLUDED: u32 = 8u;
+// runtime::pipeline::composite::FILL_MIN_HIDDEN
+const FILL_MIN_HIDDEN: f32 = 1e-3;
 
 @compute @workgroup_size(16, 16, 1)
 fn composite(@builtin(global_invocation_id) id: vec3<u32>) {
@@ -27,7 +33,7 @@ fn composite(@builtin(global_invocation_id) id: vec3<u32>) {
     let y = id.y + params.border;
     let o = id.y * w + id.x;
     var acc = vec4<f32>(0.0);
-    var total = 0.0;
+    var total = vec4<f32>(0.0);
     if (params.flags & FIRST_CHUNK) == 0u {
         acc = output[o];
         total = coverage[o];
@@ -42,7 +48,7 @@ fn composite(@builtin(global_invocation_id) id: vec3<u32>) {
         if c.w > 1.0 {
             c = c * (1.0 / c.w);
         }
-        total += c.w;
+        total += c;
         acc = c + (1.0 - c.w) * acc;
     }
     if (params.flags & LAST_CHUNK) == 0u {
@@ -50,8 +56,13 @@ fn composite(@builtin(global_invocation_id) id: vec3<u32>) {
         coverage[o] = total;
         return;
     }
-    if (params.flags & RENORMALIZE) != 0u {
-        let target_alpha = min(total, 1.0);
+    if (params.flags & (RENORMALIZE | RESTORE_OCCLUDED)) == (RENORMALIZE | RESTORE_OCCLUDED) {
+        let hidden = total.w - acc.w;
+        if hidden > FILL_MIN_HIDDEN && acc.w < 1.0 {
+            acc = acc + ((1.0 - acc.w) / hidden) * (total - acc);
+        }
+    } else if (params.flags & RENORMALIZE) != 0u {
+        let target_alpha = min(total.w, 1.0);
         if acc.w > 1e-6 && target_alpha > acc.w {
             acc = acc * (target_alpha / acc.w);
             acc.w = target_alpha;

@@ -265,11 +265,22 @@ pub fn reconstruct_with(
     placement: SamplePlacement,
 ) -> Result<(RgbaImage, SynthStats), ClassifyError> {
     let total = Instant::now();
+    let options = &for_samples(options);
     let (classified, mut stats) = classify_samples(frames, camera, dbs, options, placement)?;
     let mut image = render_classified(&classified, dbs, options, &mut stats);
     normalize_density(&mut image);
     stats.times.total_ms = ms_since(total);
     Ok((image, stats))
+}
+
+/// `options` as reconstruction applies them: the coverage that "over" leaves missing is made up
+/// with the colour it hid of the farther layers
+/// ([`crate::pipeline::composite::CompositeOptions::restore_occluded`]), because the samples
+/// already hold their visibility.
+pub fn for_samples(options: &SynthOptions) -> SynthOptions {
+    let mut options = options.clone();
+    options.composite.restore_occluded = true;
+    options
 }
 
 /// The device-independent front of reconstruction, shared by the CPU path

@@ -43,6 +43,7 @@ fn rotation_and_compositing_apply_per_call() {
         },
         composite: CompositeOptions {
             renormalize_coverage: false,
+            restore_occluded: false,
         },
         ..SynthOptions::default()
     };

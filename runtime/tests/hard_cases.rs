@@ -574,9 +574,12 @@ fn layers_of(pixels: &[Option<[f32; 4]>]) -> IntegratedLayers {
 }
 
 /// The documented compositing in f64: per layer divide by coverage above one, "over" back to
-/// front, scale up to the joint coverage (capped at 1), clamp negatives.
-fn composite_f64(pixels: &[Option<[f32; 4]>], renormalize: bool) -> [f64; 4] {
+/// front, make up the joint coverage (capped at 1) by scaling the pixel or, with `restore`, fill
+/// the missing coverage with the hidden colour (`O + (1 - O.a) (S - O) / (S.a - O.a)`), clamp
+/// negatives.
+fn composite_f64(pixels: &[Option<[f32; 4]>], renormalize: bool, restore: bool) -> [f64; 4] {
     let mut acc = [0.0f64; 4];
+    let mut sum = [0.0f64; 4];
     let mut total = 0.0f64;
     for p in pixels.iter().flatten() {
         let mut c = p.map(f64::from);
@@ -588,10 +591,20 @@ fn composite_f64(pixels: &[Option<[f32; 4]>], renormalize: bool) -> [f64; 4] {
         total += c[3];
         let t = 1.0 - c[3];
         for k in 0..4 {
+            sum[k] += c[k];
             acc[k] = c[k] + t * acc[k];
         }
     }
-    if renormalize {
+    if renormalize && restore {
+        let hidden = total - acc[3];
+        if hidden > 1e-3 && acc[3] < 1.0 {
+            let f = (1.0 - acc[3]) / hidden;
+            let over = acc;
+            for k in 0..4 {
+                acc[k] += f * (sum[k] - over[k]);
+            }
+        }
+    } else if renormalize {
         let target = total.min(1.0);
         if acc[3] > 1e-6 && target > acc[3] {
             let s = target / acc[3];
@@ -600,6 +613,29 @@ fn composite_f64(pixels: &[Option<[f32; 4]>], renormalize: bool) -> [f64; 4] {
         }
     }
     acc.map(|v| v.max(0.0))
+}
+
+/// Reconstruction's compositing keeps a bright front layer's light as it is and fills what is
+/// missing with the farther layer's colour: an emitter layer of coverage 0.3 (colour 40) over a
+/// wall layer of colour 0.1 whose samples the emitter blocked (coverage 0.6) gives exactly the
+/// emitter plus 0.7 of the wall, opaque; scaling the pixel up to the joint coverage 0.9 instead
+/// would brighten the emitter by a quarter.
+#[test]
+fn restoring_the_occluded_colour_keeps_the_front_layers_light() {
+    let case = vec![Some([0.06, 0.06, 0.06, 0.6]), Some([12.0, 12.0, 12.0, 0.3])];
+    let restored = composite(
+        &layers_of(&case),
+        &CompositeOptions {
+            renormalize_coverage: true,
+            restore_occluded: true,
+        },
+    )
+    .pixels[0];
+    let want = 12.0 + 0.7 * 0.1;
+    assert!((restored[0] - want).abs() < 1e-5, "{restored:?}");
+    assert!((restored[3] - 1.0).abs() < 1e-6, "{restored:?}");
+    let scaled = composite(&layers_of(&case), &CompositeOptions::default()).pixels[0];
+    assert!(scaled[0] > 1.2 * want, "{scaled:?}");
 }
 
 /// Coverage near 0 and exactly 1, layers over 1, empty layers, a single layer, no layer: the
@@ -629,22 +665,23 @@ fn compositing_edge_cases_match_the_f64_formula() {
         vec![Some([-1e-3, 0.2, 0.2, -1e-3]), Some([0.1, 0.1, 0.1, 0.1])],
         vec![Some([1e6, 1e6, 1e6, 1.0]), Some([0.0, 0.0, 0.0, 1.0])],
     ];
-    for renormalize in [true, false] {
+    for (renormalize, restore) in [(true, false), (true, true), (false, false)] {
         for case in &cases {
             let got = composite(
                 &layers_of(case),
                 &CompositeOptions {
                     renormalize_coverage: renormalize,
+                    restore_occluded: restore,
                 },
             )
             .pixels[0];
-            let want = composite_f64(case, renormalize);
+            let want = composite_f64(case, renormalize, restore);
             for k in 0..4 {
                 let g = f64::from(got[k]);
                 assert!(g.is_finite() && g >= 0.0, "{case:?}: {got:?}");
                 assert!(
                     (g - want[k]).abs() <= 1e-6 * want[k].abs().max(1.0),
-                    "{case:?} (renormalize {renormalize}): {got:?} vs {want:?}"
+                    "{case:?} (renormalize {renormalize}, restore {restore}): {got:?} vs {want:?}"
                 );
             }
         }

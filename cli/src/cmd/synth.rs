@@ -149,6 +149,7 @@ impl SynthArgs {
             integrator: self.integrate,
             composite: CompositeOptions {
                 renormalize_coverage: !self.no_coverage_renormalization,
+                ..CompositeOptions::default()
             },
         }
     }

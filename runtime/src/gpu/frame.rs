@@ -16,7 +16,7 @@ use crate::pipeline::types::{FrameParams, SplatRecord};
 
 /// What the frame buffers are made for: the frame's size, padding and layers, and the options
 /// baked into their uniforms (rotation sampling, coverage renormalisation).
-pub(super) type FrameKey = (u32, u32, u32, u32, RotationSampling, bool);
+pub(super) type FrameKey = (u32, u32, u32, u32, RotationSampling, bool, bool);
 
 /// Everything that depends on the frame size and layer count (and the options in uniforms).
 pub(super) struct FrameBuffers {
@@ -70,6 +70,8 @@ pub(super) const QUERIES_PER_CHUNK: u32 = 8;
 pub(super) const RENORMALIZE: u32 = 1;
 pub(super) const FIRST_CHUNK: u32 = 2;
 pub(super) const LAST_CHUNK: u32 = 4;
+/// Make up missing coverage with the occluded layers' colour (`CompositeOptions::restore_occluded`).
+pub(super) const RESTORE_OCCLUDED: u32 = 8;
 
 impl GpuSynthesizer {
     pub(super) fn frame_buffers(&self) -> Result<&FrameBuffers, GpuError> {
@@ -127,6 +129,7 @@ impl GpuSynthesizer {
             frame.layers,
             self.options.rotation,
             self.options.composite.renormalize_coverage,
+            self.options.composite.restore_occluded,
         );
         let mut rebuild = false;
         if self.frame.as_ref().is_none_or(|f| f.key != key) {
@@ -307,7 +310,8 @@ impl GpuSynthesizer {
         let (w, h) = (frame.width as usize, frame.height as usize);
         let output_bytes = 16 * (w * h) as u64;
         let output = storage_zeroed(ctx, "output image", output_bytes)?;
-        let coverage = storage_zeroed(ctx, "output coverage", 4 * (w * h) as u64)?;
+        // The layers' running sum of colour and coverage, one vec4 per pixel.
+        let coverage = storage_zeroed(ctx, "output coverage", 16 * (w * h) as u64)?;
         let output_staging = ctx.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("output staging"),
             size: output.size(),
@@ -323,10 +327,13 @@ impl GpuSynthesizer {
         )?;
         let entries = storage_zeroed(ctx, "tile entries", 16)?;
         let n_chunks = frame.layers.div_ceil(chunk_layers);
-        let renormalize = if self.options.composite.renormalize_coverage {
-            RENORMALIZE
-        } else {
-            0
+        let renormalize = match (
+            self.options.composite.renormalize_coverage,
+            self.options.composite.restore_occluded,
+        ) {
+            (true, true) => RENORMALIZE | RESTORE_OCCLUDED,
+            (true, false) => RENORMALIZE,
+            (false, _) => 0,
         };
         let chunks = (0..n_chunks)
             .map(|k| {

@@ -117,6 +117,7 @@ pub fn reconstruct_gpu(
     options: &SynthOptions,
 ) -> Result<(RgbaImage, SynthStats, GpuStageTimes), GpuError> {
     gpu.check_database(dbs.combined.as_ref())?;
+    let options = &crate::reconstruct::for_samples(options);
     gpu.apply_call_options(options);
     let total = Instant::now();
     let (classified, mut stats) = crate::reconstruct::classify_samples(

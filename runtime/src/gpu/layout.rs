@@ -53,7 +53,7 @@ pub struct PassParams {
     /// Border (padding) cropped by the composite pass, px.
     pub border: u32,
     /// Pass-specific flags (composite: bit 0 = renormalise coverage, bit 1 = first chunk of
-    /// layers, bit 2 = last chunk).
+    /// layers, bit 2 = last chunk, bit 3 = restore the occluded colour).
     pub flags: u32,
 }
 
