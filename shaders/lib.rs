@@ -143,8 +143,14 @@ pub mod bindings {
         &[(0, Uniform), (1, ReadWrite), (2, ReadWrite), (3, ReadWrite)];
 
     /// The composite (`composite.wgsl`).
-    pub const COMPOSITE: &[(u32, Binding)] =
-        &[(0, Uniform), (1, Read), (2, ReadWrite), (3, ReadWrite)];
+    pub const COMPOSITE: &[(u32, Binding)] = &[
+        (0, Uniform),
+        (1, Read),
+        (2, ReadWrite),
+        (3, ReadWrite),
+        (4, Read),
+        (5, ReadWrite),
+    ];
 
     /// The filter baseline (`filter.wgsl`).
     pub const FILTER: &[(u32, Binding)] = &[

@@ -9,8 +9,8 @@ use crate::camera::Camera;
 use crate::dbset::DbSet;
 use crate::gbuffer::{GBuffer, ViewLayer};
 use crate::pipeline::{
-    classify, composite, integrate, splat, ClassifyOptions, CompositeOptions, Effects, Integrator,
-    PathCounts, SplatOptions,
+    classify, integrate, splat, ClassifyOptions, CompositeOptions, Effects, Integrator, PathCounts,
+    SplatOptions,
 };
 use formats::{DeepImage, RgbaImage};
 
@@ -359,7 +359,16 @@ pub fn render_classified(
     drop(stack);
 
     let t = Instant::now();
-    let image = composite(&layers, &options.composite);
+    let sharpness = if options.composite.restore_occluded {
+        crate::pipeline::composite::layer_sharpness(classified, dbs.combined.as_ref())
+    } else {
+        Vec::new()
+    };
+    let image = crate::pipeline::composite::composite_with_sharpness(
+        &layers,
+        &options.composite,
+        &sharpness,
+    );
     stats.times.composite_ms = ms_since(t);
     image
 }

@@ -20,6 +20,7 @@ use psf_db::{DatabaseBuilder, DbHeader, ParamSpace, PsfDatabase, PsfModel};
 use spreadlet::camera::Camera;
 use spreadlet::dbset::DbSet;
 use spreadlet::gbuffer::GBuffer;
+use spreadlet::pipeline::composite::composite_with_sharpness;
 use spreadlet::pipeline::types::{FrameParams, SplatPath, SplatRecord};
 use spreadlet::pipeline::{
     classify, composite, integrate, splat, Classified, ClassifyOptions, CompositeOptions,
@@ -574,9 +575,9 @@ fn layers_of(pixels: &[Option<[f32; 4]>]) -> IntegratedLayers {
 }
 
 /// The documented compositing in f64: per layer divide by coverage above one, "over" back to
-/// front, make up the joint coverage (capped at 1) by scaling the pixel or, with `restore`, fill
-/// the missing coverage with the hidden colour (`O + (1 - O.a) (S - O) / (S.a - O.a)`), clamp
-/// negatives.
+/// front, make up the joint coverage (capped at 1) by scaling the pixel or, with `restore` and
+/// every layer equally sharp, fill half the missing coverage with the hidden colour (`O + (1 -
+/// O.a) (S - O) / (2 (S.a - O.a))`), clamp negatives.
 fn composite_f64(pixels: &[Option<[f32; 4]>], renormalize: bool, restore: bool) -> [f64; 4] {
     let mut acc = [0.0f64; 4];
     let mut sum = [0.0f64; 4];
@@ -598,7 +599,8 @@ fn composite_f64(pixels: &[Option<[f32; 4]>], renormalize: bool, restore: bool) 
     if renormalize && restore {
         let hidden = total - acc[3];
         if hidden > 1e-3 && acc[3] < 1.0 {
-            let f = (1.0 - acc[3]) / hidden;
+            // Every layer equally sharp: the hidden colour fills half the gap.
+            let f = 0.5 * (1.0 - acc[3]) / hidden;
             let over = acc;
             for k in 0..4 {
                 acc[k] += f * (sum[k] - over[k]);
@@ -615,20 +617,26 @@ fn composite_f64(pixels: &[Option<[f32; 4]>], renormalize: bool, restore: bool) 
     acc.map(|v| v.max(0.0))
 }
 
-/// Reconstruction's compositing keeps a bright front layer's light as it is and fills what is
-/// missing with the farther layer's colour: an emitter layer of coverage 0.3 (colour 40) over a
-/// wall layer of colour 0.1 whose samples the emitter blocked (coverage 0.6) gives exactly the
-/// emitter plus 0.7 of the wall, opaque; scaling the pixel up to the joint coverage 0.9 instead
-/// would brighten the emitter by a quarter.
+/// Reconstruction's compositing keeps a bright, blurred front layer's light as it is and fills
+/// what is missing with the sharper farther layer's colour: an emitter layer of coverage 0.3
+/// (colour 40, reach 15 px) over a wall layer of colour 0.1 (reach 3 px) whose samples the
+/// emitter blocked (coverage 0.6) gives exactly the emitter plus 0.7 of the wall, opaque;
+/// scaling the pixel up to the joint coverage 0.9 instead would brighten the emitter by a
+/// quarter. A sharp front layer's gap is its own sampling hole: a sharp sphere (coverage 0.6,
+/// colour 0.8) over a blurred wall keeps the wall's colour out of it, and the pixel is left
+/// for the division by coverage, which gives the sphere's colour.
 #[test]
 fn restoring_the_occluded_colour_keeps_the_front_layers_light() {
+    let restore = CompositeOptions {
+        renormalize_coverage: true,
+        restore_occluded: true,
+    };
+    let sharpness = |reach: f32| 1.0 / (1.0 + reach).powi(2);
     let case = vec![Some([0.06, 0.06, 0.06, 0.6]), Some([12.0, 12.0, 12.0, 0.3])];
-    let restored = composite(
+    let restored = composite_with_sharpness(
         &layers_of(&case),
-        &CompositeOptions {
-            renormalize_coverage: true,
-            restore_occluded: true,
-        },
+        &restore,
+        &[sharpness(3.0), sharpness(15.0)],
     )
     .pixels[0];
     let want = 12.0 + 0.7 * 0.1;
@@ -636,6 +644,20 @@ fn restoring_the_occluded_colour_keeps_the_front_layers_light() {
     assert!((restored[3] - 1.0).abs() < 1e-6, "{restored:?}");
     let scaled = composite(&layers_of(&case), &CompositeOptions::default()).pixels[0];
     assert!(scaled[0] > 1.2 * want, "{scaled:?}");
+
+    let sphere = vec![Some([0.05, 0.05, 0.05, 0.5]), Some([0.48, 0.48, 0.48, 0.6])];
+    let own_hole = composite_with_sharpness(
+        &layers_of(&sphere),
+        &restore,
+        &[sharpness(12.0), sharpness(0.0)],
+    )
+    .pixels[0];
+    let normalised = own_hole[0] / own_hole[3];
+    assert!((own_hole[3] - 0.8).abs() < 1e-6, "{own_hole:?}");
+    assert!(
+        (normalised - (0.48 + 0.4 * 0.05) / 0.8).abs() < 1e-5,
+        "{own_hole:?}"
+    );
 }
 
 /// Coverage near 0 and exactly 1, layers over 1, empty layers, a single layer, no layer: the

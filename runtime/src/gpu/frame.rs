@@ -33,6 +33,8 @@ pub(super) struct FrameBuffers {
     pub(super) output: wgpu::Buffer,
     /// Running coverage between chunks (bound in the composite groups).
     pub(super) _coverage: wgpu::Buffer,
+    /// Running sharpness of the fill between chunks (bound in the composite groups).
+    pub(super) _fill_state: wgpu::Buffer,
     pub(super) output_staging: wgpu::Buffer,
     pub(super) output_bytes: u64,
     pub(super) queries: Option<Queries>,
@@ -44,7 +46,12 @@ pub(super) struct FrameBuffers {
 
 /// A run of layers drawn, integrated and composited together in the frame buffers.
 pub(super) struct Chunk {
+    /// The chunk's first layer (index 0 = farthest).
+    pub(super) layer_base: u32,
     pub(super) layer_count: u32,
+    /// The sharpness of each of the chunk's layers (`CompositeOptions::restore_occluded`),
+    /// written before every frame.
+    pub(super) layer_sharpness: wgpu::Buffer,
     pub(super) splat_group: wgpu::BindGroup,
     /// Tiled splat: bind group, tile grid (its entry capacity rewritten when the list grows).
     pub(super) tiled_group: Option<wgpu::BindGroup>,
@@ -312,6 +319,9 @@ impl GpuSynthesizer {
         let output = storage_zeroed(ctx, "output image", output_bytes)?;
         // The layers' running sum of colour and coverage, one vec4 per pixel.
         let coverage = storage_zeroed(ctx, "output coverage", 16 * (w * h) as u64)?;
+        // The running sharpness of what "over" shows, of all layers and of what hid something,
+        // one vec4 per pixel.
+        let fill_state = storage_zeroed(ctx, "fill sharpness", 16 * (w * h) as u64)?;
         let output_staging = ctx.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("output staging"),
             size: output.size(),
@@ -378,14 +388,25 @@ impl GpuSynthesizer {
                         ..Default::default()
                     }),
                 );
+                let layer_sharpness =
+                    storage_zeroed(ctx, "layer sharpness", 4 * u64::from(layer_count.max(1)))?;
                 let composite_group = bind_group(
                     ctx,
                     "composite",
                     &self.composite_layout,
-                    &[&params, &layer_images, &output, &coverage],
+                    &[
+                        &params,
+                        &layer_images,
+                        &output,
+                        &coverage,
+                        &layer_sharpness,
+                        &fill_state,
+                    ],
                 );
-                Chunk {
+                Ok(Chunk {
+                    layer_base,
                     layer_count,
+                    layer_sharpness,
                     splat_group,
                     tiled_group: None,
                     grid,
@@ -393,9 +414,9 @@ impl GpuSynthesizer {
                     composite_group,
                     _targets: targets,
                     _composite_params: params,
-                }
+                })
             })
-            .collect();
+            .collect::<Result<Vec<_>, GpuError>>()?;
         let count = QUERIES_PER_CHUNK * n_chunks;
         let queries =
             (ctx.has_timestamps() && count <= wgpu::QUERY_SET_MAX_QUERIES).then(|| Queries {
@@ -430,6 +451,7 @@ impl GpuSynthesizer {
             chunks,
             output,
             _coverage: coverage,
+            _fill_state: fill_state,
             output_staging,
             output_bytes,
             queries,

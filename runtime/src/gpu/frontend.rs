@@ -128,8 +128,11 @@ pub fn reconstruct_gpu(
         crate::reconstruct::SamplePlacement::for_spp(frames.spp),
     )
     .map_err(|e| GpuError::Input(e.to_string()))?;
-    let (mut image, gpu_times) =
-        gpu.run(&classified.frame, &classified.records, options.integrator)?;
+    gpu.layer_sharpness =
+        crate::pipeline::composite::layer_sharpness(&classified, dbs.combined.as_ref());
+    let result = gpu.run(&classified.frame, &classified.records, options.integrator);
+    gpu.layer_sharpness.clear();
+    let (mut image, gpu_times) = result?;
     crate::reconstruct::normalize_density(&mut image);
     stats.times.splat_ms = gpu_times.splat_ms;
     stats.times.integrate_ms = gpu_times.integrate_ms;

@@ -166,6 +166,10 @@ pub struct GpuSynthesizer {
     pub(super) composite: wgpu::ComputePipeline,
     pub(super) frame: Option<FrameBuffers>,
     pub(super) counters: SynthCounters,
+    /// The sharpness of each layer for the composite's fill (index 0 = farthest;
+    /// `crate::pipeline::composite::layer_sharpness`), set for one frame; missing layers count
+    /// as 1.
+    pub(super) layer_sharpness: Vec<f32>,
 }
 
 /// How far [`GpuSynthesizer::execute`] goes.
@@ -258,6 +262,7 @@ impl GpuSynthesizer {
             composite_layout,
             composite,
             frame: None,
+            layer_sharpness: Vec::new(),
             counters: SynthCounters {
                 pipeline_builds: 1,
                 database_uploads: 1,
@@ -511,6 +516,13 @@ impl GpuSynthesizer {
                 ctx.wait(stage)?;
                 Ok(ms_since(t))
             };
+        for chunk in &fb.chunks {
+            let sharpness: Vec<f32> = (chunk.layer_base..chunk.layer_base + chunk.layer_count)
+                .map(|l| self.layer_sharpness.get(l as usize).copied().unwrap_or(1.0))
+                .collect();
+            ctx.queue
+                .write_buffer(&chunk.layer_sharpness, 0, bytemuck::cast_slice(&sharpness));
+        }
         let mut enc = new_encoder();
         for (k, chunk) in fb.chunks.iter().enumerate() {
             let ts = |stage: u32| {

@@ -16,33 +16,102 @@
 //! filled with the colour that "over" hid instead. With `S` the layers' plain sum and `O` the
 //! "over" result, both premultiplied, `S - O` is that hidden colour: the nearest layer loses
 //! nothing to "over", so it is the farther layers' own colour, each in proportion to how much
-//! of it was hidden. The output is `O + (1 - O.a) (S - O) / (S.a - O.a)`, opaque. The fill
-//! covers all of `1 - O.a`, not only the hidden `S.a - O.a`: a farther layer's hole (where the
-//! nearer one blocked its samples) is blurred by the farther layer's own PSF into a shallower,
-//! wider dip than the nearer layer's coverage fills, and what is missing there is the farther
-//! surface. Dividing by the joint coverage instead (the ratio estimator) would scale the nearer
+//! of it was hidden. The output is `O + f (1 - O.a) (S - O) / (S.a - O.a)`, with `f` the share
+//! below, opaque where `f = 1`. The fill covers all of `1 - O.a`, not only what was hidden: a
+//! farther layer's hole (where the nearer one blocked its samples) is blurred by the farther
+//! layer's own PSF into a shallower, wider dip than the nearer layer's coverage fills, and what
+//! is missing there is the farther surface. Dividing by the joint coverage instead (the ratio estimator) would scale the nearer
 //! layer's light up there: round a bright emitter in front of a defocused wall, that put 14 %
 //! more light into the frame. Where nothing was hidden (`S.a - O.a` below
 //! [`FILL_MIN_HIDDEN`]), the pixel is left for reconstruction's division by coverage.
+//!
+//! A missing coverage is not always a farther layer's hole, though. A sharp layer's coverage is
+//! a handful of samples' footprints, with pixel-sized gaps between them at one sample per
+//! pixel, while a blurred layer's is smooth: a sharp sphere in front of a defocused wall has
+//! holes of its own, and filling them with the wall's hidden colour speckles the sphere grey.
+//! So the gap goes to whichever side is sharper, the layers that hid or the layers they hid:
+//! each layer has a sharpness `s = 1 / (1 + r)^2` ([`layer_sharpness`], `r` the mean reach of
+//! its PSFs in pixels). A layer `k` hides `A_k O.a` of what lies behind it ("over" turns `O.a`
+//! into `A_k + (1 - A_k) O.a`). With `H = S.a - O.a` all that was hidden, the occluders'
+//! sharpness is `s_occ = sum_k s_k A_k O.a / H`, and the hidden layers' is `s_hid = sum_l s_l
+//! A_l (1 - T_l) / H`, `T_l` the transmittance in front of layer `l`. A share `f = clamp(1/2 +
+//! log2(s_hid / s_occ) / 2, 0, 1)` of the gap is filled with the hidden colour: all of it where
+//! the hidden layers are at least twice as sharp as what hid them (a blurred emitter over a
+//! wall), none where the occluders are (a sharp sphere over a defocused wall). The rest is left
+//! for the division by coverage, which fills a layer's own holes with its own colour. Choosing
+//! between the two colours, rather than mixing them by weight, matters: an emitter a thousand
+//! times brighter than the wall would dominate any weighted mean of the two.
+//!
 //! Negative values (approximation ringing) are clamped to zero in the output.
 
+use super::classify::Classified;
 use super::integrate::IntegratedLayers;
+use super::splat::psf_reach;
+use super::types::SplatPath;
 use formats::RgbaImage;
+use psf_db::PsfDatabase;
 
 /// Hidden coverage below which [`CompositeOptions::restore_occluded`] fills nothing (the same
 /// threshold as reconstruction's division by coverage).
 pub const FILL_MIN_HIDDEN: f32 = 1e-3;
+
+/// The share of a pixel's missing coverage that [`CompositeOptions::restore_occluded`] fills
+/// with the hidden colour, from the sharpness of the layers that hid (`occluders`) and of what
+/// they hid (`hidden`): `clamp(1/2 + log2(hidden / occluders) / 2, 0, 1)`, all of it where the
+/// occluders have no sharpness.
+pub fn hidden_fill_share(occluders: f32, hidden: f32) -> f32 {
+    if occluders <= 0.0 {
+        return 1.0;
+    }
+    if hidden <= 0.0 {
+        return 0.0;
+    }
+    (0.5 + 0.5 * (hidden / occluders).log2()).clamp(0.0, 1.0)
+}
+
+/// The sharpness of each layer (index 0 = farthest) for [`CompositeOptions::restore_occluded`]:
+/// `1 / (1 + r)^2`, with `r` the mean reach of its records' PSFs (px, [`psf_reach`]; weighted
+/// by each record's coverage; 0 for a copied pixel), the inverse of one sample's footprint.
+/// Layers without records get 1.
+pub fn layer_sharpness(classified: &Classified, db: Option<&PsfDatabase>) -> Vec<f32> {
+    let reach = db.map_or_else(Vec::new, psf_reach);
+    let layers = classified.frame.layers as usize;
+    let mut reach_sum = vec![0.0f64; layers];
+    let mut coverage_sum = vec![0.0f64; layers];
+    for r in &classified.records {
+        let layer = r.layer as usize;
+        if layer >= layers {
+            continue;
+        }
+        let px = if r.path == SplatPath::Copy as u32 {
+            0.0
+        } else {
+            f64::from(reach.get(r.psf_index as usize).copied().unwrap_or(0))
+        };
+        let coverage = f64::from(r.color[3].abs());
+        reach_sum[layer] += coverage * px;
+        coverage_sum[layer] += coverage;
+    }
+    reach_sum
+        .iter()
+        .zip(&coverage_sum)
+        .map(|(&r, &c)| {
+            let mean = if c > 0.0 { r / c } else { 0.0 };
+            (1.0 / (1.0 + mean).powi(2)) as f32
+        })
+        .collect()
+}
 
 /// Knobs of compositing.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct CompositeOptions {
     /// Scale the result up to the layers' joint coverage (see the module documentation).
     pub renormalize_coverage: bool,
-    /// Make up the missing coverage with the colour "over" hid of the farther layers (`O + (1 -
-    /// O.a) (S - O) / (S.a - O.a)`, see the module documentation) instead of scaling the whole
-    /// pixel up to the layers' joint coverage: for
-    /// reconstruction from stochastic samples, whose visibility is already in the samples.
-    /// Takes effect only with `renormalize_coverage`.
+    /// Make up the missing coverage with the colour "over" hid of the farther layers, where
+    /// they are sharper than what hid them (`O + f (1 - O.a) (S - O) / (S.a - O.a)`, see the
+    /// module documentation), instead of scaling the whole pixel up to the layers' joint
+    /// coverage: for reconstruction from stochastic samples, whose visibility is already in
+    /// the samples. Takes effect only with `renormalize_coverage`.
     pub restore_occluded: bool,
 }
 
@@ -55,19 +124,34 @@ impl Default for CompositeOptions {
     }
 }
 
-/// Composites the layers back to front (layer 0 = farthest) into a `width x height` image.
+/// Composites the layers back to front (layer 0 = farthest) into a `width x height` image,
+/// every layer equally sharp for [`CompositeOptions::restore_occluded`].
 pub fn composite(layers: &IntegratedLayers, options: &CompositeOptions) -> RgbaImage {
+    composite_with_sharpness(layers, options, &[])
+}
+
+/// [`composite`] with each layer's sharpness for [`CompositeOptions::restore_occluded`]
+/// (index 0 = farthest, [`layer_sharpness`]); missing entries count as 1.
+pub fn composite_with_sharpness(
+    layers: &IntegratedLayers,
+    options: &CompositeOptions,
+    sharpness: &[f32],
+) -> RgbaImage {
     let f = layers.frame;
     let (w, h) = (f.width as usize, f.height as usize);
     let (pw, pad) = (f.padded_width as usize, f.pad as usize);
     let mut out = RgbaImage::new(w, h);
     // The layers' plain sum, colour and coverage (`S`).
     let mut total = vec![[0.0f32; 4]; w * h];
+    // Coverage-weighted sharpness: of what "over" shows, summed over the layers, and of what
+    // hid something.
+    let mut sharp = vec![[0.0f32; 3]; w * h];
     for l in 0..f.layers as usize {
         let planes = &layers.planes[l * 4..l * 4 + 4];
         if planes.iter().any(|p| p.is_empty()) {
             continue;
         }
+        let s = sharpness.get(l).copied().unwrap_or(1.0);
         for y in 0..h {
             let row = (y + pad) * pw + pad;
             for x in 0..w {
@@ -86,19 +170,26 @@ pub fn composite(layers: &IntegratedLayers, options: &CompositeOptions) -> RgbaI
                 for ch in 0..4 {
                     total[i][ch] += c[ch];
                 }
-                let acc = &mut out.pixels[i];
                 let t = 1.0 - c[3];
+                let acc = &mut out.pixels[i];
+                let [shown, summed, hiding] = sharp[i];
+                sharp[i] = [
+                    s * c[3] + t * shown,
+                    summed + s * c[3],
+                    hiding + s * c[3] * acc[3],
+                ];
                 for ch in 0..4 {
                     acc[ch] = c[ch] + t * acc[ch];
                 }
             }
         }
     }
-    for (px, sum) in out.pixels.iter_mut().zip(&total) {
+    for ((px, sum), sharp) in out.pixels.iter_mut().zip(&total).zip(&sharp) {
         if options.renormalize_coverage && options.restore_occluded {
             let hidden = sum[3] - px[3];
             if hidden > FILL_MIN_HIDDEN && px[3] < 1.0 {
-                let f = (1.0 - px[3]) / hidden;
+                let share = hidden_fill_share(sharp[2] / hidden, (sharp[1] - sharp[0]) / hidden);
+                let f = share * (1.0 - px[3]) / hidden;
                 let over = *px;
                 for ch in 0..4 {
                     px[ch] += f * (sum[ch] - over[ch]);
