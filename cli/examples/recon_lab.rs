@@ -48,12 +48,7 @@ fn main() -> anyhow::Result<()> {
     let camera = Camera::from_json_str(&scene.camera_json())?;
     let frames = scene::render_stochastic(&scene, 16, &render)?;
     let reference = to_runtime(scene::render_reference(&scene, 1024, &render)?);
-    let one = scene::StochasticFrames {
-        width: frames.width,
-        height: frames.height,
-        spp: 1,
-        samples: frames.samples.iter().step_by(16).copied().collect(),
-    };
+    let one = frames.first_samples(1);
     let effects = effects_of(&camera, &frames);
     let dbs = spreadlet_cli::demo::cached_dbs(
         effects,
@@ -97,16 +92,7 @@ fn main() -> anyhow::Result<()> {
     }
     if std::env::var("LAB_ALL").is_ok() {
         for spp in [2usize, 4, 16] {
-            let sub = scene::StochasticFrames {
-                width: frames.width,
-                height: frames.height,
-                spp,
-                samples: frames
-                    .samples
-                    .chunks(16)
-                    .flat_map(|c| c[..spp].iter().copied())
-                    .collect(),
-            };
+            let sub = frames.first_samples(spp);
             let (image, _) = spreadlet::reconstruct::reconstruct(&sub, &camera, &dbs, &options)?;
             println!("reconstruct_{spp}spp: {:.4}", ssim(&image, &reference)?);
         }

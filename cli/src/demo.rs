@@ -170,12 +170,7 @@ pub fn run(options: &DemoOptions) -> Result<Vec<(String, DemoStep)>> {
     let gbuffer = crate::gbuffer_of(&g)?;
 
     // One-sample frames: the first sample of every pixel.
-    let one_spp = scene::StochasticFrames {
-        width: frames.width,
-        height: frames.height,
-        spp: 1,
-        samples: frames.samples.iter().step_by(frames.spp).copied().collect(),
-    };
+    let one_spp = frames.first_samples(1);
 
     let effects = Effects::of(&camera, &gbuffer);
     say("loading (or building) the databases");

@@ -329,12 +329,7 @@ mod tests {
                 }
             }
         }
-        StochasticFrames {
-            width: w,
-            height: h,
-            spp,
-            samples,
-        }
+        StochasticFrames::new(w, h, spp, samples)
     }
 
     #[test]

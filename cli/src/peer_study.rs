@@ -32,7 +32,6 @@ use spreadlet::synth::ms_since;
 
 use anyhow::{Context, Result};
 use peers::{InputKind, PeerMethod};
-use scene::StochasticFrames;
 
 use crate::demo::cached_dbs;
 use crate::peer::{reconstruct_peer, synthesize_peer, unhandled_effects};
@@ -390,21 +389,6 @@ fn cli_synth_options() -> SynthOptions {
     }
 }
 
-/// The first `spp` samples of every pixel.
-fn first_samples(frames: &StochasticFrames, spp: usize) -> StochasticFrames {
-    let spp = spp.clamp(1, frames.spp.max(1));
-    StochasticFrames {
-        width: frames.width,
-        height: frames.height,
-        spp,
-        samples: frames
-            .samples
-            .chunks(frames.spp.max(1))
-            .flat_map(|px| px[..spp].iter().copied())
-            .collect(),
-    }
-}
-
 type SceneResult = (Vec<StudyRow>, Vec<RgbaImage>, RgbaImage);
 
 /// Renders one built-in scene and runs every method on it.
@@ -437,7 +421,7 @@ fn study_scene(
     }
     let effects = effects_of(&camera, &frames);
     for spp in config.our_spp() {
-        let sub = first_samples(&frames, spp);
+        let sub = frames.first_samples(spp);
         let options = cli_synth_options();
         let set = dbs.get(effects, &camera)?;
         let t = Instant::now();
@@ -454,7 +438,7 @@ fn study_scene(
         )?;
     }
     for (method, spp) in &config.sample_peers {
-        let sub = first_samples(&frames, *spp);
+        let sub = frames.first_samples(*spp);
         let run = reconstruct_peer(method.name(), &sub, &camera, true)?;
         acc.push(
             method.name(),
@@ -469,7 +453,7 @@ fn study_scene(
     let mut baselines: Vec<usize> = vec![1, frames.spp];
     baselines.dedup();
     for spp in baselines {
-        let sub = first_samples(&frames, spp);
+        let sub = frames.first_samples(spp);
         let t = Instant::now();
         let image = sub.average();
         let ms = ms_since(t);

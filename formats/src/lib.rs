@@ -38,4 +38,4 @@ pub use error::{Error, Result};
 pub use gbuffer::{ChannelOptions, GBuffer, GBufferError, ViewLayer};
 pub use image::RgbaImage;
 pub use srgb::srgb_encode;
-pub use stochastic::{Sample, StochasticFrames};
+pub use stochastic::{GuidesError, Sample, SampleGuides, StochasticFrames};

@@ -15,6 +15,11 @@ pub const CHANNELS: [&str; 12] = [
     "R", "G", "B", "A", "Z", "lens.u", "lens.v", "time", "motion.x", "motion.y", "jitter.x",
     "jitter.y",
 ];
+/// The optional guide channels, in [`SampleGuides`] field order: the denoiser's albedo and
+/// normal of each sample's first hit (Cycles' Denoising Albedo and Normal passes).
+pub const GUIDE_CHANNELS: [&str; 6] = [
+    "albedo.R", "albedo.G", "albedo.B", "normal.X", "normal.Y", "normal.Z",
+];
 
 /// One sample: a single ray's result and the labels needed to reconstruct from it.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -69,6 +74,65 @@ impl Sample {
     }
 }
 
+/// A denoiser's guides for one sample: what its ray first hit, without lighting.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SampleGuides {
+    /// Linear reflectance of the first hit (emission on emitters, as Cycles writes it), RGB.
+    pub albedo: [f32; 3],
+    /// Shading normal of the first hit in camera space: x right, y up, z along the view (as
+    /// Cycles writes it); unit length on a hit, zero on a miss.
+    pub normal: [f32; 3],
+}
+
+impl SampleGuides {
+    /// The guides as their channels, in [`GUIDE_CHANNELS`] order.
+    pub fn to_channels(self) -> [f32; 6] {
+        [
+            self.albedo[0],
+            self.albedo[1],
+            self.albedo[2],
+            self.normal[0],
+            self.normal[1],
+            self.normal[2],
+        ]
+    }
+
+    /// Guides from their channels, in [`GUIDE_CHANNELS`] order.
+    pub fn from_channels(c: [f32; 6]) -> Self {
+        Self {
+            albedo: [c[0], c[1], c[2]],
+            normal: [c[3], c[4], c[5]],
+        }
+    }
+}
+
+/// Guides that do not fit their frames.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum GuidesError {
+    /// Not one guide per sample.
+    #[error("{guides} guides for {samples} samples: the guides must come one per sample")]
+    Count {
+        /// Guides given.
+        guides: usize,
+        /// Samples in the frames.
+        samples: usize,
+    },
+    /// A guide value that is not a number or infinite.
+    #[error("guide channel {channel} is {value} at pixel ({x}, {y}), sample {sample}: guides must be finite (a miss has albedo and normal 0)")]
+    NotFinite {
+        /// The channel's name.
+        channel: &'static str,
+        /// The value found.
+        value: f32,
+        /// Pixel column.
+        x: usize,
+        /// Pixel row.
+        y: usize,
+        /// Sample index within the pixel.
+        sample: usize,
+    },
+}
+
 /// All samples of a frame, pixel-major: sample k of pixel (x, y) is
 /// `samples[(y * width + x) * spp + k]`.
 #[derive(Clone, Debug, PartialEq)]
@@ -81,9 +145,72 @@ pub struct StochasticFrames {
     pub spp: usize,
     /// `width * height * spp` samples.
     pub samples: Vec<Sample>,
+    /// The denoiser's guides, one per sample in the order of `samples`, when the frames carry
+    /// them (files without the guide channels read as `None`).
+    pub guides: Option<Vec<SampleGuides>>,
 }
 
 impl StochasticFrames {
+    /// Frames without guides.
+    pub fn new(width: usize, height: usize, spp: usize, samples: Vec<Sample>) -> Self {
+        Self {
+            width,
+            height,
+            spp,
+            samples,
+            guides: None,
+        }
+    }
+
+    /// These frames with `guides`, one per sample in the order of `samples`; an error when
+    /// their count differs or a value is not finite.
+    pub fn with_guides(
+        mut self,
+        guides: Vec<SampleGuides>,
+    ) -> std::result::Result<Self, GuidesError> {
+        if guides.len() != self.samples.len() {
+            return Err(GuidesError::Count {
+                guides: guides.len(),
+                samples: self.samples.len(),
+            });
+        }
+        for (i, g) in guides.iter().enumerate() {
+            let channels = g.to_channels();
+            if let Some(c) = channels.iter().position(|v| !v.is_finite()) {
+                let (pixel, k) = (i / self.spp.max(1), i % self.spp.max(1));
+                return Err(GuidesError::NotFinite {
+                    channel: GUIDE_CHANNELS[c],
+                    value: channels[c],
+                    x: pixel % self.width.max(1),
+                    y: pixel / self.width.max(1),
+                    sample: k,
+                });
+            }
+        }
+        self.guides = Some(guides);
+        Ok(self)
+    }
+
+    /// The first `spp` samples of every pixel (clamped to 1..=`self.spp`), with their guides:
+    /// the frames a smaller sample count would have given.
+    pub fn first_samples(&self, spp: usize) -> Self {
+        let spp = spp.clamp(1, self.spp.max(1));
+        let keep = |i: &usize| i % self.spp.max(1) < spp;
+        Self {
+            width: self.width,
+            height: self.height,
+            spp,
+            samples: (0..self.samples.len())
+                .filter(keep)
+                .map(|i| self.samples[i])
+                .collect(),
+            guides: self
+                .guides
+                .as_ref()
+                .map(|g| (0..g.len()).filter(keep).map(|i| g[i]).collect()),
+        }
+    }
+
     /// The samples of pixel (x, y).
     pub fn pixel(&self, x: usize, y: usize) -> &[Sample] {
         let start = (y * self.width + x) * self.spp;
@@ -130,24 +257,41 @@ impl StochasticFrames {
                 ),
             });
         }
+        if let Some(guides) = &self.guides {
+            if guides.len() != n {
+                return Err(Error::Layout {
+                    path: path.to_path_buf(),
+                    message: format!("{} guides for {n} samples", guides.len()),
+                });
+            }
+        }
         let pixels = self.width * self.height;
+        let row_of = |i: usize| (i % self.spp) * pixels + i / self.spp;
         let mut channels: Vec<Vec<f32>> = vec![vec![0.0; n]; CHANNELS.len()];
         for (i, sample) in self.samples.iter().enumerate() {
-            let (pixel, k) = (i / self.spp, i % self.spp);
-            let row = k * pixels + pixel;
             for (c, v) in sample.to_channels().into_iter().enumerate() {
-                channels[c][row] = v;
+                channels[c][row_of(i)] = v;
             }
+        }
+        let mut named: Vec<(String, Vec<f32>)> = CHANNELS
+            .iter()
+            .map(|s| s.to_string())
+            .zip(channels)
+            .collect();
+        if let Some(guides) = &self.guides {
+            let mut columns: Vec<Vec<f32>> = vec![vec![0.0; n]; GUIDE_CHANNELS.len()];
+            for (i, g) in guides.iter().enumerate() {
+                for (c, v) in g.to_channels().into_iter().enumerate() {
+                    columns[c][row_of(i)] = v;
+                }
+            }
+            named.extend(GUIDE_CHANNELS.iter().map(|s| s.to_string()).zip(columns));
         }
         exr_io::write_channels(
             path,
             self.width,
             self.height * self.spp,
-            CHANNELS
-                .iter()
-                .map(|s| s.to_string())
-                .zip(channels)
-                .collect(),
+            named,
             Some((ATTRIBUTE, self.attribute_value())),
         )
     }
@@ -186,23 +330,64 @@ impl StochasticFrames {
         for name in CHANNELS {
             columns.push(channels.take(name, path)?);
         }
+        let guide_columns = read_guides(&mut channels, path)?;
         let pixels = width * height;
         let n = pixels * spp;
-        let mut samples = Vec::with_capacity(n);
-        for i in 0..n {
-            let (pixel, k) = (i / spp, i % spp);
-            let row = k * pixels + pixel;
-            samples.push(Sample::from_channels(std::array::from_fn(|c| {
-                columns[c][row]
-            })));
+        let row_of = |i: usize| (i % spp) * pixels + i / spp;
+        let samples = (0..n)
+            .map(|i| Sample::from_channels(std::array::from_fn(|c| columns[c][row_of(i)])))
+            .collect();
+        let frames = Self::new(width, height, spp, samples);
+        match guide_columns {
+            None => Ok(frames),
+            Some(columns) => {
+                let guides = (0..n)
+                    .map(|i| {
+                        SampleGuides::from_channels(std::array::from_fn(|c| columns[c][row_of(i)]))
+                    })
+                    .collect();
+                frames
+                    .with_guides(guides)
+                    .map_err(|e| layout(e.to_string()))
+            }
         }
-        Ok(Self {
-            width,
-            height,
-            spp,
-            samples,
-        })
     }
+}
+
+/// The guide channels of a stochastic-frames file, in [`GUIDE_CHANNELS`] order: `None` when it
+/// has none of them; an error when it has only some, or a value that is not finite (a
+/// denoiser's guide must be a number everywhere; a miss has albedo and normal 0; checked by
+/// [`StochasticFrames::with_guides`]).
+fn read_guides(channels: &mut exr_io::Channels, path: &Path) -> Result<Option<Vec<Vec<f32>>>> {
+    let present: Vec<&str> = GUIDE_CHANNELS
+        .iter()
+        .copied()
+        .filter(|name| channels.data.contains_key(*name))
+        .collect();
+    if present.is_empty() {
+        return Ok(None);
+    }
+    let layout = |message: String| Error::Layout {
+        path: path.to_path_buf(),
+        message,
+    };
+    if present.len() != GUIDE_CHANNELS.len() {
+        let missing: Vec<&str> = GUIDE_CHANNELS
+            .iter()
+            .copied()
+            .filter(|name| !present.contains(name))
+            .collect();
+        return Err(layout(format!(
+            "guide channels come as all of {} or none; missing {}",
+            GUIDE_CHANNELS.join(", "),
+            missing.join(", ")
+        )));
+    }
+    let mut columns = Vec::with_capacity(GUIDE_CHANNELS.len());
+    for name in GUIDE_CHANNELS {
+        columns.push(channels.take(name, path)?);
+    }
+    Ok(Some(columns))
 }
 
 /// Parses `stochastic-frames version=1 width=W height=H spp=N`.
@@ -233,14 +418,93 @@ fn parse_attribute(value: &str) -> Option<(usize, usize, usize)> {
 mod tests {
     use super::*;
 
+    fn frames_with_guides() -> StochasticFrames {
+        let (w, h, spp) = (3, 2, 2);
+        let samples: Vec<Sample> = (0..w * h * spp)
+            .map(|i| Sample {
+                color: [i as f32, 0.5, 0.25, 1.0],
+                depth: 1.0 + i as f32,
+                ..Sample::default()
+            })
+            .collect();
+        let guides = (0..w * h * spp)
+            .map(|i| SampleGuides {
+                albedo: [0.1 * i as f32, 0.2, 0.3],
+                normal: [0.0, 0.6, -0.8],
+            })
+            .collect();
+        StochasticFrames::new(w, h, spp, samples)
+            .with_guides(guides)
+            .expect("guides")
+    }
+
+    #[test]
+    fn guides_round_trip_and_old_files_read_without_them() {
+        let dir = tempfile::tempdir().expect("dir");
+        let with = frames_with_guides();
+        let path = dir.path().join("guided.exr");
+        with.write_exr(&path).expect("write");
+        assert_eq!(StochasticFrames::read_exr(&path).expect("read"), with);
+        let mut without = with.clone();
+        without.guides = None;
+        let path = dir.path().join("plain.exr");
+        without.write_exr(&path).expect("write");
+        let read = StochasticFrames::read_exr(&path).expect("read");
+        assert_eq!(read.guides, None);
+        assert_eq!(read.samples, with.samples);
+        // Smaller sample counts keep each sample's guide with it.
+        let first = with.first_samples(1);
+        assert_eq!(first.samples.len(), 6);
+        assert_eq!(first.samples[1], with.samples[2]);
+        assert_eq!(
+            first.guides.as_ref().expect("guides")[1],
+            with.guides.as_ref().expect("guides")[2]
+        );
+    }
+
+    #[test]
+    fn guides_of_the_wrong_count_or_not_finite_are_refused() {
+        let frames = frames_with_guides();
+        let mut guides = frames.guides.clone().expect("guides");
+        guides.pop();
+        let mut plain = frames.clone();
+        plain.guides = None;
+        assert!(matches!(
+            plain.clone().with_guides(guides),
+            Err(GuidesError::Count {
+                guides: 11,
+                samples: 12
+            })
+        ));
+        let mut guides = frames.guides.clone().expect("guides");
+        guides[7].normal[1] = f32::NAN;
+        let err = plain.clone().with_guides(guides.clone()).expect_err("NaN");
+        assert!(
+            matches!(
+                err,
+                GuidesError::NotFinite {
+                    channel: "normal.Y",
+                    x: 0,
+                    y: 1,
+                    sample: 1,
+                    ..
+                }
+            ),
+            "{err}"
+        );
+        // The same NaN in a file is a clear error naming the channel, not a panic.
+        let dir = tempfile::tempdir().expect("dir");
+        let path = dir.path().join("nan.exr");
+        let mut bad = frames.clone();
+        bad.guides = Some(guides);
+        bad.write_exr(&path).expect("write");
+        let err = StochasticFrames::read_exr(&path).expect_err("NaN guide");
+        assert!(err.to_string().contains("normal.Y"), "{err}");
+    }
+
     #[test]
     fn attribute_round_trips() {
-        let frames = StochasticFrames {
-            width: 3,
-            height: 2,
-            spp: 5,
-            samples: vec![],
-        };
+        let frames = StochasticFrames::new(3, 2, 5, vec![]);
         assert_eq!(parse_attribute(&frames.attribute_value()), Some((3, 2, 5)));
         assert_eq!(
             parse_attribute("stochastic-frames version=2 width=1 height=1 spp=1"),

@@ -7,8 +7,8 @@ use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
 
 use numpy::{
-    PyArray2, PyArray3, PyArray4, PyArrayMethods, PyReadonlyArray2, PyReadonlyArray3,
-    PyReadonlyArray4, PyUntypedArrayMethods,
+    PyArray2, PyArray3, PyArrayMethods, PyReadonlyArray2, PyReadonlyArray3, PyReadonlyArray4,
+    PyUntypedArrayMethods,
 };
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -381,8 +381,11 @@ impl PyRenderer {
     /// Depth of field and motion blur reconstructed from stochastic frames
     /// (`docs/STOCHASTIC.md`): `frames` is an array (h, w, spp, 12) float32 whose last axis
     /// holds a sample's channels in `spreadlet.SAMPLE_CHANNELS` order (what `read_frames`
-    /// returns), or the path of a stochastic-frames EXR. Returns as `synthesize` does.
-    #[pyo3(signature = (frames, camera, stats=false, progress=None))]
+    /// returns), or the path of a stochastic-frames EXR. `guides`, optional, is the denoiser's
+    /// albedo and normal of every sample, an array (h, w, spp, 6) float32 in
+    /// `spreadlet.GUIDE_CHANNELS` order (what `read_frames(path, guides=True)` returns); it
+    /// replaces the guides a file holds. Returns as `synthesize` does.
+    #[pyo3(signature = (frames, camera, stats=false, progress=None, guides=None))]
     fn reconstruct<'py>(
         &mut self,
         py: Python<'py>,
@@ -390,6 +393,7 @@ impl PyRenderer {
         camera: &PyCamera,
         stats: bool,
         progress: Option<Py<PyAny>>,
+        guides: Option<PyReadonlyArray4<'py, f32>>,
     ) -> PyResult<PyObject> {
         let frames = if let Ok(array) = frames.extract::<PyReadonlyArray4<'py, f32>>() {
             frames_of_array(&array)?
@@ -400,6 +404,10 @@ impl PyRenderer {
             return Err(value_error(
                 "frames must be a float32 array (height, width, spp, 12) or a path",
             ));
+        };
+        let frames = match guides {
+            Some(array) => with_guides_of_array(frames, &array)?,
+            None => frames,
         };
         if (frames.width, frames.height)
             != (camera.inner.width as usize, camera.inner.height as usize)
@@ -461,12 +469,7 @@ fn frames_of_array(array: &PyReadonlyArray4<'_, f32>) -> PyResult<renderer::Stoc
         .chunks_exact(formats::stochastic::CHANNELS.len())
         .map(|c| renderer::Sample::from_channels(std::array::from_fn(|i| c[i])))
         .collect();
-    Ok(renderer::StochasticFrames {
-        width,
-        height,
-        spp,
-        samples,
-    })
+    Ok(renderer::StochasticFrames::new(width, height, spp, samples))
 }
 
 /// The image of `frame`, with its statistics as a dict when `stats`.
@@ -492,26 +495,74 @@ fn frame_result(py: Python<'_>, frame: &renderer::Frame, stats: bool) -> PyResul
     Ok((image, d).into_pyobject(py)?.into_any().unbind())
 }
 
+/// `frames` with the guides of an array (h, w, spp, 6), which must match the frames' shape.
+fn with_guides_of_array(
+    frames: renderer::StochasticFrames,
+    array: &PyReadonlyArray4<'_, f32>,
+) -> PyResult<renderer::StochasticFrames> {
+    let shape = array.shape();
+    let want = [
+        frames.height,
+        frames.width,
+        frames.spp,
+        formats::stochastic::GUIDE_CHANNELS.len(),
+    ];
+    if shape != want {
+        return Err(value_error(format!(
+            "guides must have shape {want:?} (the frames' height, width and spp, then {}), \
+             got {shape:?}",
+            formats::stochastic::GUIDE_CHANNELS.join(", ")
+        )));
+    }
+    let view = array.as_array();
+    let standard = view.as_standard_layout();
+    let flat = standard
+        .as_slice()
+        .ok_or_else(|| value_error("guides is not contiguous"))?;
+    let guides = flat
+        .chunks_exact(formats::stochastic::GUIDE_CHANNELS.len())
+        .map(|c| formats::SampleGuides::from_channels(std::array::from_fn(|i| c[i])))
+        .collect();
+    frames.with_guides(guides).map_err(value_error)
+}
+
 /// Reads a stochastic-frames EXR (`docs/STOCHASTIC.md`) as an array (h, w, spp, 12) float32,
-/// the last axis a sample's channels in `SAMPLE_CHANNELS` order.
+/// the last axis a sample's channels in `SAMPLE_CHANNELS` order. With `guides=True`, returns
+/// `(frames, guides)`: `guides` is an array (h, w, spp, 6) float32 of the denoiser's albedo
+/// and normal in `GUIDE_CHANNELS` order, or None when the file has no guide channels.
 #[pyfunction]
-fn read_frames<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyArray4<f32>>> {
+#[pyo3(signature = (path, guides=false))]
+fn read_frames(py: Python<'_>, path: PathBuf, guides: bool) -> PyResult<PyObject> {
     let frames = py
         .allow_threads(|| renderer::StochasticFrames::read_exr(&path))
         .map_err(value_error)?;
+    let (h, w, spp) = (frames.height, frames.width, frames.spp);
     let flat: Vec<f32> = frames
         .samples
         .iter()
         .flat_map(|s| s.to_channels())
         .collect();
-    Ok(numpy::PyArray1::from_vec(py, flat)
-        .reshape([
-            frames.height,
-            frames.width,
-            frames.spp,
-            formats::stochastic::CHANNELS.len(),
-        ])
-        .expect("the samples fill the shape"))
+    let samples = numpy::PyArray1::from_vec(py, flat)
+        .reshape([h, w, spp, formats::stochastic::CHANNELS.len()])
+        .map_err(|e| value_error(e.to_string()))?;
+    if !guides {
+        return Ok(samples.into_any().unbind());
+    }
+    let guide_array = match &frames.guides {
+        Some(g) => {
+            let flat: Vec<f32> = g.iter().flat_map(|g| g.to_channels()).collect();
+            Some(
+                numpy::PyArray1::from_vec(py, flat)
+                    .reshape([h, w, spp, formats::stochastic::GUIDE_CHANNELS.len()])
+                    .map_err(|e| value_error(e.to_string()))?,
+            )
+        }
+        None => None,
+    };
+    Ok((samples, guide_array)
+        .into_pyobject(py)?
+        .into_any()
+        .unbind())
 }
 
 /// SSIM, PSNR (dB, None when identical), FLIP mean and 99th percentile of `a` against
@@ -558,5 +609,9 @@ fn spreadlet(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(compare, m)?)?;
     m.add_function(wrap_pyfunction!(read_frames, m)?)?;
     m.add("SAMPLE_CHANNELS", formats::stochastic::CHANNELS.to_vec())?;
+    m.add(
+        "GUIDE_CHANNELS",
+        formats::stochastic::GUIDE_CHANNELS.to_vec(),
+    )?;
     Ok(())
 }

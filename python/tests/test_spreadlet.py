@@ -112,6 +112,29 @@ def test_reconstruct_writes_what_the_cli_writes(scene):
         r.reconstruct(frames[:32].copy(), camera)
 
 
+def test_reconstruct_takes_the_denoiser_guides(scene):
+    d, _, cam = scene
+    frames_path = str(d / "frames.exr")
+    camera = spreadlet.Camera.from_json(cam)
+    # The scene renderer writes the guides: what each sample's ray hit, its albedo and its
+    # camera-space normal (unit length on a hit; every ray of this scene hits the wall or more).
+    frames, guides = spreadlet.read_frames(frames_path, guides=True)
+    assert list(spreadlet.GUIDE_CHANNELS) == ["albedo.R", "albedo.G", "albedo.B",
+                                              "normal.X", "normal.Y", "normal.Z"]
+    assert guides.shape == frames.shape[:3] + (6,) and guides.dtype == np.float32
+    assert np.allclose(np.linalg.norm(guides[..., 3:], axis=-1), 1.0, atol=1e-4)
+    assert spreadlet.read_frames(frames_path).shape == frames.shape
+    r = spreadlet.Renderer(backend="cpu")
+    image = r.reconstruct(frames, camera, guides=guides)
+    assert image.shape == (camera.height, camera.width, 4) and np.isfinite(image).all()
+    assert np.array_equal(image, r.reconstruct(frames_path, camera))
+    with pytest.raises(ValueError, match="guides must have shape"):
+        r.reconstruct(frames, camera, guides=guides[:, :, :1].copy())
+    guides[3, 4, 1, 4] = np.nan
+    with pytest.raises(ValueError, match="normal.Y"):
+        r.reconstruct(frames, camera, guides=guides)
+
+
 def test_progress_reaches_the_callback_while_a_database_is_built(scene, tmp_path):
     _, g, cam = scene
     gbuffer = spreadlet.read_gbuffer(g)

@@ -377,12 +377,7 @@ mod tests {
         let (u, v, t, m) = (0.6f32, -0.3f32, 0.25f32, [8.0f32, -4.0f32]);
         let (sx, sy) = (qx + coc * u + m[0] * t, qy + coc * v + m[1] * t);
         let (x, y) = (sx.floor() as usize, sy.floor() as usize);
-        let mut frames = StochasticFrames {
-            width: 16,
-            height: 16,
-            spp: 1,
-            samples: vec![Sample::default(); 256],
-        };
+        let mut frames = StochasticFrames::new(16, 16, 1, vec![Sample::default(); 256]);
         frames.samples[y * 16 + x] = Sample {
             color: [1.0; 4],
             depth,
@@ -406,12 +401,7 @@ mod tests {
     #[test]
     fn bilinear_placement_keeps_weight_and_position() {
         let cam = camera();
-        let mut frames = StochasticFrames {
-            width: 16,
-            height: 16,
-            spp: 2,
-            samples: vec![Sample::default(); 512],
-        };
+        let mut frames = StochasticFrames::new(16, 16, 2, vec![Sample::default(); 512]);
         let (x, y) = (6usize, 9usize);
         frames.samples[(y * 16 + x) * 2] = Sample {
             color: [0.5, 0.25, 1.0, 1.0],
@@ -439,12 +429,7 @@ mod tests {
 
     /// One opaque sample at depth `depth` with jitter `jitter`, in pixel (6, 9) of a 16x16 frame.
     fn lone_sample(depth: f32, jitter: [f32; 2], motion: [f32; 2]) -> StochasticFrames {
-        let mut frames = StochasticFrames {
-            width: 16,
-            height: 16,
-            spp: 1,
-            samples: vec![Sample::default(); 256],
-        };
+        let mut frames = StochasticFrames::new(16, 16, 1, vec![Sample::default(); 256]);
         frames.samples[9 * 16 + 6] = Sample {
             color: [0.5, 0.25, 1.0, 1.0],
             depth,
@@ -572,11 +557,11 @@ mod tests {
     #[test]
     fn non_finite_samples_are_dropped_and_counted() {
         let cam = camera();
-        let mut frames = StochasticFrames {
-            width: 16,
-            height: 16,
-            spp: 1,
-            samples: vec![
+        let mut frames = StochasticFrames::new(
+            16,
+            16,
+            1,
+            vec![
                 Sample {
                     color: [1.0; 4],
                     depth: 1.0,
@@ -584,7 +569,7 @@ mod tests {
                 };
                 256
             ],
-        };
+        );
         frames.samples[3].depth = f32::NAN;
         frames.samples[4].color[0] = f32::INFINITY;
         let (fragments, dropped) = sample_fragments(

@@ -30,12 +30,7 @@ fn footprint_keeps_the_psf_of_an_in_focus_moving_sample() {
     )
     .expect("db set");
     let cam = camera(32, 32, true, 1.0);
-    let mut frames = StochasticFrames {
-        width: 32,
-        height: 32,
-        spp: 1,
-        samples: vec![Sample::default(); 32 * 32],
-    };
+    let mut frames = StochasticFrames::new(32, 32, 1, vec![Sample::default(); 32 * 32]);
     frames.samples[16 * 32 + 12] = Sample {
         color: [1.0, 0.5, 0.25, 1.0],
         depth: 1.0, // the focus distance: CoC 0

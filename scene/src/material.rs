@@ -80,6 +80,22 @@ pub enum Light {
         /// Linear RGB irradiance scale.
         intensity: [f32; 3],
     },
+    /// A rectangle `corner + a edge_u + b edge_v` (a, b in [0, 1]) that emits `radiance`
+    /// uniformly from its front side, the side `edge_u x edge_v` points to (a Blender area
+    /// light). Soft shadows: each shading point sees it through one random point of the
+    /// rectangle, so a penumbra is noisy in one sample and converges over many. Contributes
+    /// `radiance cos_surface cos_light area / (pi distance^2)` per sample (the irradiance over
+    /// pi, as the other lights' terms are), shadowed.
+    Area {
+        /// One corner, metres.
+        corner: DVec3,
+        /// First edge from the corner, metres.
+        edge_u: DVec3,
+        /// Second edge from the corner, metres.
+        edge_v: DVec3,
+        /// Linear RGB radiance of the front side.
+        radiance: [f32; 3],
+    },
 }
 
 impl Light {
@@ -101,6 +117,22 @@ impl Light {
                     ));
                 }
                 (*direction, intensity)
+            }
+            Light::Area {
+                corner,
+                edge_u,
+                edge_v,
+                radiance,
+            } => {
+                if !(edge_u.is_finite() && edge_v.is_finite())
+                    || edge_u.cross(*edge_v).length_squared() == 0.0
+                {
+                    return Err(invalid(
+                        context,
+                        "area light needs two finite, non-parallel, non-zero edges",
+                    ));
+                }
+                (*corner, radiance)
             }
         };
         if !v.is_finite() || i.iter().any(|c| !c.is_finite() || *c < 0.0) {

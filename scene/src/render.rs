@@ -302,7 +302,8 @@ fn render_gbuffer_with(
 }
 
 /// Stochastic frames: `spp` independent samples per pixel, each one ray at a uniformly random
-/// lens position, time in the shutter and (with `options.jitter`) position in the pixel.
+/// lens position, time in the shutter and (with `options.jitter`) position in the pixel, with
+/// the denoiser's guides of what each ray hit ([`Scene::guides`]).
 pub fn render_stochastic(
     scene: &Scene,
     spp: usize,
@@ -349,24 +350,23 @@ pub fn render_stochastic(
                     .hit
                     .map(|hit| scene.image_velocity(&hit, time))
                     .unwrap_or(DVec2::ZERO);
-                row.push(Sample {
+                let sample = Sample {
                     color: trace.color,
                     depth: trace.depth as f32,
                     lens: [lens.x as f32, lens.y as f32],
                     time: time as f32,
                     motion: [motion.x as f32, motion.y as f32],
                     jitter: [jitter.x as f32, jitter.y as f32],
-                });
+                };
+                row.push((sample, scene.guides(trace.hit.as_ref())));
             }
         }
         row
     });
-    Ok(StochasticFrames {
-        width,
-        height,
-        spp,
-        samples,
-    })
+    let (samples, guides) = samples.into_iter().unzip();
+    StochasticFrames::new(width, height, spp, samples)
+        .with_guides(guides)
+        .map_err(|e| invalid("stochastic frames", e.to_string()))
 }
 
 /// The converged reference: per pixel the mean of `spp` rays whose pixel position, lens

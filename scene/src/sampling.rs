@@ -34,6 +34,68 @@ pub fn pixel_rng(seed: u64, stream: Stream, pixel_index: u64) -> ChaCha8Rng {
     ChaCha8Rng::seed_from_u64(key)
 }
 
+/// The generator of the random choices made while shading `ray` (area light points, bounce
+/// directions): a hash of the ray itself, so every ray of every render shades with its own
+/// numbers, deterministically, without threading a generator through the tracer.
+pub fn ray_rng(ray: &crate::camera::Ray) -> ChaCha8Rng {
+    let words = [
+        ray.origin.x,
+        ray.origin.y,
+        ray.origin.z,
+        ray.direction.x,
+        ray.direction.y,
+        ray.direction.z,
+        ray.time,
+    ];
+    let key = words
+        .iter()
+        .fold(mix(0x5348_4144_494e_4721), |h, w| mix(h ^ w.to_bits()));
+    ChaCha8Rng::seed_from_u64(key)
+}
+
+/// The random numbers shading one ray draws (area light points, bounce directions): from
+/// [`ray_rng`] of that ray, seeded the first time a number is needed, so scenes that draw
+/// none pay nothing for it.
+pub struct ShadingRng {
+    ray: crate::camera::Ray,
+    rng: Option<ChaCha8Rng>,
+}
+
+impl ShadingRng {
+    /// The numbers of `ray`.
+    pub fn new(ray: &crate::camera::Ray) -> Self {
+        Self {
+            ray: *ray,
+            rng: None,
+        }
+    }
+
+    /// Numbers drawn from `rng` instead (for estimates that shade one hit many times).
+    pub fn from_rng(rng: ChaCha8Rng, ray: &crate::camera::Ray) -> Self {
+        Self {
+            ray: *ray,
+            rng: Some(rng),
+        }
+    }
+
+    /// A uniform number in [0, 1).
+    pub fn uniform(&mut self) -> f64 {
+        let ray = &self.ray;
+        uniform(self.rng.get_or_insert_with(|| ray_rng(ray)))
+    }
+}
+
+/// A direction on the hemisphere around the unit `normal`, drawn with density `cos / pi`
+/// (Malley's method: a uniform point of the unit disk lifted onto the hemisphere).
+pub fn cosine_hemisphere(normal: glam::DVec3, u1: f64, u2: f64) -> glam::DVec3 {
+    let r = u1.sqrt();
+    let phi = 2.0 * std::f64::consts::PI * u2;
+    let (x, y) = (r * phi.cos(), r * phi.sin());
+    let z = (1.0 - u1).max(0.0).sqrt();
+    let (t, b) = normal.any_orthonormal_pair();
+    (t * x + b * y + normal * z).normalize()
+}
+
 /// Uniform number in [0, 1).
 pub fn uniform(rng: &mut ChaCha8Rng) -> f64 {
     rng.random::<f64>()

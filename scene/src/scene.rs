@@ -9,6 +9,7 @@ use serde::{Deserialize, Serialize};
 use crate::camera::{Camera, CameraPose, CameraSpec, Ray};
 use crate::error::{invalid, Error, Result};
 use crate::material::{Light, Material};
+use crate::sampling::{cosine_hemisphere, ShadingRng};
 use crate::shapes::{Motion, PreparedShape, Shape, Spin};
 
 /// Depth written where a ray hits nothing (Blender's convention).
@@ -39,6 +40,11 @@ pub struct SceneDescription {
     /// Lights.
     #[serde(default)]
     pub lights: Vec<Light>,
+    /// One diffuse bounce: every shaded point also gathers, along one random direction drawn
+    /// with density `cos / pi`, the light of what that direction sees (its emission and its
+    /// direct lighting, or the background), as indirect light. Off by default.
+    #[serde(default)]
+    pub diffuse_bounce: bool,
     /// Objects.
     pub objects: Vec<ObjectDescription>,
 }
@@ -126,6 +132,8 @@ pub struct Scene {
     pub ambient: [f32; 3],
     /// Lights.
     pub lights: Vec<Light>,
+    /// One diffuse bounce of indirect light ([`SceneDescription::diffuse_bounce`]).
+    pub diffuse_bounce: bool,
     /// Objects.
     pub objects: Vec<Object>,
     description: SceneDescription,
@@ -141,8 +149,8 @@ pub enum ViewLayerPass {
 }
 
 /// Names of the scenes embedded in the library.
-pub const BUILTIN_NAMES: [&str; 6] = [
-    "bokeh", "crossing", "occluder", "rotating", "physical", "rain",
+pub const BUILTIN_NAMES: [&str; 7] = [
+    "bokeh", "crossing", "occluder", "rotating", "physical", "rain", "studio",
 ];
 
 /// The JSON text of a builtin scene.
@@ -154,6 +162,7 @@ pub fn builtin_json(name: &str) -> Option<&'static str> {
         "rotating" => include_str!("../scenes/rotating.json"),
         "physical" => include_str!("../scenes/physical.json"),
         "rain" => include_str!("../scenes/rain.json"),
+        "studio" => include_str!("../scenes/studio.json"),
         _ => return None,
     })
 }
@@ -271,6 +280,7 @@ impl Scene {
             background: description.background,
             ambient: description.ambient,
             lights: description.lights.clone(),
+            diffuse_bounce: description.diffuse_bounce,
             objects,
             description,
         })
@@ -378,10 +388,27 @@ impl Scene {
         })
     }
 
-    /// Outgoing radiance of a hit at `time`: emission + albedo * (ambient + shadowed lights).
-    pub fn shade(&self, hit: &Hit, time: f64) -> [f32; 3] {
+    /// Outgoing radiance of a hit at `time`: emission + albedo * (ambient + shadowed lights +
+    /// with [`Scene::diffuse_bounce`], one sample of indirect light). Area lights and the
+    /// bounce draw their random numbers from `rng`; scenes without them draw none.
+    pub fn shade(&self, hit: &Hit, time: f64, rng: &mut ShadingRng) -> [f32; 3] {
         let material = &self.objects[hit.object].material;
         let albedo = material.albedo_at(hit.uv);
+        let mut irradiance = self.direct_irradiance(hit, time, rng);
+        if self.diffuse_bounce {
+            let indirect = self.indirect_radiance(hit, time, rng);
+            for (e, l) in irradiance.iter_mut().zip(indirect) {
+                *e += l;
+            }
+        }
+        std::array::from_fn(|c| {
+            (f64::from(material.emission[c]) + f64::from(albedo[c]) * irradiance[c]) as f32
+        })
+    }
+
+    /// The light a hit gathers from the ambient term and the lights (shadowed), in the units
+    /// of `albedo * irradiance = radiance` (the irradiance over pi).
+    fn direct_irradiance(&self, hit: &Hit, time: f64, rng: &mut ShadingRng) -> [f64; 3] {
         let mut irradiance = [
             f64::from(self.ambient[0]),
             f64::from(self.ambient[1]),
@@ -405,6 +432,26 @@ impl Scene {
                     direction,
                     intensity,
                 } => (-direction.normalize(), f64::INFINITY, 1.0, intensity),
+                Light::Area {
+                    corner,
+                    edge_u,
+                    edge_v,
+                    radiance,
+                } => {
+                    let (a, b) = (rng.uniform(), rng.uniform());
+                    let point = *corner + *edge_u * a + *edge_v * b;
+                    let d = point - hit.point;
+                    let dist = d.length();
+                    let facing = edge_u.cross(*edge_v);
+                    let area = facing.length();
+                    let cos_light = -(facing / area).dot(d) / dist;
+                    if dist <= 0.0 || cos_light <= 0.0 {
+                        continue;
+                    }
+                    let scale = cos_light * area / (std::f64::consts::PI * dist * dist);
+                    // The shadow ray stops just short of the light's surface.
+                    (d / dist, dist * (1.0 - 1e-9), scale, radiance)
+                }
             };
             let cosine = hit.normal.dot(to_light);
             if cosine <= 0.0 {
@@ -422,9 +469,50 @@ impl Scene {
                 *e += f64::from(*i) * cosine * scale;
             }
         }
-        std::array::from_fn(|c| {
-            (f64::from(material.emission[c]) + f64::from(albedo[c]) * irradiance[c]) as f32
-        })
+        irradiance
+    }
+
+    /// One sample of the indirect light at a hit: the radiance along a direction drawn with
+    /// density `cos / pi` (emission and direct light of what it meets, or the background), which
+    /// is an unbiased estimate of the gathered irradiance over pi.
+    fn indirect_radiance(&self, hit: &Hit, time: f64, rng: &mut ShadingRng) -> [f64; 3] {
+        let direction = cosine_hemisphere(hit.normal, rng.uniform(), rng.uniform());
+        let ray = Ray {
+            origin: hit.point + hit.normal * 1e-7,
+            direction,
+            time,
+        };
+        match self.intersect(&ray, f64::INFINITY) {
+            Some(next) => {
+                let material = &self.objects[next.object].material;
+                let albedo = material.albedo_at(next.uv);
+                let direct = self.direct_irradiance(&next, time, rng);
+                std::array::from_fn(|c| {
+                    f64::from(material.emission[c]) + f64::from(albedo[c]) * direct[c]
+                })
+            }
+            None => self.background.map(f64::from),
+        }
+    }
+
+    /// The denoiser's guides of what a ray hit: its albedo (emission added, as Cycles does) and
+    /// its normal in camera space (x right, y up, z along the view: a surface facing the camera
+    /// reads (0, 0, -1)); zero on a miss.
+    pub fn guides(&self, hit: Option<&Hit>) -> formats::SampleGuides {
+        let Some(hit) = hit else {
+            return formats::SampleGuides::default();
+        };
+        let material = &self.objects[hit.object].material;
+        let albedo = material.albedo_at(hit.uv);
+        let n = hit.normal;
+        formats::SampleGuides {
+            albedo: std::array::from_fn(|c| albedo[c] + material.emission[c]),
+            normal: [
+                n.dot(self.camera.right()) as f32,
+                -n.dot(self.camera.down()) as f32,
+                n.dot(self.camera.forward()) as f32,
+            ],
+        }
     }
 
     /// Traces one camera ray: colour, alpha and planar depth.
@@ -455,7 +543,7 @@ impl Scene {
     fn shaded(&self, ray: &Ray, hit: Option<Hit>, missed: [f32; 3]) -> Trace {
         match hit {
             Some(hit) => {
-                let [r, g, b] = self.shade(&hit, ray.time);
+                let [r, g, b] = self.shade(&hit, ray.time, &mut ShadingRng::new(ray));
                 Trace {
                     color: [r, g, b, 1.0],
                     depth: self.camera.planar_depth(hit.point, ray.time),
@@ -498,6 +586,99 @@ impl Scene {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A camera at the origin looking down -z at a grey floor plane facing it at `z = -1`,
+    /// with `lights` and the bounce as given, and `extra` objects.
+    fn studio(lights: &str, bounce: bool, extra: &str) -> Scene {
+        let text = format!(
+            r#"{{"name": "studio",
+              "camera": {{"width": 8, "height": 8, "focal_length_mm": 50, "sensor_width_mm": 36}},
+              "camera_pose": {{"position": [0, 0, 0], "look_at": [0, 0, -1]}},
+              "lights": [{lights}], "diffuse_bounce": {bounce},
+              "objects": [{{"name": "floor", "shape": {{"type": "plane", "point": [0, 0, -1],
+                            "normal": [0, 0, 1]}}, "material": {{"albedo": [0.5, 0.5, 0.5]}}}}{extra}]}}"#
+        );
+        Scene::from_json(&text, "studio").expect("scene")
+    }
+
+    /// The mean of `n` shadings of the floor's point on the viewing axis (seen from just above
+    /// it, below any ceiling).
+    fn mean_shading(scene: &Scene, n: usize) -> f64 {
+        let ray = Ray {
+            origin: DVec3::new(0.0, 0.0, -0.9),
+            direction: DVec3::new(0.0, 0.0, -1.0),
+            time: 0.0,
+        };
+        let hit = scene.intersect(&ray, f64::INFINITY).expect("the floor");
+        let mut rng = ShadingRng::from_rng(
+            crate::sampling::pixel_rng(7, crate::sampling::Stream::Reference, 0),
+            &ray,
+        );
+        let sum: f64 = (0..n)
+            .map(|_| f64::from(scene.shade(&hit, 0.0, &mut rng)[0]))
+            .sum();
+        sum / n as f64
+    }
+
+    /// The form factor from a point to a parallel rectangle `a x b` at height `h` above one of
+    /// its corners (the standard closed form), which is the irradiance over pi per unit
+    /// radiance.
+    fn corner_form_factor(a: f64, b: f64, h: f64) -> f64 {
+        let (x, y) = (a / h, b / h);
+        let (sx, sy) = ((1.0 + x * x).sqrt(), (1.0 + y * y).sqrt());
+        ((x / sx) * (y / sx).atan() + (y / sy) * (x / sy).atan()) / (2.0 * std::f64::consts::PI)
+    }
+
+    /// A square area light facing the floor point below its centre lights it as the closed
+    /// form says (four corner rectangles), within the Monte Carlo error; seen from behind it
+    /// gives nothing.
+    #[test]
+    fn an_area_light_gives_its_form_factor() {
+        // Side 0.6 m, 0.5 m above the floor point (0, 0, -1), facing down.
+        let light = r#"{"type": "area", "corner": [-0.3, -0.3, -0.5], "edge_u": [0.0, 0.6, 0.0],
+                        "edge_v": [0.6, 0.0, 0.0], "radiance": [2.0, 2.0, 2.0]}"#;
+        let scene = studio(light, false, "");
+        let want = 0.5 * 2.0 * 4.0 * corner_form_factor(0.3, 0.3, 0.5);
+        let got = mean_shading(&scene, 200_000);
+        assert!((got / want - 1.0).abs() < 0.01, "{got} against {want}");
+        let backwards = light
+            .replace("[0.0, 0.6, 0.0]", "[0.0, -0.6, 0.0]")
+            .replace("[-0.3, -0.3, -0.5]", "[-0.3, 0.3, -0.5]");
+        assert_eq!(mean_shading(&studio(&backwards, false, ""), 1000), 0.0);
+    }
+
+    /// One diffuse bounce under a wide emissive ceiling: the floor gathers the ceiling's
+    /// radiance times its form factor, times its own albedo; without the bounce it stays dark.
+    #[test]
+    fn one_bounce_gathers_an_emissive_ceiling() {
+        let ceiling = r#", {"name": "ceiling", "shape": {"type": "quad", "corner": [-20, -20, -0.8],
+                        "edge_u": [40, 0, 0], "edge_v": [0, 40, 0]},
+                        "material": {"albedo": [0, 0, 0], "emission": [3, 3, 3]}}"#;
+        let want = 0.5 * 3.0 * 4.0 * corner_form_factor(20.0, 20.0, 0.2);
+        let got = mean_shading(&studio("", true, ceiling), 100_000);
+        assert!((got / want - 1.0).abs() < 0.01, "{got} against {want}");
+        assert_eq!(mean_shading(&studio("", false, ceiling), 100), 0.0);
+    }
+
+    /// The guides of the floor: its albedo, and its normal facing the camera, (0, 0, -1) in
+    /// camera space; a miss has none.
+    #[test]
+    fn guides_hold_the_albedo_and_the_camera_space_normal() {
+        let scene = studio("", false, "");
+        let ray = Ray {
+            origin: DVec3::ZERO,
+            direction: DVec3::new(0.3, 0.2, -1.0).normalize(),
+            time: 0.0,
+        };
+        let hit = scene.intersect(&ray, f64::INFINITY);
+        let g = scene.guides(hit.as_ref());
+        assert_eq!(g.albedo, [0.5; 3]);
+        assert!(
+            (g.normal[2] + 1.0).abs() < 1e-6 && g.normal[0].abs() < 1e-6,
+            "{g:?}"
+        );
+        assert_eq!(scene.guides(None), formats::SampleGuides::default());
+    }
 
     #[test]
     fn builtins_parse() {

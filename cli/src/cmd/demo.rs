@@ -11,7 +11,7 @@ pub(crate) struct DemoArgs {
     /// Output folder.
     #[arg(long, default_value = "out/demo")]
     pub(crate) out: PathBuf,
-    /// Built-in scene (bokeh, crossing, occluder, rotating, physical).
+    /// Built-in scene (bokeh, crossing, occluder, rotating, physical, studio).
     #[arg(long, default_value = "crossing")]
     pub(crate) scene: String,
     /// Square image size override, pixels.

@@ -35,7 +35,8 @@ enum Command {
 
 #[derive(Args)]
 struct SceneArgs {
-    /// Scene JSON file, or a builtin name (bokeh, crossing, occluder, rotating, physical, rain).
+    /// Scene JSON file, or a builtin name (bokeh, crossing, occluder, rotating, physical, rain,
+    /// studio).
     scene: PathBuf,
     /// Image width in pixels (default: the scene's); the field of view is kept.
     #[arg(long)]
