@@ -27,6 +27,7 @@ pub mod condition;
 pub mod databases;
 pub mod dbcache;
 pub mod dbset;
+pub mod denoise;
 pub mod error;
 #[cfg(feature = "gpu")]
 pub mod gpu;

@@ -94,6 +94,61 @@ impl SamplePlacement {
     }
 }
 
+/// A sample moved back to the lens centre and the shutter centre.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MovedSample {
+    /// Continuous sensor position there, pixels (pixel centres at +0.5).
+    pub q: [f32; 2],
+    /// Signed CoC radius at the sample's depth, pixels.
+    pub coc: f32,
+    /// Its motion, pixels per frame (zero when the frame calls for no motion blur).
+    pub motion: [f32; 2],
+}
+
+/// Every sample moved back to the lens and shutter centre (`docs/STOCHASTIC.md`), in the order
+/// of `frames.samples`; `None` for a sample that carries nothing (all zero) or has a label
+/// that is not finite.
+pub fn moved_samples(
+    frames: &StochasticFrames,
+    camera: &Camera,
+    effects: Effects,
+) -> Vec<Option<MovedSample>> {
+    let lens = camera.thin_lens();
+    frames
+        .samples
+        .iter()
+        .enumerate()
+        .map(|(k, s)| {
+            let pixel = k / frames.spp.max(1);
+            let (px, py) = ((pixel % frames.width) as f32, (pixel / frames.width) as f32);
+            if s.color == [0.0; 4] {
+                return None; // carries nothing, whatever its labels
+            }
+            let finite = s.color.iter().all(|v| v.is_finite())
+                && s.depth.is_finite()
+                && s.depth > 0.0
+                && s.lens
+                    .iter()
+                    .chain(&s.motion)
+                    .chain(&s.jitter)
+                    .all(|v| v.is_finite())
+                && s.time.is_finite();
+            if !finite {
+                return None;
+            }
+            let coc = lens.map_or(0.0, |l| l.signed_coc_px(f64::from(s.depth)) as f32);
+            let motion = if effects.motion { s.motion } else { [0.0; 2] };
+            // Continuous sensor position (pixel centres at +0.5), moved back to the lens centre
+            // and the shutter centre.
+            let q = [
+                px + 0.5 + s.jitter[0] - coc * s.lens[0] - motion[0] * s.time,
+                py + 0.5 + s.jitter[1] - coc * s.lens[1] - motion[1] * s.time,
+            ];
+            Some(MovedSample { q, coc, motion })
+        })
+        .collect()
+}
+
 /// One fragment per finite sample (four with [`SamplePlacement::Bilinear`]), centred where the
 /// lens centre at the shutter centre would have put it. Returns the fragments and the number of
 /// samples dropped (non-finite labels).
@@ -103,10 +158,18 @@ pub fn sample_fragments(
     effects: Effects,
     placement: SamplePlacement,
 ) -> (Vec<Fragment>, usize) {
-    let lens = camera.thin_lens();
     let shutter = camera.shutter_frames as f32;
     let weight = 1.0 / frames.spp.max(1) as f32;
-    let mut dropped = 0;
+    let moved = moved_samples(frames, camera, effects);
+    let dropped = moved
+        .iter()
+        .zip(&frames.samples)
+        .filter(|(m, s)| m.is_none() && s.color != [0.0; 4])
+        .count();
+    let denoised = frames
+        .guides
+        .as_ref()
+        .map(|guides| crate::denoise::denoise_samples(frames, guides, &moved));
     let per_sample = match placement {
         SamplePlacement::Nearest => 1,
         SamplePlacement::Bilinear => 4,
@@ -114,34 +177,19 @@ pub fn sample_fragments(
     };
     let mut fragments = Vec::with_capacity(frames.samples.len() * per_sample);
     for (k, s) in frames.samples.iter().enumerate() {
-        let pixel = k / frames.spp.max(1);
-        let (px, py) = ((pixel % frames.width) as f32, (pixel / frames.width) as f32);
-        if s.color == [0.0; 4] {
-            continue; // carries nothing, whatever its labels
-        }
-        let finite = s.color.iter().all(|v| v.is_finite())
-            && s.depth.is_finite()
-            && s.depth > 0.0
-            && s.lens
-                .iter()
-                .chain(&s.motion)
-                .chain(&s.jitter)
-                .all(|v| v.is_finite())
-            && s.time.is_finite();
-        if !finite {
-            dropped += 1;
+        let Some(MovedSample {
+            q: [qx, qy],
+            coc,
+            motion,
+        }) = moved[k]
+        else {
             continue;
-        }
-        let coc = lens.map_or(0.0, |l| l.signed_coc_px(f64::from(s.depth)) as f32);
-        let motion = if effects.motion { s.motion } else { [0.0; 2] };
-        // Continuous sensor position (pixel centres at +0.5), moved back to the lens centre and
-        // the shutter centre.
-        let qx = px + 0.5 + s.jitter[0] - coc * s.lens[0] - motion[0] * s.time;
-        let qy = py + 0.5 + s.jitter[1] - coc * s.lens[1] - motion[1] * s.time;
+        };
+        let color = denoised.as_ref().map_or(s.color, |d| d[k]);
         let fragment = |x: f32, y: f32, share: f32| Fragment {
             x: x as i32,
             y: y as i32,
-            color: s.color,
+            color,
             weight: weight * share,
             parallax: 1.0 / s.depth,
             depth: s.depth,

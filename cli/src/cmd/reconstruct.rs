@@ -30,6 +30,11 @@ pub(crate) struct ReconstructArgs {
     /// it that is an error.
     #[arg(long)]
     pub(crate) allow_unhandled_effects: bool,
+    /// Leave the shading noise in: ignore the denoiser's guides (albedo, normal) the frames
+    /// carry. With guides, each sample's lighting is first averaged with its surface's
+    /// neighbours at the lens and shutter centre (docs/STOCHASTIC.md).
+    #[arg(long)]
+    pub(crate) no_denoise: bool,
     /// Frame range A-B of a sequence (# in the paths is replaced by the frame number).
     #[arg(long)]
     pub(crate) frames: Option<String>,
@@ -101,8 +106,11 @@ pub(crate) fn run(args: ReconstructArgs) -> Result<()> {
     )?)?;
     for job in &jobs {
         let camera = load_camera(job.camera.as_deref(), &args.camera_flags)?;
-        let frames = StochasticFrames::read_exr(&job.input)
+        let mut frames = StochasticFrames::read_exr(&job.input)
             .with_context(|| format!("reading stochastic frames {}", job.input.display()))?;
+        if args.no_denoise {
+            frames.guides = None;
+        }
         if args.method != "spreadlet" {
             reconstruct_frame_peer(&args, job, &frames, &camera)?;
             continue;

@@ -1,0 +1,327 @@
+//! Denoising stochastic samples where they are cheapest to denoise: at the lens centre and the
+//! shutter centre.
+//!
+//! Moved back there ([`crate::reconstruct::moved_samples`]), the samples of one surface lie
+//! densely around its sharp pinhole image, whatever their lens point and time, so the shading
+//! noise they carry (light selection, soft shadows, bounces) can be averaged over neighbours of
+//! the same surface without blurring lens or motion blur, which the PSFs apply afterwards, and
+//! without mixing a foreground with the background seen past its edge.
+//!
+//! Each sample with guides is a cross-bilateral mean of the samples around it, of its
+//! illumination `c / (albedo + eps)` (demodulated, so that texture is kept exactly and only
+//! lighting is averaged), multiplied back by its own albedo. The weight of a neighbour `j` for
+//! sample `i` is the product of
+//! - space: `exp(-d^2 / (2 sigma^2))`, `d` the distance of their moved positions in pixels;
+//! - depth: `exp(-(dz / (DEPTH_TOLERANCE z_i))^2)`, the same surface or none;
+//! - normal: `max(0, n_i . n_j)^NORMAL_POWER`;
+//! - albedo: `exp(-|a_i - a_j|^2 / ALBEDO_SIGMA^2)`, relative to the brighter albedo, so that an
+//!   emitter (whose guide albedo holds its emission) never mixes with a lit surface.
+//!
+//! Samples without a hit, and samples whose neighbours all weigh nothing, keep their colour.
+
+use formats::{SampleGuides, StochasticFrames};
+use rayon::prelude::*;
+
+use crate::reconstruct::MovedSample;
+
+/// Spatial standard deviation of the filter at one sample per pixel, pixels; it narrows as
+/// `spp^(-1/4)`, so more samples buy both less noise and less blur.
+pub const SIGMA_1SPP_PX: f32 = 1.5;
+
+/// Relative depth difference at which a neighbour's weight falls to `1/e`.
+pub const DEPTH_TOLERANCE: f32 = 0.03;
+
+/// Exponent of the normals' cosine in the weight.
+pub const NORMAL_POWER: i32 = 16;
+
+/// Relative albedo difference at which a neighbour's weight falls to `1/e`.
+pub const ALBEDO_SIGMA: f32 = 0.1;
+
+/// Neighbours farther than this many standard deviations (weight under 0.044) are left out.
+const CUTOFF_SIGMAS: f32 = 2.5;
+
+/// Added to the albedo before demodulating, so that black surfaces keep their colour.
+const ALBEDO_EPSILON: f32 = 1e-3;
+
+/// The spatial standard deviation for `spp` samples per pixel, pixels.
+pub fn sigma_px(spp: usize) -> f32 {
+    SIGMA_1SPP_PX / (spp.max(1) as f32).powf(0.25)
+}
+
+/// The denoised colour of every sample of `frames` (in its order), given its `guides` and
+/// where each sample lands at the lens and shutter centre (`moved`, `None` for samples that
+/// carry nothing). Alpha is kept; colour stays premultiplied.
+pub fn denoise_samples(
+    frames: &StochasticFrames,
+    guides: &[SampleGuides],
+    moved: &[Option<MovedSample>],
+) -> Vec<[f32; 4]> {
+    let (w, h) = (frames.width, frames.height);
+    let sigma = sigma_px(frames.spp);
+    let reach = (CUTOFF_SIGMAS * sigma).ceil() as i64;
+    // Samples indexed by the pixel their moved position falls in (counting sort), for those
+    // inside the frame.
+    let cell_of = |m: &MovedSample| -> Option<usize> {
+        let (x, y) = (m.q[0].floor(), m.q[1].floor());
+        (x >= 0.0 && y >= 0.0 && (x as usize) < w && (y as usize) < h)
+            .then(|| y as usize * w + x as usize)
+    };
+    if guides.len() != frames.samples.len() {
+        return frames.samples.iter().map(|s| s.color).collect();
+    }
+    let hit = |k: usize| frames.samples[k].color[3] > 0.0;
+    let mut starts = vec![0usize; w * h + 1];
+    for (k, m) in moved.iter().enumerate() {
+        if let Some(cell) = m.as_ref().and_then(cell_of).filter(|_| hit(k)) {
+            starts[cell + 1] += 1;
+        }
+    }
+    for i in 0..w * h {
+        starts[i + 1] += starts[i];
+    }
+    // The members' data in cell order, so that a neighbourhood is read from contiguous memory.
+    let mut fill = starts.clone();
+    let mut members = vec![Member::default(); starts[w * h]];
+    for (k, m) in moved.iter().enumerate() {
+        if let Some((cell, m)) = m.as_ref().and_then(|m| cell_of(m).map(|c| (c, m))) {
+            if !hit(k) {
+                continue;
+            }
+            let (s, g) = (&frames.samples[k], &guides[k]);
+            members[fill[cell]] = Member {
+                q: m.q,
+                depth: s.depth,
+                normal: g.normal,
+                albedo: g.albedo,
+                illumination: std::array::from_fn(|c| {
+                    s.color[c] / (g.albedo[c].max(0.0) + ALBEDO_EPSILON)
+                }),
+            };
+            fill[cell] += 1;
+        }
+    }
+    let inv_two_var = 1.0 / (2.0 * sigma * sigma);
+    let inv_albedo_var = 1.0 / (ALBEDO_SIGMA * ALBEDO_SIGMA);
+    let max_d2 = (CUTOFF_SIGMAS * sigma).powi(2);
+    (0..frames.samples.len())
+        .into_par_iter()
+        .map(|i| {
+            let original = frames.samples[i].color;
+            let Some(mi) = moved.get(i).copied().flatten() else {
+                return original;
+            };
+            if !hit(i) {
+                return original;
+            }
+            let (gi, zi) = (guides[i], frames.samples[i].depth);
+            let inv_depth = 1.0 / (DEPTH_TOLERANCE * zi);
+            let (cx, cy) = (mi.q[0].floor() as i64, mi.q[1].floor() as i64);
+            let mut sum = [0.0f32; 3];
+            let mut total = 0.0f32;
+            for y in (cy - reach).max(0)..=(cy + reach).min(h as i64 - 1) {
+                let (x0, x1) = ((cx - reach).max(0), (cx + reach).min(w as i64 - 1));
+                if x1 < x0 {
+                    continue;
+                }
+                let row = y as usize * w;
+                let (first, last) = (row + x0 as usize, row + x1 as usize);
+                for mj in &members[starts[first]..starts[last + 1]] {
+                    let (dx, dy) = (mj.q[0] - mi.q[0], mj.q[1] - mi.q[1]);
+                    let d2 = dx * dx + dy * dy;
+                    if d2 > max_d2 {
+                        continue;
+                    }
+                    let cosine = gi.normal[0] * mj.normal[0]
+                        + gi.normal[1] * mj.normal[1]
+                        + gi.normal[2] * mj.normal[2];
+                    if cosine <= 0.0 {
+                        continue;
+                    }
+                    let dz = (mj.depth - zi) * inv_depth;
+                    let mut scale = ALBEDO_EPSILON;
+                    let mut da2 = 0.0;
+                    for c in 0..3 {
+                        scale = scale.max(gi.albedo[c].abs().max(mj.albedo[c].abs()));
+                        da2 += (gi.albedo[c] - mj.albedo[c]).powi(2);
+                    }
+                    let exponent =
+                        d2 * inv_two_var + dz * dz + da2 / (scale * scale) * inv_albedo_var;
+                    if exponent > 12.0 {
+                        continue;
+                    }
+                    let weight = (-exponent).exp() * cosine.powi(NORMAL_POWER);
+                    if !(weight > 0.0 && weight.is_finite()) {
+                        continue;
+                    }
+                    for (acc, e) in sum.iter_mut().zip(mj.illumination) {
+                        *acc += weight * e;
+                    }
+                    total += weight;
+                }
+            }
+            if total.is_nan() || total <= 0.0 {
+                return original;
+            }
+            let a = gi.albedo;
+            let mut out = original;
+            for c in 0..3 {
+                out[c] = (sum[c] / total) * (a[c].max(0.0) + ALBEDO_EPSILON);
+            }
+            out
+        })
+        .collect()
+}
+
+/// One sample as the filter reads it, stored in the order of the pixels its moved position
+/// falls in.
+#[derive(Clone, Copy, Debug, Default)]
+struct Member {
+    q: [f32; 2],
+    depth: f32,
+    normal: [f32; 3],
+    albedo: [f32; 3],
+    illumination: [f32; 3],
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use formats::Sample;
+
+    /// A `w x h` frame at 1 spp, every sample a hit at its pixel centre, depth 2 (or `depth`
+    /// per pixel), facing the camera, with colour `albedo * light`.
+    fn frame(
+        w: usize,
+        h: usize,
+        albedo: impl Fn(usize, usize) -> f32,
+        light: impl Fn(usize, usize) -> f32,
+        depth: impl Fn(usize, usize) -> f32,
+    ) -> (StochasticFrames, Vec<Option<MovedSample>>) {
+        let mut samples = Vec::new();
+        let mut guides = Vec::new();
+        let mut moved = Vec::new();
+        for y in 0..h {
+            for x in 0..w {
+                let (a, l) = (albedo(x, y), light(x, y));
+                samples.push(Sample {
+                    color: [a * l, a * l, a * l, 1.0],
+                    depth: depth(x, y),
+                    ..Sample::default()
+                });
+                guides.push(SampleGuides {
+                    albedo: [a; 3],
+                    normal: [0.0, 0.0, -1.0],
+                });
+                moved.push(Some(MovedSample {
+                    q: [x as f32 + 0.5, y as f32 + 0.5],
+                    coc: 0.0,
+                    motion: [0.0; 2],
+                }));
+            }
+        }
+        let frames = StochasticFrames::new(w, h, 1, samples)
+            .with_guides(guides)
+            .expect("guides");
+        (frames, moved)
+    }
+
+    /// A deterministic noise in [-0.5, 0.5) per pixel.
+    fn noise(x: usize, y: usize) -> f32 {
+        let h = (x as u64)
+            .wrapping_mul(0x9E37_79B9_7F4A_7C15)
+            .wrapping_add((y as u64).wrapping_mul(0xBF58_476D_1CE4_E5B9));
+        ((h >> 40) as f32 / (1u64 << 24) as f32) - 0.5
+    }
+
+    fn mean_var(values: impl Iterator<Item = f32>) -> (f64, f64) {
+        let v: Vec<f64> = values.map(f64::from).collect();
+        let mean = v.iter().sum::<f64>() / v.len() as f64;
+        let var = v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / v.len() as f64;
+        (mean, var)
+    }
+
+    /// Noisy lighting on one surface: the noise's variance falls at least fivefold and the
+    /// mean stays within 1 %.
+    #[test]
+    fn lighting_noise_is_averaged_over_the_surface() {
+        let (frames, moved) = frame(40, 40, |_, _| 0.5, |x, y| 1.0 + noise(x, y), |_, _| 2.0);
+        let guides = frames.guides.clone().expect("guides");
+        let out = denoise_samples(&frames, &guides, &moved);
+        let inner = |k: &usize| {
+            let (x, y) = (k % 40, k / 40);
+            (4..36).contains(&x) && (4..36).contains(&y)
+        };
+        let (m0, v0) = mean_var((0..1600).filter(inner).map(|k| frames.samples[k].color[0]));
+        let (m1, v1) = mean_var((0..1600).filter(inner).map(|k| out[k][0]));
+        assert!(v1 * 5.0 < v0, "variance {v0} -> {v1}");
+        assert!((m1 / m0 - 1.0).abs() < 0.01, "mean {m0} -> {m1}");
+        assert!(out.iter().all(|c| c[3] == 1.0));
+    }
+
+    /// Under even light a checkered texture comes back exactly: only lighting is averaged.
+    #[test]
+    fn texture_is_kept() {
+        let checker = |x: usize, y: usize| {
+            if (x / 3 + y / 3).is_multiple_of(2) {
+                0.8
+            } else {
+                0.1
+            }
+        };
+        let (frames, moved) = frame(24, 24, checker, |_, _| 0.7, |_, _| 2.0);
+        let guides = frames.guides.clone().expect("guides");
+        let out = denoise_samples(&frames, &guides, &moved);
+        for (k, c) in out.iter().enumerate() {
+            let want = frames.samples[k].color[0];
+            assert!(
+                (c[0] - want).abs() < 1e-5 * want.max(1.0),
+                "{k}: {c:?} vs {want}"
+            );
+        }
+    }
+
+    /// Samples moved far outside the frame (a huge motion label) keep their colour and do not
+    /// disturb the others.
+    #[test]
+    fn samples_outside_the_frame_are_left_alone() {
+        let (frames, mut moved) = frame(8, 8, |_, _| 0.5, |x, y| 1.0 + noise(x, y), |_, _| 2.0);
+        for (k, q) in [
+            (0, [-1e6, -1e6]),
+            (9, [1e6, 4.0]),
+            (20, [4.0, -30.0]),
+            (30, [-40.0, 3.0]),
+        ] {
+            moved[k] = Some(MovedSample {
+                q,
+                coc: 0.0,
+                motion: [0.0; 2],
+            });
+        }
+        let guides = frames.guides.clone().expect("guides");
+        let out = denoise_samples(&frames, &guides, &moved);
+        for k in [0, 9, 20, 30] {
+            assert_eq!(out[k], frames.samples[k].color);
+        }
+        assert!(out.iter().flatten().all(|v| v.is_finite()));
+    }
+
+    /// A near surface and a far one side by side, lit differently: neither takes the other's
+    /// light across their edge.
+    #[test]
+    fn surfaces_at_other_depths_do_not_mix() {
+        let near = |x: usize, _: usize| x < 12;
+        let (frames, moved) = frame(
+            24,
+            12,
+            |_, _| 0.5,
+            |x, y| if near(x, y) { 4.0 } else { 1.0 },
+            |x, y| if near(x, y) { 0.5 } else { 3.0 },
+        );
+        let guides = frames.guides.clone().expect("guides");
+        let out = denoise_samples(&frames, &guides, &moved);
+        for (k, c) in out.iter().enumerate() {
+            let want = frames.samples[k].color[0];
+            assert!((c[0] / want - 1.0).abs() < 1e-4, "{k}: {c:?} vs {want}");
+        }
+    }
+}
