@@ -40,6 +40,10 @@ pub const ALBEDO_SIGMA: f32 = 0.1;
 /// Neighbours farther than this many standard deviations (weight under 0.044) are left out.
 const CUTOFF_SIGMAS: f32 = 2.5;
 
+/// A neighbour's illumination counts at most this many times the mean round a sample without
+/// its brightest neighbour (luminance), in the filter's second pass.
+pub const FIREFLY_FACTOR: f32 = 8.0;
+
 /// Added to the albedo before demodulating, so that black surfaces keep their colour.
 const ALBEDO_EPSILON: f32 = 1e-3;
 
@@ -103,73 +107,108 @@ pub fn denoise_samples(
     let inv_two_var = 1.0 / (2.0 * sigma * sigma);
     let inv_albedo_var = 1.0 / (ALBEDO_SIGMA * ALBEDO_SIGMA);
     let max_d2 = (CUTOFF_SIGMAS * sigma).powi(2);
+    // The cross-bilateral mean illumination round sample `i`, each neighbour's luminance
+    // capped at `ceiling`, or without the brightest neighbour when `ceiling` is infinite (a
+    // level that one outlier does not move); `None` for a sample left as it is.
+    let mean_illumination = |i: usize, ceiling: f32| -> Option<[f32; 3]> {
+        let mi = moved.get(i).copied().flatten()?;
+        if !hit(i) {
+            return None;
+        }
+        let (gi, zi) = (guides[i], frames.samples[i].depth);
+        let inv_depth = 1.0 / (DEPTH_TOLERANCE * zi);
+        let (cx, cy) = (mi.q[0].floor() as i64, mi.q[1].floor() as i64);
+        let mut sum = [0.0f32; 3];
+        let mut total = 0.0f32;
+        // The brightest neighbour: luminance, weight and illumination.
+        let mut brightest = (f32::NEG_INFINITY, 0.0f32, [0.0f32; 3]);
+        for y in (cy - reach).max(0)..=(cy + reach).min(h as i64 - 1) {
+            let (x0, x1) = ((cx - reach).max(0), (cx + reach).min(w as i64 - 1));
+            if x1 < x0 {
+                continue;
+            }
+            let row = y as usize * w;
+            let (first, last) = (row + x0 as usize, row + x1 as usize);
+            for mj in &members[starts[first]..starts[last + 1]] {
+                let (dx, dy) = (mj.q[0] - mi.q[0], mj.q[1] - mi.q[1]);
+                let d2 = dx * dx + dy * dy;
+                if d2 > max_d2 {
+                    continue;
+                }
+                let cosine = gi.normal[0] * mj.normal[0]
+                    + gi.normal[1] * mj.normal[1]
+                    + gi.normal[2] * mj.normal[2];
+                if cosine <= 0.0 {
+                    continue;
+                }
+                let dz = (mj.depth - zi) * inv_depth;
+                let mut scale = ALBEDO_EPSILON;
+                let mut da2 = 0.0;
+                for c in 0..3 {
+                    scale = scale.max(gi.albedo[c].abs().max(mj.albedo[c].abs()));
+                    da2 += (gi.albedo[c] - mj.albedo[c]).powi(2);
+                }
+                let exponent = d2 * inv_two_var + dz * dz + da2 / (scale * scale) * inv_albedo_var;
+                if exponent > 12.0 {
+                    continue;
+                }
+                let weight = (-exponent).exp() * cosine.powi(NORMAL_POWER);
+                if !(weight > 0.0 && weight.is_finite()) {
+                    continue;
+                }
+                let e = mj.illumination;
+                let lum = luminance(e);
+                if lum > brightest.0 {
+                    brightest = (lum, weight, e);
+                }
+                let cap = if lum > ceiling { ceiling / lum } else { 1.0 };
+                for (acc, e) in sum.iter_mut().zip(e) {
+                    *acc += weight * cap * e;
+                }
+                total += weight;
+            }
+        }
+        if ceiling.is_infinite() && total - brightest.1 > 0.0 {
+            let (_, w, e) = brightest;
+            for (acc, e) in sum.iter_mut().zip(e) {
+                *acc -= w * e;
+            }
+            total -= w;
+        }
+        (total > 0.0 && total.is_finite()).then(|| sum.map(|v| v / total))
+    };
+    // First the means without each neighbourhood's brightest sample; then the means with every
+    // neighbour's luminance capped at FIREFLY_FACTOR times that level, so that one rare bright
+    // sample (a bounce that found a small emitter) is not spread into a blob over its
+    // neighbours, nor kept as a speck.
+    let first: Vec<Option<[f32; 3]>> = (0..frames.samples.len())
+        .into_par_iter()
+        .map(|i| mean_illumination(i, f32::INFINITY))
+        .collect();
     (0..frames.samples.len())
         .into_par_iter()
         .map(|i| {
             let original = frames.samples[i].color;
-            let Some(mi) = moved.get(i).copied().flatten() else {
+            let Some(mean) = first[i] else {
                 return original;
             };
-            if !hit(i) {
+            let ceiling = FIREFLY_FACTOR * luminance(mean).max(0.0);
+            let Some(mean) = mean_illumination(i, ceiling) else {
                 return original;
-            }
-            let (gi, zi) = (guides[i], frames.samples[i].depth);
-            let inv_depth = 1.0 / (DEPTH_TOLERANCE * zi);
-            let (cx, cy) = (mi.q[0].floor() as i64, mi.q[1].floor() as i64);
-            let mut sum = [0.0f32; 3];
-            let mut total = 0.0f32;
-            for y in (cy - reach).max(0)..=(cy + reach).min(h as i64 - 1) {
-                let (x0, x1) = ((cx - reach).max(0), (cx + reach).min(w as i64 - 1));
-                if x1 < x0 {
-                    continue;
-                }
-                let row = y as usize * w;
-                let (first, last) = (row + x0 as usize, row + x1 as usize);
-                for mj in &members[starts[first]..starts[last + 1]] {
-                    let (dx, dy) = (mj.q[0] - mi.q[0], mj.q[1] - mi.q[1]);
-                    let d2 = dx * dx + dy * dy;
-                    if d2 > max_d2 {
-                        continue;
-                    }
-                    let cosine = gi.normal[0] * mj.normal[0]
-                        + gi.normal[1] * mj.normal[1]
-                        + gi.normal[2] * mj.normal[2];
-                    if cosine <= 0.0 {
-                        continue;
-                    }
-                    let dz = (mj.depth - zi) * inv_depth;
-                    let mut scale = ALBEDO_EPSILON;
-                    let mut da2 = 0.0;
-                    for c in 0..3 {
-                        scale = scale.max(gi.albedo[c].abs().max(mj.albedo[c].abs()));
-                        da2 += (gi.albedo[c] - mj.albedo[c]).powi(2);
-                    }
-                    let exponent =
-                        d2 * inv_two_var + dz * dz + da2 / (scale * scale) * inv_albedo_var;
-                    if exponent > 12.0 {
-                        continue;
-                    }
-                    let weight = (-exponent).exp() * cosine.powi(NORMAL_POWER);
-                    if !(weight > 0.0 && weight.is_finite()) {
-                        continue;
-                    }
-                    for (acc, e) in sum.iter_mut().zip(mj.illumination) {
-                        *acc += weight * e;
-                    }
-                    total += weight;
-                }
-            }
-            if total.is_nan() || total <= 0.0 {
-                return original;
-            }
-            let a = gi.albedo;
+            };
+            let a = guides[i].albedo;
             let mut out = original;
             for c in 0..3 {
-                out[c] = (sum[c] / total) * (a[c].max(0.0) + ALBEDO_EPSILON);
+                out[c] = mean[c] * (a[c].max(0.0) + ALBEDO_EPSILON);
             }
             out
         })
         .collect()
+}
+
+/// Rec. 709 luminance of linear RGB.
+fn luminance(c: [f32; 3]) -> f32 {
+    0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2]
 }
 
 /// One sample as the filter reads it, stored in the order of the pixels its moved position
@@ -278,6 +317,19 @@ mod tests {
                 "{k}: {c:?} vs {want}"
             );
         }
+    }
+
+    /// One sample two hundred times brighter than its surface (a bounce that found a small
+    /// emitter) is not spread into a blob: every sample round it stays within twice the
+    /// surface's level (without the cap its neighbours would reach about twelve times it).
+    #[test]
+    fn a_firefly_is_not_spread_over_its_neighbours() {
+        let light = |x: usize, y: usize| if (x, y) == (10, 10) { 200.0 } else { 1.0 };
+        let (frames, moved) = frame(21, 21, |_, _| 0.5, light, |_, _| 2.0);
+        let guides = frames.guides.clone().expect("guides");
+        let out = denoise_samples(&frames, &guides, &moved);
+        let worst = out.iter().map(|c| c[0]).fold(0.0f32, f32::max);
+        assert!(worst < 2.0 * 0.5, "brightest sample {worst}");
     }
 
     /// Samples moved far outside the frame (a huge motion label) keep their colour and do not
