@@ -13,8 +13,10 @@
 //!   at 16, `vaidyanathan` at 8, `munkberg`, `munkberg44` at 4 and 8;
 //! - baselines: the plain per-pixel average of the samples at 1 and 16 spp.
 //!
-//! The shared Blender examples hold only a G-buffer, so only the G-buffer methods run on them
-//! (plus Blender's own compositor output, `blender_post.exr`, as a baseline).
+//! On the shared Blender examples the G-buffer methods run (plus Blender's own compositor
+//! output, `blender_post.exr`, as a baseline), and, where an example has Cycles stochastic
+//! frames (`stochastic/`), spreadlet reconstructs from them beside Cycles + OIDN at the same
+//! paths per pixel.
 //!
 //! A method that ignores an effect of the input (`vaidyanathan` and `shirley-layered` on moving
 //! scenes, `mcguire` and `guertin` on any defocused scene) runs anyway and is flagged.
@@ -35,7 +37,7 @@ use peers::{InputKind, PeerMethod};
 
 use crate::demo::cached_dbs;
 use crate::peer::{reconstruct_peer, synthesize_peer, unhandled_effects};
-use formats::{srgb_encode as linear_to_srgb, Error as WriteError, RgbaImage};
+use formats::{srgb_encode as linear_to_srgb, Error as WriteError, RgbaImage, StochasticFrames};
 use spreadlet::camera::Camera;
 use spreadlet::dbset::DbSet;
 use spreadlet::gbuffer::{ChannelOptions, GBuffer};
@@ -610,6 +612,9 @@ fn study_example(
         images: Vec::new(),
     };
     gbuffer_rows(&mut acc, &g, &camera, dbs)?;
+    if config.example_crop.is_none() {
+        cycles_sample_rows(&mut acc, &dir.join("stochastic"), &camera, dbs)?;
+    }
     if let Some(post) = post {
         acc.push(
             "blender-post",
@@ -623,6 +628,56 @@ fn study_example(
     }
     let (rows, images) = (acc.rows, acc.images);
     Ok((rows, images, reference))
+}
+
+/// The Cycles stochastic frames of a shared example (`stochastic/`, when it has them) beside
+/// what a Cycles user does instead at the same number of paths per pixel: Cycles' own lens
+/// and shutter, denoised by OIDN (`cycles_Nspp_oidn.exr`). Both rows give the paths per pixel
+/// in the spp column.
+fn cycles_sample_rows(
+    acc: &mut SceneRows,
+    dir: &Path,
+    camera: &Camera,
+    dbs: &mut DbCache,
+) -> Result<()> {
+    // (frames, Cycles paths per pixel they hold, the peer at those paths)
+    let sets = [
+        ("stochastic_1spp_1path.exr", 1, "cycles_1spp_oidn.exr"),
+        ("stochastic_1spp.exr", 4, "cycles_4spp_oidn.exr"),
+        ("stochastic_4spp.exr", 16, "cycles_16spp_oidn.exr"),
+    ];
+    for (frames_file, paths, peer_file) in sets {
+        let (frames_path, peer_path) = (dir.join(frames_file), dir.join(peer_file));
+        if !frames_path.exists() || !peer_path.exists() {
+            continue;
+        }
+        let frames = StochasticFrames::read_exr(&frames_path)
+            .with_context(|| format!("reading {}", frames_path.display()))?;
+        let set = dbs.get(effects_of(camera, &frames), camera)?;
+        let t = Instant::now();
+        let (image, _) = reconstruct(&frames, camera, set, &cli_synth_options())?;
+        let ms = ms_since(t);
+        acc.push(
+            "spreadlet",
+            "Cycles paths",
+            Some(paths),
+            image,
+            Some(ms),
+            vec![],
+            RowKind::Ours,
+        )?;
+        let peer = read_color(&peer_path)?;
+        acc.push(
+            "cycles+oidn",
+            "Cycles paths",
+            Some(paths),
+            peer,
+            None,
+            vec![],
+            RowKind::Baseline,
+        )?;
+    }
+    Ok(())
 }
 
 /// Index of the highest-SSIM row of `kind`.

@@ -149,3 +149,73 @@ fn the_hardest_region_is_where_the_error_is() {
     assert_eq!(edge, 8);
     assert!((15..=20).contains(&x) && (0..=5).contains(&y), "({x}, {y})");
 }
+
+/// An example folder with Cycles stochastic frames (`stochastic/`) gets spreadlet's
+/// reconstruction beside Cycles + OIDN at the same paths per pixel; a set without its peer file
+/// is left out.
+#[test]
+fn examples_with_stochastic_frames_get_reconstruction_beside_cycles_and_oidn() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let example = dir.path().join("examples").join("comets");
+    std::fs::create_dir_all(example.join("stochastic")).expect("folders");
+    let scene = scene::builtin("crossing")
+        .and_then(|s| s.with_size(32, 32))
+        .expect("scene");
+    let render = scene::RenderOptions {
+        seed: 3,
+        ..Default::default()
+    };
+    scene::render_gbuffer(&scene, 4, &render)
+        .and_then(|g| g.write_exr(&example.join("input.exr")))
+        .expect("G-buffer");
+    std::fs::write(example.join("camera.json"), scene.camera_json()).expect("camera");
+    let reference = scene::render_reference(&scene, 64, &render).expect("reference");
+    reference
+        .write_exr(&example.join("reference.exr"))
+        .expect("reference file");
+    let frames = scene::render_stochastic(&scene, 1, &render).expect("frames");
+    for name in ["stochastic_1spp.exr", "stochastic_1spp_1path.exr"] {
+        frames
+            .write_exr(&example.join("stochastic").join(name))
+            .expect("frames file");
+    }
+    // The peer at 4 paths only: the reference itself stands in for it.
+    reference
+        .write_exr(&example.join("stochastic").join("cycles_4spp_oidn.exr"))
+        .expect("peer file");
+    let options = PeerStudyOptions {
+        out_dir: dir.path().join("peers"),
+        full: false,
+        db_profile: "test".into(),
+        quiet: true,
+    };
+    let config = PeerStudyConfig {
+        scenes: vec![],
+        size: 32,
+        reference_spp: 64,
+        sample_peers: vec![],
+        spreadlet_spp: vec![1],
+        gbuffer_methods: true,
+        examples_dir: Some(dir.path().join("examples")),
+        example_crop: None,
+        seed: 3,
+    };
+    let report = run_with(&options, &config).expect("study runs");
+    let cycles: Vec<_> = report
+        .rows
+        .iter()
+        .filter(|r| r.input == "Cycles paths")
+        .collect();
+    let names: Vec<String> = cycles
+        .iter()
+        .map(|r| format!("{}@{:?}", r.method, r.spp))
+        .collect();
+    assert_eq!(names, ["spreadlet@Some(4)", "cycles+oidn@Some(4)"]);
+    assert_eq!(cycles[0].kind, RowKind::Ours);
+    assert!(
+        cycles[0].ssim > 0.5 && cycles[0].ssim < 1.0,
+        "{:?}",
+        cycles[0]
+    );
+    assert!((cycles[1].ssim - 1.0).abs() < 1e-9, "{:?}", cycles[1]);
+}
