@@ -288,6 +288,13 @@ pub fn run_with(options: &PeerStudyOptions, config: &PeerStudyConfig) -> Result<
         }
     };
     for name in &config.scenes {
+        // The sample methods need stochastic frames, which a real lens has no labels for.
+        if scene::builtin(name).is_ok_and(|s| s.camera_spec().lens.is_some()) {
+            report.skipped.push(format!(
+                "{name}: its camera is a real lens, which stochastic frames cannot label"
+            ));
+            continue;
+        }
         say(&format!(
             "peer study: scene '{name}' at {0}x{0}, reference {1} spp",
             config.size, config.reference_spp

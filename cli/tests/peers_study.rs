@@ -18,7 +18,8 @@ fn tiny_study_writes_a_consistent_table_and_crops() {
         quiet: true,
     };
     let config = PeerStudyConfig {
-        scenes: vec!["bokeh".into(), "crossing".into()],
+        // rain's camera is a real lens: skipped, with the reason.
+        scenes: vec!["bokeh".into(), "crossing".into(), "rain".into()],
         size: 40,
         reference_spp: 128,
         sample_peers: vec![
@@ -32,6 +33,11 @@ fn tiny_study_writes_a_consistent_table_and_crops() {
         seed: 2,
     };
     let report = run_with(&options, &config).expect("study runs");
+    assert!(
+        report.skipped.iter().any(|s| s.starts_with("rain:")),
+        "{:?}",
+        report.skipped
+    );
 
     // Per scene: spreadlet synth, mcguire, guertin; spreadlet at 1 and 4 spp; the two peers;
     // averages at 1 and 4 spp.
