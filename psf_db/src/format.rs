@@ -220,6 +220,12 @@ impl PsfDatabase {
         self.header.space.lookup(s)
     }
 
+    /// The neighbouring cell a PSF for `s` is blended with along dimension `dim`, and its
+    /// share; see [`crate::ParamSpace::neighbour_blend`].
+    pub fn neighbour_blend(&self, s: [f32; 2], dim: usize) -> Option<([f32; 2], f32)> {
+        self.header.space.neighbour_blend(s, dim)
+    }
+
     /// Ceiling of the largest Euclidean distance (px) of any spreadlet or dense pixel from its
     /// PSF centre: the padding a layer needs, valid under any rotation of the PSF.
     pub fn max_extent_px(&self) -> u32 {

@@ -308,11 +308,13 @@ pub fn filter_plan(
     let mut stats = FilterStats::default();
     let t = Instant::now();
     let effects = Effects::of(camera, gbuffer);
-    // One record per non-empty pixel: one layer, no soft layering, no edge split.
+    // One record per non-empty pixel: one layer, no soft layering, no edge split, no blend
+    // of neighbouring cells.
     let classify_options = ClassifyOptions {
         layers: 1,
         soft_layers: None,
         edge_split: false,
+        continuous_lookup: false,
         copy_threshold_px: options.copy_threshold_px,
         ..ClassifyOptions::default()
     };

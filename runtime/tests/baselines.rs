@@ -53,6 +53,8 @@ fn single_layer() -> SynthOptions {
             // The filter gathers nothing from beyond the frame; compare like with like.
             frame_edges: FrameEdges::Black,
             fill_hidden: false,
+            // The filter takes each pixel's one cell.
+            continuous_lookup: false,
             ..ClassifyOptions::default()
         },
         integrator: Integrator::Exact,
@@ -79,7 +81,10 @@ fn dense_splat_of_one_bright_pixel_is_its_stored_psf() {
     let g = one_pixel(n, n, 24, 24, [2.0, 1.0, 0.5, 1.0], depth, [0.0, 0.0]);
     let db = dense_test_db();
     let dbs = set(db);
-    let (image, stats) = synthesize(&g, &cam, &dbs, &SynthOptions::default()).expect("synth");
+    let mut options = SynthOptions::default();
+    // The one PSF of the cell holding the pixel's CoC.
+    options.classify.continuous_lookup = false;
+    let (image, stats) = synthesize(&g, &cam, &dbs, &options).expect("synth");
     assert_eq!(stats.counts.dense, 1, "{:?}", stats.counts);
     let coc = cam.thin_lens().expect("lens").coc_px(f64::from(depth)) as f32;
     let (idx, _) = db.lookup([coc, 0.0]);

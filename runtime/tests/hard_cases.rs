@@ -123,6 +123,8 @@ fn one_layer(integrator: Integrator) -> SynthOptions {
             layers: 1,
             soft_layers: None,
             edge_split: false,
+            // One record per pixel, of the cell holding its parameters.
+            continuous_lookup: false,
             ..ClassifyOptions::default()
         },
         integrator,

@@ -8,31 +8,14 @@
 //! their light exactly: against the reference, one sample per pixel of a small emitter is
 //! several per cent off by noise alone (6 % with this seed), which would hide any bias.
 
-use std::path::Path;
+mod support;
 
-use psf_db::{PsfDatabase, PsfModel};
+use psf_db::PsfModel;
 use spreadlet::camera::Camera;
-use spreadlet::dbcache::{build_config, cache_dir, cached_database, CACHE_ENV};
 use spreadlet::dbset::DbSet;
 use spreadlet::reconstruct::reconstruct;
 use spreadlet::synth::SynthOptions;
-
-/// The database `spreadlet reconstruct` uses (quick profile, circular aperture), conditioned,
-/// from the cache: the Test profile's coarse cells spread the emitter's light several pixels
-/// wider and would hide the compositing behind the PSF.
-fn quick_db(model: PsfModel) -> PsfDatabase {
-    let cfg = build_config(model, precompute::Profile::Quick, 0);
-    // Tests run in runtime/: share the workspace root's cache unless one is set.
-    let dir = if std::env::var_os(CACHE_ENV).is_some() {
-        cache_dir()
-    } else {
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../.spreadlet-cache")
-    };
-    let db = cached_database(&cfg, &dir, false, &|_| {})
-        .expect("quick database")
-        .0;
-    spreadlet::condition::condition(&db).expect("condition").0
-}
+use support::quick_db;
 
 /// Frame edge, pixels.
 const SIZE: usize = 128;

@@ -40,7 +40,9 @@ fn footprint_keeps_the_psf_of_an_in_focus_moving_sample() {
         jitter: [0.15, -0.3],
     };
     assert!(effects_of(&cam, &frames).motion);
-    let options = SynthOptions::default();
+    let mut options = SynthOptions::default();
+    // One record per footprint pixel, of the cell holding its parameters.
+    options.classify.continuous_lookup = false;
     let records = |placement| {
         classify_samples(&frames, &cam, &dbs, &options, placement)
             .expect("prepare")

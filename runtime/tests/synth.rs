@@ -28,6 +28,8 @@ fn plain_options(integrator: Integrator) -> SynthOptions {
             layers: 1,
             soft_layers: None,
             edge_split: false,
+            // One record per pixel, of the cell holding its parameters.
+            continuous_lookup: false,
             ..ClassifyOptions::default()
         },
         integrator,

@@ -156,3 +156,26 @@ fn builtin_scenes_render_something() {
         assert!(r.pixels.iter().all(|p| p.iter().all(|v| v.is_finite())));
     }
 }
+
+#[test]
+fn the_hard_case_scene_files_load_and_render() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/hard");
+    let mut names: Vec<_> = std::fs::read_dir(&dir)
+        .expect("scenes/hard")
+        .map(|e| e.expect("entry").path())
+        .filter(|p| p.extension().is_some_and(|e| e == "json"))
+        .collect();
+    names.sort();
+    assert!(names.len() >= 9, "{} scene files", names.len());
+    for path in names {
+        let scene = scene::Scene::load(&path)
+            .and_then(|s| s.with_size(24, 24))
+            .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        let r = render_reference(&scene, 4, &RenderOptions::default()).expect("render");
+        assert!(
+            r.pixels.iter().all(|p| p.iter().all(|v| v.is_finite())),
+            "{}",
+            path.display()
+        );
+    }
+}

@@ -90,6 +90,11 @@ pub(crate) struct SynthArgs {
     /// background then darkens along them).
     #[arg(long)]
     pub(crate) no_hidden_fill: bool,
+    /// Look each pixel's PSF up in the one database cell holding its CoC and motion, with
+    /// no dither or blend between neighbouring cells (a surface whose blur varies smoothly
+    /// then shows a line at each cell boundary; for comparison).
+    #[arg(long)]
+    pub(crate) nearest_cell: bool,
     /// Poisson integrator (exact by default: the pyramid's small relative error becomes
     /// visible around HDR highlights).
     #[arg(long, value_enum, default_value_t = Integrator::default())]
@@ -141,6 +146,7 @@ impl SynthArgs {
                 edge_split: !self.no_edge_split,
                 frame_edges: self.frame_edges,
                 fill_hidden: !self.no_hidden_fill,
+                continuous_lookup: !self.nearest_cell,
                 ..ClassifyOptions::default()
             },
             splat: SplatOptions {

@@ -5,6 +5,8 @@
 
 use std::sync::OnceLock;
 
+use std::path::Path;
+
 use precompute::{build_database, BuildConfig, Profile};
 use psf_db::{PsfDatabase, PsfModel};
 use spreadlet::camera::Camera;
@@ -41,6 +43,24 @@ pub fn raw_test_db(model: PsfModel) -> &'static PsfDatabase {
             Err(e) => panic!("building the {} test database failed: {e}", model.name()),
         }
     })
+}
+
+/// The database `spreadlet synth` and `reconstruct` use by default (quick profile, circular
+/// aperture), conditioned, from the cache (built there once): the Test profile's coarse cells
+/// would hide what these tests look at behind the PSF's own spread.
+pub fn quick_db(model: PsfModel) -> PsfDatabase {
+    use spreadlet::dbcache::{build_config, cache_dir, cached_database, CACHE_ENV};
+    let cfg = build_config(model, Profile::Quick, 0);
+    // Tests run in runtime/: share the workspace root's cache unless one is set.
+    let dir = if std::env::var_os(CACHE_ENV).is_some() {
+        cache_dir()
+    } else {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../.spreadlet-cache")
+    };
+    let db = cached_database(&cfg, &dir, false, &|_| {})
+        .expect("quick database")
+        .0;
+    spreadlet::condition::condition(&db).expect("condition").0
 }
 
 /// A camera of `w x h` pixels: 50 mm on a 36 mm sensor, f/2 focused at 1 m when `lens`.

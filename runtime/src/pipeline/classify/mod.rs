@@ -119,6 +119,16 @@ pub struct ClassifyOptions {
     /// Continue a blurred background behind the silhouette of a sharper occluder, so that
     /// the background does not darken along it (the lens sees past the occluder's edge).
     pub fill_hidden: bool,
+    /// Look PSFs up continuously, so that a surface whose blur varies smoothly blurs
+    /// smoothly instead of showing a line at each cell boundary: a fragment is splatted with
+    /// its cell's PSF and with the PSF of the neighbouring cell it is nearer, weighted by the
+    /// tent between the two cells' centres ([`psf_db::ParamSpace::neighbour_blend`]), along
+    /// the CoC for still pixels (thin lens) and along the motion length for moving ones
+    /// (lens-motion). A step in the PSF's size between neighbouring pixels leaves the light
+    /// they scatter short of one along the step, a dark line. Bright fragments (drawn with
+    /// their HDR twin) and physical-lens lookups take their one cell. Off: every fragment
+    /// its one cell, one record.
+    pub continuous_lookup: bool,
 }
 
 impl Default for ClassifyOptions {
@@ -133,6 +143,7 @@ impl Default for ClassifyOptions {
             frame_edges: FrameEdges::Extend,
             fill_hidden: true,
             soft_layers_min_blur_px: 2.0,
+            continuous_lookup: true,
         }
     }
 }
@@ -751,12 +762,19 @@ pub fn classify_fragments(
         let coc = signed.abs();
         let m = frag.motion;
         let motion_len = (m[0] * m[0] + m[1] * m[1]).sqrt();
+        let bright = color[..3]
+            .iter()
+            .any(|&c| c * frag.weight > options.hdr_dense_threshold);
+        // A bright fragment stands alone (a highlight's bokeh is one PSF, not an average over
+        // a neighbourhood): it keeps the PSF of its own parameters.
+        let continuous = options.continuous_lookup && !bright;
         let Lookup {
             path,
             psf_index,
             clamped,
             mut rot_cos,
             mut rot_sin,
+            blend,
         } = lookup_psf(
             frag,
             coc,
@@ -766,6 +784,7 @@ pub fn classify_fragments(
             dbs,
             model,
             options,
+            continuous,
         );
         // In front of the focus plane the lens images its aperture turned half a turn: the
         // databases hold the PSF behind it (see `front_turns_the_aperture`).
@@ -774,13 +793,11 @@ pub fn classify_fragments(
             rot_sin = -rot_sin;
         }
         counts.clamped += usize::from(clamped);
-        let bright = color[..3]
-            .iter()
-            .any(|&c| c * frag.weight > options.hdr_dense_threshold);
         // The twin of the sub-cell holding the fragment's own CoC and motion (a thin-lens
         // cell is divided in CoC alone and ignores the motion).
         let twin = dbs.hdr_twin_for(psf_index, [coc, motion_len]);
-        let (path, psf_index) = if path != SplatPath::Copy && bright && twin != NO_TWIN {
+        let to_twin = path != SplatPath::Copy && bright && twin != NO_TWIN;
+        let (path, psf_index) = if to_twin {
             counts.hdr_dense += 1;
             (SplatPath::Dense, twin)
         } else {
@@ -791,23 +808,34 @@ pub fn classify_fragments(
         if n_targets == 2 {
             counts.soft_split += 1;
         }
+        // The fragment's PSF, or its cell's and its neighbour's with their shares.
+        // A twin is already the PSF of the fragment's own sub-cell.
+        let mut parts = [(path, psf_index, 1.0f32), (path, psf_index, 0.0)];
+        if let Some(b) = blend.filter(|b| !to_twin && b.psf_index != psf_index) {
+            parts[0].2 = 1.0 - b.share;
+            parts[1] = (b.path, b.psf_index, b.share);
+        }
+        let n_parts = if parts[1].2 > 0.0 { 2 } else { 1 };
         for (t, &(layer, lw)) in targets[..n_targets].iter().enumerate() {
             let weight = match &transmission {
                 Some(kept) => frag.weight * lw * kept[index][t],
                 None => frag.weight * lw,
             };
-            // Frame coordinates for now; shifted by the padding once it is known.
-            per_layer[layer].push(SplatRecord {
-                center_x: x,
-                center_y: y,
-                psf_index,
-                layer: layer as u32,
-                rot_cos,
-                rot_sin,
-                weight,
-                path: path as u32,
-                color: color.map(|v| v * weight),
-            });
+            for &(path, psf_index, share) in &parts[..n_parts] {
+                let weight = weight * share;
+                // Frame coordinates for now; shifted by the padding once it is known.
+                per_layer[layer].push(SplatRecord {
+                    center_x: x,
+                    center_y: y,
+                    psf_index,
+                    layer: layer as u32,
+                    rot_cos,
+                    rot_sin,
+                    weight,
+                    path: path as u32,
+                    color: color.map(|v| v * weight),
+                });
+            }
         }
     }
 
@@ -929,6 +957,17 @@ struct Lookup {
     clamped: bool,
     rot_cos: f32,
     rot_sin: f32,
+    /// The neighbouring cell the PSF is blended with, if any.
+    blend: Option<Blend>,
+}
+
+/// The second PSF of a blended lookup ([`ClassifyOptions::continuous_lookup`]).
+#[derive(Clone, Copy)]
+struct Blend {
+    path: SplatPath,
+    psf_index: u32,
+    /// Its share of the fragment's weight, in `(0, 0.5]`.
+    share: f32,
 }
 
 /// The PSF of `frag` (CoC `coc` and motion `motion_len`, pixels), O(1) through the nested
@@ -945,6 +984,7 @@ fn lookup_psf(
     dbs: &DbSet,
     model: Option<PsfModel>,
     options: &ClassifyOptions,
+    continuous: bool,
 ) -> Lookup {
     let (thin, main, combined) = (
         dbs.thin_lens.as_ref(),
@@ -955,6 +995,17 @@ fn lookup_psf(
     let m = frag.motion;
     let (mut rot_cos, mut rot_sin) = (1.0f32, 0.0f32);
     let offset = dbs.main_offset;
+    let mut blend = None;
+    // The neighbour along `dim` that a continuous lookup blends the PSF of `s` with.
+    let neighbour = |db: &PsfDatabase, s: [f32; 2], dim: usize, offset: u32| {
+        let (at, share) = db.neighbour_blend(s, dim).filter(|_| continuous)?;
+        let j = db.lookup(at).0 + offset;
+        Some(Blend {
+            path: combined.map_or(SplatPath::Copy, |all| path_of(all, j)),
+            psf_index: j,
+            share,
+        })
+    };
     let (path, psf_index, clamped) = match (model, main, combined) {
         (Some(PsfModel::PhysicalLens), Some(db), Some(all)) => {
             let dx = x as f32 + 0.5 - centre[0];
@@ -972,17 +1023,24 @@ fn lookup_psf(
             if coc >= options.copy_threshold_px || motion_len >= options.copy_threshold_px =>
         {
             let still = motion_len < options.copy_threshold_px;
+            let mut thin_lookup = |t: &PsfDatabase| {
+                blend = neighbour(t, [coc, 0.0], 0, 0);
+                t.lookup([coc, 0.0])
+            };
             let (idx, cl) = match (thin, main) {
-                (Some(t), _) if still => t.lookup([coc, 0.0]),
+                (Some(t), _) if still => thin_lookup(t),
                 (_, Some(db_m)) => {
                     if db_m.model() == PsfModel::LensMotion && motion_len > 0.0 {
                         rot_cos = m[0] / motion_len;
                         rot_sin = m[1] / motion_len;
                     }
                     let (i, cl) = db_m.lookup([coc, motion_len]);
+                    if db_m.model() == PsfModel::LensMotion {
+                        blend = neighbour(db_m, [coc, motion_len], 1, offset);
+                    }
                     (i + offset, cl)
                 }
-                (Some(t), None) => t.lookup([coc, 0.0]),
+                (Some(t), None) => thin_lookup(t),
                 (None, None) => (0, false),
             };
             (path_of(all, idx), idx, cl)
@@ -995,6 +1053,7 @@ fn lookup_psf(
         clamped,
         rot_cos,
         rot_sin,
+        blend,
     }
 }
 
