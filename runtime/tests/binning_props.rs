@@ -116,6 +116,8 @@ proptest! {
             edge_split: false,
             // Soft layering of every fragment, however sharp (the binning under test).
             soft_layers_min_blur_px: 0.0,
+            // One PSF per layer target: no blend of neighbouring cells.
+            continuous_lookup: false,
             ..ClassifyOptions::default()
         };
         let (per, c) = bin(&frags, &options);
@@ -162,7 +164,7 @@ proptest! {
     #[test]
     fn one_depth_is_one_layer(p in 0.05f32..20.0, n in 1usize..20, layers in 1u32..17, soft in prop_oneof![Just(None), Just(Some(1.0f32))]) {
         let frags = fragments_from(&vec![p; n], &vec![1.0; n]);
-        let options = ClassifyOptions { layers, soft_layers: soft, edge_split: false, ..ClassifyOptions::default() };
+        let options = ClassifyOptions { layers, soft_layers: soft, edge_split: false, continuous_lookup: false, ..ClassifyOptions::default() };
         let (per, _) = bin(&frags, &options);
         for recs in per {
             prop_assert_eq!(recs, vec![(0u32, 1.0f32)]);
