@@ -136,7 +136,18 @@ fn hidden_behind_deep(deep: &DeepImage, camera: &Camera, fragments: &[Fragment])
             ..fragments[0]
         },
     };
-    super::hidden::hidden_background(&proxy, &several, &signed_coc, &depth_at, &own)
+    // Behind sharper occluders only: a deep image's own samples hold what a blurrier
+    // occluder's smear reveals wherever the renderer saw it.
+    let no_blur = |_: usize, _: (i32, i32)| 0.0;
+    super::hidden::hidden_background(
+        &proxy,
+        &several,
+        &signed_coc,
+        &depth_at,
+        &no_blur,
+        f32::INFINITY,
+        &own,
+    )
 }
 
 /// Classifies a deep image: its samples as fragments ([`deep_fragments`]), layered and

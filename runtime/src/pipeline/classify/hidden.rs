@@ -4,22 +4,35 @@
 use super::Fragment;
 use crate::gbuffer::GBuffer;
 
-/// The background hidden behind the silhouette of a sharper, nearer occluder, continued from
-/// the visible background next to it.
+/// The background hidden behind the silhouette of a nearer occluder that is sharper or
+/// blurrier than it, continued from the visible background next to it.
 ///
 /// A pinhole image holds no pixels of what an occluder hides, but a lens sees past the
-/// occluder's edge: where the background is blurred more than the occluder, its layer would
-/// otherwise lose the light of its hidden pixels and darken in a band along the silhouette.
-/// As at the frame's edges, the background is taken to continue as it is: each background
-/// pixel next to a nearer, sharper pixel is repeated into the occluder along that direction
-/// (left, right, up, down), as far as its own blur reaches, under the occluder (which hides the
-/// copies wherever it is opaque). A hidden pixel filled from several sides gets the mean of
-/// them. `own(i)` is pixel `i`'s own fragment.
+/// occluder's edge, and a moving or defocused occluder is itself partly transparent within its
+/// blur of its silhouette. Where the background is blurred more than the occluder, its layer
+/// would otherwise lose the light of its hidden pixels and darken in a band along the
+/// silhouette. Where the occluder is blurred more than the background (a car crossing a street,
+/// a defocused post in front of a sharp wall), its smear is half transparent on both sides of
+/// its silhouette, but only outside it is there a background to show: inside, compositing
+/// fills the missing coverage with the occluder's own colour, so the smear stays opaque up to
+/// the silhouette and ends in a hard edge there. As at the frame's edges, the background is
+/// taken to continue as it is: each background pixel next to such an occluder is repeated into
+/// the occluder along that direction (left, right, up, down), as far as the larger of the two
+/// blurs reaches along it, under the occluder (which hides the copies wherever it is opaque).
+/// A hidden pixel filled from several sides gets the mean of them. A background brighter than
+/// `hdr_threshold` is not continued behind a blurrier occluder: a small emitter does not go on
+/// behind what passes in front of it, and its copies, half hidden by the smear, would add
+/// light (29 % more on the comets example); nor behind an occluder of less than half
+/// coverage, which hides little. `blur_along(i, d)` is pixel
+/// `i`'s blur reach along axis direction `d` (pixels: its CoC radius plus half its motion
+/// over the shutter projected on `d`); `own(i)` is pixel `i`'s own fragment.
 pub(super) fn hidden_background(
     g: &GBuffer,
     was_split: &[bool],
     signed_coc: &dyn Fn(f32) -> f32,
     depth_at: &dyn Fn(usize) -> f32,
+    blur_along: &dyn Fn(usize, (i32, i32)) -> f32,
+    hdr_threshold: f32,
     own: &dyn Fn(usize) -> Fragment,
 ) -> Vec<Fragment> {
     let (w, h) = (g.width as i32, g.height as i32);
@@ -34,23 +47,28 @@ pub(super) fn hidden_background(
                 continue;
             }
             let (db, coc_b) = (depth_at(b), signed_coc(depth_at(b)));
-            let reach = coc_b.abs().ceil() as i32;
-            if reach < 2 {
-                continue;
-            }
+            let bright = g.color[b][..3].iter().any(|&c| c > hdr_threshold);
             for d in DIRECTIONS {
-                // Hidden: nearer than the background and sharper by more than a pixel. The
-                // first step may be the silhouette's anti-aliased pixel, which carries the
-                // background's depth.
-                let hidden = |k: i32| -> bool {
+                let blur_b = blur_along(b, d);
+                // Hidden: nearer than the background, and sharper by more than a pixel or
+                // blurred by more than a pixel along `d` than it. The first step may be the
+                // silhouette's anti-aliased pixel, which carries the background's depth.
+                let occluder = |k: i32| -> Option<usize> {
                     let (qx, qy) = (x + d.0 * k, y + d.1 * k);
                     if qx < 0 || qy < 0 || qx >= w || qy >= h {
-                        return false;
+                        return None;
                     }
                     let q = (qy * w + qx) as usize;
                     let dq = depth_at(q);
-                    dq < db && signed_coc(dq).abs() + 1.0 < coc_b.abs()
+                    // A blurrier occluder hides the background only where it is opaque (an
+                    // emitter of no coverage hides nothing, and copies under it would add light).
+                    let opaque = g.color[q][3] >= 0.5;
+                    (dq < db
+                        && (signed_coc(dq).abs() + 1.0 < coc_b.abs()
+                            || (!bright && opaque && blur_along(q, d) > blur_b + 1.0)))
+                        .then_some(q)
                 };
+                let hidden = |k: i32| occluder(k).is_some();
                 let first = if hidden(1) {
                     1
                 } else if was_split
@@ -61,6 +79,11 @@ pub(super) fn hidden_background(
                 } else {
                     continue;
                 };
+                let silhouette_blur = occluder(first).map_or(0.0, |q| blur_along(q, d));
+                let reach = coc_b.abs().max(silhouette_blur).ceil() as i32;
+                if reach < 2 {
+                    continue;
+                }
                 let mut steps = 0;
                 for k in first..=reach {
                     if !hidden(k) {

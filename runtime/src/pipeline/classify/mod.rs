@@ -641,8 +641,20 @@ fn pixel_fragments(
     }
 
     if options.fill_hidden && model.is_some() {
-        let filled =
-            hidden_background(gbuffer, &was_split, &signed_coc, &depth_at, &|i| Fragment {
+        // Along an axis direction: the CoC radius plus half the motion over the shutter
+        // projected on it (the streak is centred on the pixel).
+        let blur_along = |i: usize, d: (i32, i32)| -> f32 {
+            let m = motion_at(i);
+            signed_coc(depth_at(i)).abs() + 0.5 * (m[0] * d.0 as f32 + m[1] * d.1 as f32).abs()
+        };
+        let filled = hidden_background(
+            gbuffer,
+            &was_split,
+            &signed_coc,
+            &depth_at,
+            &blur_along,
+            options.hdr_dense_threshold,
+            &|i| Fragment {
                 x: (i % w) as i32 - overscan.left as i32,
                 y: (i / w) as i32 - overscan.top as i32,
                 color: gbuffer.color[i],
@@ -651,7 +663,8 @@ fn pixel_fragments(
                 depth: depth_at(i),
                 motion: motion_at(i),
                 source: 0,
-            });
+            },
+        );
         counts.hidden_filled += filled.len();
         fragments.extend(filled);
     }
