@@ -1,22 +1,31 @@
 """spreadlet synth against Blender's compositor on the same inputs, timed side by side.
 
-For every input (both shared Blender examples and the built-in scenes rendered at 512 x 512,
-plus the hard car-on-road scene), each round runs the whole `spreadlet synth` process (EXR
-read, database load, synthesis, EXR write) and then Blender's compositor on the same G-buffer
-(`bench/blender_compositor.py`: Vector Blur, then Defocus, calibrated to the lens), inputs
-round-robin and the two tools alternating (A B A B), so a change of the machine's load hits
-both alike. Reports medians, spreads (min-max) and the ratio of medians from one run,
-spreadlet's per-stage breakdown (from its --stats), and both results' SSIM and FLIP against
-the reference.
+For every input (both shared Blender examples, the built-in scenes rendered at 512 x 512, and
+the hard cases with motion: a car on a road, a spinning ball, a fast box, a slanted floor and a
+camera pan), each round runs the whole `spreadlet synth` process (EXR read, database load,
+synthesis, EXR write) and then Blender's compositor on the same G-buffer
+(`bench/blender_compositor.py`: Vector Blur, then Defocus, calibrated to the lens): the
+Blender application (3.4 from Debian) and, with `--bpy`, current Blender as the `bpy` module
+(5.x, its rewritten compositor). Inputs go round-robin and the tools alternate, so a change of
+the machine's load hits all alike. Reports medians, spreads (min-max) and the ratios of medians
+from one run, per call (spreadlet's synthesis against Blender's render call) and per process,
+each against the faster Blender; spreadlet's per-stage breakdown (from its --stats); and every
+result's SSIM and FLIP against the reference.
 
-    python3 bench/against_blender.py --out target/against-blender [--rounds 5] [--ref-spp 256]
+    python3 bench/against_blender.py --out target/against-blender [--rounds 3] [--ref-spp 256] \
+        [--bpy target/bpy-env/bin/python]
 
-Needs `target/release/{spreadlet,spreadlet-scene}` (cargo build --release) and Blender
-(`apt-get install blender`). Writes OUT/results.json and OUT/results.md.
+Needs `target/release/{spreadlet,spreadlet-scene}` (cargo build --release), Blender
+(`apt-get install blender`) and, for `--bpy`, a Python with `bpy` (`pip install bpy==5.0.1` on
+Python 3.11, as `.ci/run` installs it in target/bpy-env) and numpy and OpenEXR in the Python
+that runs this script (5.x's Defocus searches a window of its "Max Blur" around every pixel,
+so it gets the frame's largest CoC radius, read from the depth pass, instead of 3.4's 128).
+Writes OUT/results.json and OUT/results.md.
 """
 
 import argparse
 import json
+import math
 import os
 import re
 import statistics
@@ -25,8 +34,10 @@ import sys
 import time
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-SCENES = ["bokeh", "crossing", "occluder", "rotating", "physical",
-          os.path.join(ROOT, "scene", "scenes", "hard", "car-on-road.json")]
+HARD = os.path.join(ROOT, "scene", "scenes", "hard")
+SCENES = ["bokeh", "crossing", "occluder", "rotating", "physical"] + [
+    os.path.join(HARD, f"{name}.json")
+    for name in ("car-on-road", "spinning-disc", "fast-box", "slanted-floor", "camera-pan")]
 STAGES = ["read_input", "database", "classify", "splat", "integrate", "composite",
           "write_output"]
 
@@ -42,7 +53,10 @@ def inputs(args, bin_dir, work):
     """(name, G-buffer, camera.json, reference) of every input, rendering the scenes once."""
     found = []
     shared = args.shared
+    wanted = lambda name: not args.only or name in args.only.split(",")
     for name in ("comets", "fence"):
+        if not wanted(name):
+            continue
         d = os.path.join(shared, name)
         if os.path.exists(os.path.join(d, "input.exr")):
             found.append((name, os.path.join(d, "input.exr"), os.path.join(d, "camera.json"),
@@ -51,6 +65,8 @@ def inputs(args, bin_dir, work):
             print(f"no {d}/input.exr: {name} is skipped", file=sys.stderr)
     for scene in SCENES:
         name = os.path.splitext(os.path.basename(scene))[0]
+        if not wanted(name):
+            continue
         d = os.path.join(work, name)
         os.makedirs(d, exist_ok=True)
         g, cam, ref = (os.path.join(d, f) for f in ("g.exr", "camera.json", "reference.exr"))
@@ -74,19 +90,44 @@ def time_spreadlet(bin_dir, g, cam, out, stats):
     stages = {k: s["times_ms"].get(k) for k in ("read_input", "database", "write_output")}
     for k in ("classify", "splat", "integrate", "composite"):
         stages[k] = s["synthesis"]["times"].get(f"{k}_ms")
-    return wall, stages
+    return wall, stages, s["synthesis"]["times"]["total_ms"] / 1000.0
 
 
-def time_blender(blender, g, cam, out):
+def time_blender(command, g, cam, out, extra=()):
+    """Runs bench/blender_compositor.py with `command` (the Blender application with its
+    flags, or a Python with bpy); (process wall time, render call time), seconds."""
     t = time.perf_counter()
-    done = run([blender, "-b", "--factory-startup", "--python-exit-code", "1", "--python",
-                os.path.join(ROOT, "bench", "blender_compositor.py"), "--", "--input", g,
-                "--camera", cam, "--out", out])
+    done = run(command + [os.path.join(ROOT, "bench", "blender_compositor.py"), "--",
+                          "--input", g, "--camera", cam, "--out", out, *extra])
     wall = time.perf_counter() - t
     m = re.search(r"composite ([0-9.]+) s \(render call\)", done.stdout + done.stderr)
     if not m:
         sys.exit(f"no render-call time in Blender's output:\n{done.stdout[-2000:]}")
     return wall, float(m.group(1))
+
+
+def largest_coc_px(g, cam_path):
+    """The largest thin-lens CoC radius (px, Blender's fixed field of view) over the depth
+    pass of G-buffer `g`, or None without defocus: what a careful Blender 5 user sets as the
+    Defocus node's Max Blur."""
+    with open(cam_path) as f:
+        cam = json.load(f)
+    if not cam.get("focus_distance") or not cam.get("f_stop"):
+        return None
+    try:
+        import numpy as np
+        import OpenEXR
+    except ImportError:
+        sys.exit("--bpy needs numpy and OpenEXR in this Python (pip install numpy OpenEXR)")
+    channels = OpenEXR.File(g).parts[0].channels
+    name = next((n for n in channels if n == "Z" or n.endswith("Depth.Z")), None)
+    if name is None:
+        sys.exit(f"{g}: no depth channel")
+    z = np.maximum(channels[name].pixels.astype(np.float64), 1e-6)
+    f_m, n, zf = cam["focal_length_mm"] * 1e-3, cam["f_stop"], cam["focus_distance"]
+    unit_m = cam.get("scene_unit_mm", 1000.0) * 1e-3
+    r = 0.5 * (f_m / n) * f_m * np.abs(z * unit_m - zf * unit_m) / (z * unit_m * zf * unit_m)
+    return float(r.max() / (cam["sensor_width_mm"] * 1e-3) * cam["width"])
 
 
 def scores(bin_dir, image, reference):
@@ -102,65 +143,102 @@ def summary(values):
 def main():
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--out", required=True)
-    p.add_argument("--rounds", type=int, default=5)
+    p.add_argument("--rounds", type=int, default=3)
     p.add_argument("--size", type=int, default=512)
     p.add_argument("--ref-spp", type=int, default=256)
     p.add_argument("--blender", default="blender")
+    p.add_argument("--bpy", help="a Python with the bpy module (Blender 5.x) to time as well")
+    p.add_argument("--only", help="comma-separated input names to run (default: all)")
     p.add_argument("--bin", default=os.path.join(ROOT, "target", "release"))
     p.add_argument("--shared", default=os.path.join(ROOT, "..", "shared", "examples"))
     args = p.parse_args()
     os.makedirs(args.out, exist_ok=True)
     items = inputs(args, args.bin, os.path.join(args.out, "inputs"))
-    times = {name: {"spreadlet": [], "blender_call": [], "blender_process": [], "stages": []}
+    if not items:
+        sys.exit("no inputs (see --only and --shared)")
+    tools = {"blender": [args.blender, "-b", "--factory-startup", "--python-exit-code", "1",
+                         "--python"]}
+    if args.bpy:
+        tools["blender5"] = [args.bpy]
+    extra = {name: {} for name, *_ in items}
+    if args.bpy:
+        for name, g, cam, _ in items:
+            coc = largest_coc_px(g, cam)
+            if coc is not None:
+                extra[name]["blender5"] = ["--blur-max", f"{math.ceil(coc) + 1:.0f}"]
+    times = {name: {"spreadlet": [], "spreadlet_call": [], "stages": [],
+                    **{f"{t}_{k}": [] for t in tools for k in ("call", "process")}}
              for name, *_ in items}
-    # One warm-up of each (file caches, the databases built once), not timed.
-    for name, g, cam, _ in items:
-        d = os.path.join(args.out, name)
-        os.makedirs(d, exist_ok=True)
-        time_spreadlet(args.bin, g, cam, os.path.join(d, "spreadlet.exr"),
-                       os.path.join(d, "stats.json"))
-        time_blender(args.blender, g, cam, os.path.join(d, "blender.exr"))
-    for r in range(args.rounds):
+
+    def one_round(record):
         for name, g, cam, _ in items:
             d = os.path.join(args.out, name)
-            wall, stages = time_spreadlet(args.bin, g, cam, os.path.join(d, "spreadlet.exr"),
-                                          os.path.join(d, "stats.json"))
-            process, call = time_blender(args.blender, g, cam, os.path.join(d, "blender.exr"))
+            os.makedirs(d, exist_ok=True)
+            wall, stages, call = time_spreadlet(args.bin, g, cam,
+                                                os.path.join(d, "spreadlet.exr"),
+                                                os.path.join(d, "stats.json"))
             t = times[name]
-            t["spreadlet"].append(wall)
-            t["blender_call"].append(call)
-            t["blender_process"].append(process)
-            t["stages"].append(stages)
+            if record:
+                t["spreadlet"].append(wall)
+                t["spreadlet_call"].append(call)
+                t["stages"].append(stages)
+            for tool, command in tools.items():
+                process, call = time_blender(command, g, cam, os.path.join(d, f"{tool}.exr"),
+                                             extra[name].get(tool, ()))
+                if record:
+                    t[f"{tool}_process"].append(process)
+                    t[f"{tool}_call"].append(call)
+
+    # One warm-up of each (file caches, the databases built once), not timed.
+    one_round(False)
+    for r in range(args.rounds):
+        one_round(True)
         print(f"round {r + 1}/{args.rounds} done", file=sys.stderr)
     results = []
     for name, g, cam, ref in items:
         t = times[name]
         d = os.path.join(args.out, name)
-        s, bc, bp = (summary(t[k]) for k in ("spreadlet", "blender_call", "blender_process"))
+        summaries = {k: summary(v) for k, v in t.items() if k != "stages"}
+        faster_call = min(summaries[f"{tool}_call"]["median"] for tool in tools)
+        faster_process = min(summaries[f"{tool}_process"]["median"] for tool in tools)
         stages = {k: statistics.median([x[k] for x in t["stages"] if x.get(k) is not None] or [0])
                   for k in STAGES}
         results.append({
-            "input": name, "spreadlet_s": s, "blender_render_call_s": bc,
-            "blender_process_s": bp, "ratio_to_render_call": s["median"] / bc["median"],
-            "ratio_to_process": s["median"] / bp["median"], "spreadlet_stages_ms": stages,
-            "spreadlet_scores": scores(args.bin, os.path.join(d, "spreadlet.exr"), ref),
-            "blender_scores": scores(args.bin, os.path.join(d, "blender.exr"), ref),
+            "input": name, "times_s": summaries,
+            "ratio_per_call": summaries["spreadlet_call"]["median"] / faster_call,
+            "ratio_per_process": summaries["spreadlet"]["median"] / faster_process,
+            "spreadlet_stages_ms": stages,
+            "scores": {tool: scores(args.bin, os.path.join(d, f"{tool}.exr"), ref)
+                       for tool in ["spreadlet", *tools]},
         })
     with open(os.path.join(args.out, "results.json"), "w") as f:
         json.dump({"rounds": args.rounds, "size": args.size, "ref_spp": args.ref_spp,
-                   "results": results}, f, indent=1)
-    lines = [
-        f"| {args.size} px input | spreadlet synth, whole process (s) | Blender render call (s) "
-        "| ratio | Blender process (s) | spreadlet SSIM / FLIP | Blender SSIM / FLIP |",
-        "| --- | --- | --- | --- | --- | --- | --- |",
-    ]
+                   "tools": list(tools), "results": results}, f, indent=1)
+    label = {"blender": "Blender 3.4", "blender5": "Blender 5"}
     fmt = lambda x: f"{x['median']:.2f} ({x['min']:.2f}-{x['max']:.2f})"
+    head = (f"| {args.size} px input | spreadlet call (s) | "
+            + " | ".join(f"{label.get(t, t)} call (s)" for t in tools)
+            + " | ratio to the faster | spreadlet process (s) | "
+            + " | ".join(f"{label.get(t, t)} process (s)" for t in tools)
+            + " | ratio to the faster |")
+    lines = [head, "|" + " --- |" * (5 + 2 * len(tools))]
     for r in results:
-        a, b = r["spreadlet_scores"], r["blender_scores"]
+        ts = r["times_s"]
         lines.append(
-            f"| {r['input']} | {fmt(r['spreadlet_s'])} | {fmt(r['blender_render_call_s'])} | "
-            f"{r['ratio_to_render_call']:.2f} | {fmt(r['blender_process_s'])} | "
-            f"{a['ssim']:.4f} / {a['flip_mean']:.4f} | {b['ssim']:.4f} / {b['flip_mean']:.4f} |")
+            f"| {r['input']} | {fmt(ts['spreadlet_call'])} | "
+            + " | ".join(fmt(ts[f"{t}_call"]) for t in tools)
+            + f" | {r['ratio_per_call']:.2f} | {fmt(ts['spreadlet'])} | "
+            + " | ".join(fmt(ts[f"{t}_process"]) for t in tools)
+            + f" | {r['ratio_per_process']:.2f} |")
+    names = ["spreadlet", *tools]
+    lines += ["", "| input (SSIM / FLIP mean / FLIP p99) | "
+              + " | ".join(label.get(n, n) for n in names) + " |",
+              "| --- |" + " --- |" * len(names)]
+    for r in results:
+        sc = r["scores"]
+        lines.append(f"| {r['input']} | " + " | ".join(
+            f"{sc[n]['ssim']:.4f} / {sc[n]['flip_mean']:.4f} / {sc[n]['flip_p99']:.3f}"
+            for n in names) + " |")
     lines += ["", "| input | " + " | ".join(STAGES) + " (ms, medians) |",
               "| --- |" + " --- |" * len(STAGES)]
     for r in results:

@@ -86,8 +86,9 @@ pub(crate) struct SynthArgs {
     /// edge) or black (the frame's border loses light; for comparison).
     #[arg(long, value_enum, default_value_t = FrameEdges::default())]
     pub(crate) frame_edges: FrameEdges,
-    /// Do not continue a blurred background behind the silhouettes of sharper occluders (the
-    /// background then darkens along them).
+    /// Do not continue the background behind the silhouettes of sharper or blurrier
+    /// occluders (a blurred background then darkens along a sharp occluder, and a moving or
+    /// defocused occluder's smear ends in a hard edge at its silhouette).
     #[arg(long)]
     pub(crate) no_hidden_fill: bool,
     /// Look each pixel's PSF up in the one database cell holding its CoC and motion, with

@@ -116,8 +116,10 @@ pub struct ClassifyOptions {
     /// Fragments whose CoC radius and motion length are both below this (pixels) are not split
     /// by soft layering.
     pub soft_layers_min_blur_px: f32,
-    /// Continue a blurred background behind the silhouette of a sharper occluder, so that
-    /// the background does not darken along it (the lens sees past the occluder's edge).
+    /// Continue the background behind the silhouette of a nearer occluder that is sharper
+    /// than it (so that a blurred background does not darken along it: the lens sees past the
+    /// occluder's edge) or blurrier (so that a moving or defocused occluder's smear is half
+    /// transparent over the background inside its silhouette as well as outside).
     pub fill_hidden: bool,
     /// Look PSFs up continuously, so that a surface whose blur varies smoothly blurs
     /// smoothly instead of showing a line at each cell boundary: a fragment is splatted with
