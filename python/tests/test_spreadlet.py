@@ -93,11 +93,13 @@ def test_reconstruct_writes_what_the_cli_writes(scene):
     subprocess.run([binary("SPREADLET_BIN", "spreadlet"), "reconstruct", "--input", frames_path,
                     "--camera", cam, "--out", out, "--backend", "cpu", "-q"], check=True)
     camera = spreadlet.Camera.from_json(cam)
-    frames = spreadlet.read_frames(frames_path)
+    # The scene renderer writes the denoiser's guides, and the CLI uses them.
+    frames, guides = spreadlet.read_frames(frames_path, guides=True)
+    assert guides is not None
     assert frames.shape == (camera.height, camera.width, 2, len(spreadlet.SAMPLE_CHANNELS))
     assert frames.dtype == np.float32
     r = spreadlet.Renderer(backend="cpu")
-    from_array, stats = r.reconstruct(frames, camera, stats=True)
+    from_array, stats = r.reconstruct(frames, camera, stats=True, guides=guides)
     from_path = r.reconstruct(frames_path, camera)
     cli = spreadlet.read_gbuffer(out).color
     assert np.array_equal(from_array, cli), "the module and the CLI differ"
