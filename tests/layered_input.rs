@@ -300,7 +300,10 @@ fn own_scenes_as_view_layers_beat_the_flat_input() {
     let car = Path::new(env!("CARGO_MANIFEST_DIR")).join("scene/scenes/hard/car-on-road.json");
     let dir3 = tempfile::tempdir().expect("temp dir");
     let (s1, f1, s2, f2) = own_scene_scores(dir3.path(), &p(&car), "car,lamp front,lamp back");
-    assert!(s2 > s1 && f2 < 1.05 * f1, "single {s1}/{f1}, layered {s2}/{f2}");
+    assert!(
+        s2 > s1 && f2 < 1.05 * f1,
+        "single {s1}/{f1}, layered {s2}/{f2}"
+    );
     let d = |n: &str| p(&dir.path().join(n));
     let bad = run(
         "spreadlet-scene",

@@ -222,7 +222,7 @@ impl PsfDatabase {
 
     /// The neighbouring cell a PSF for `s` is blended with along dimension `dim`, and its
     /// share; see [`crate::ParamSpace::neighbour_blend`].
-    pub fn neighbour_blend(&self, s: [f32; 2], dim: usize) -> Option<([f32; 2], f32)> {
+    pub fn neighbour_blend(&self, s: [f32; 2], dim: usize) -> Option<(u32, f32)> {
         self.header.space.neighbour_blend(s, dim)
     }
 

@@ -178,14 +178,14 @@ impl ParamSpace {
     }
 
     /// The neighbouring cell along dimension `dim` that a PSF for `s` is blended with, so that
-    /// the blend changes linearly from one cell's centre to the next: a point of that cell in
-    /// physical units (its centre along `dim`, `s` elsewhere) and its share in `(0, 0.5]`.
+    /// the blend changes linearly from one cell's centre to the next: that cell's index and its
+    /// share in `(0, 0.5]`.
     /// With `(1 - share)` of the cell holding `s`, the PSF is the tent interpolation between
     /// cell centres, continuous in `s` across cell boundaries, where the cell holding `s`
     /// alone steps: a step in a PSF's size shows as a line on a surface whose blur varies
     /// smoothly. `None` where `s` sits on its cell's centre, at the space's ends (NaN too), or
     /// for a dimension the space lacks.
-    pub fn neighbour_blend(&self, s: [f32; 2], dim: usize) -> Option<([f32; 2], f32)> {
+    pub fn neighbour_blend(&self, s: [f32; 2], dim: usize) -> Option<(u32, f32)> {
         if dim >= self.dims.len() || !s[dim].is_finite() {
             return None;
         }
@@ -209,7 +209,8 @@ impl ParamSpace {
         };
         let mut at = u;
         at[dim] = probe;
-        let neighbour = self.grid.cell_box(self.grid.index_of(at))?;
+        let neighbour_index = self.grid.index_of(at);
+        let neighbour = self.grid.cell_box(neighbour_index)?;
         let neighbour_centre = 0.5 * (neighbour.min[dim] + neighbour.max[dim]);
         // From 0 at the own centre to 1/2 at the boundary. A narrower ramp (the cell's own PSF
         // over the middle of the cell) would halve the second splats, but leaves the ramp a
@@ -219,10 +220,7 @@ impl ParamSpace {
         if share <= 0.0 {
             return None;
         }
-        at[dim] = neighbour_centre;
-        let mut point = s;
-        point[dim] = self.from_grid(at)[dim] as f32;
-        Some((point, share as f32))
+        Some((neighbour_index, share as f32))
     }
 
     /// The box of PSF `i` in physical units (the region its PSF is pre-filtered over);
@@ -275,9 +273,9 @@ mod tests {
             let own = centre_along(&space, s, 1);
             // The shares' mean cell centre is the point itself: the tent between centres.
             let mean = match space.neighbour_blend(s, 1) {
-                Some((at, share)) => {
+                Some((other, share)) => {
                     assert!(share > 0.0 && share <= 0.5, "share {share}");
-                    let other = centre_along(&space, at, 1);
+                    let other = space.grid.cell_box(other).unwrap().center()[1];
                     assert!((other - own).abs() > 0.5, "a different cell");
                     (1.0 - f64::from(share)) * own + f64::from(share) * other
                 }

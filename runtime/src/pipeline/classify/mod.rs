@@ -1013,8 +1013,11 @@ fn lookup_psf(
     let mut blend = None;
     // The neighbour along `dim` that a continuous lookup blends the PSF of `s` with.
     let neighbour = |db: &PsfDatabase, s: [f32; 2], dim: usize, offset: u32| {
-        let (at, share) = db.neighbour_blend(s, dim).filter(|_| continuous)?;
-        let j = db.lookup(at).0 + offset;
+        if !continuous {
+            return None;
+        }
+        let (i, share) = db.neighbour_blend(s, dim)?;
+        let j = i + offset;
         Some(Blend {
             path: combined.map_or(SplatPath::Copy, |all| path_of(all, j)),
             psf_index: j,
