@@ -123,7 +123,7 @@ fn a_renderer_loads_databases_once_for_a_sequence() {
 
 #[test]
 fn options_out_of_range_are_errors_naming_the_option() {
-    use spreadlet::pipeline::ClassifyOptions;
+    use spreadlet::ClassifyOptions;
     let mut options = spreadlet::SynthOptions {
         classify: ClassifyOptions {
             layers: 0,

@@ -75,7 +75,7 @@ fn shirley_through_the_binary_equals_the_library_and_beats_the_plain_average() {
     // Bit for bit what the library gives on the same file and camera.
     let frames = scene::StochasticFrames::read_exr(&p("frames.exr")).expect("frames");
     let camera = Camera::from_json_file(&p("camera.json")).expect("camera");
-    let direct = spreadlet_cli::peer::reconstruct_peer("shirley", &frames, &camera, false)
+    let direct = spreadlet_harness::peer::reconstruct_peer("shirley", &frames, &camera, false)
         .expect("library run");
     let from_binary = read_rgba(&p("shirley.exr"));
     let from_library: Vec<f32> = direct.image.pixels.iter().flatten().copied().collect();

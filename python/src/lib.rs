@@ -283,7 +283,7 @@ impl PyRenderer {
         let databases = match db {
             Some(path) => renderer::DbSource::File(path),
             None => renderer::DbSource::Cache {
-                dir: cache_dir.unwrap_or_else(renderer::dbcache::cache_dir),
+                dir: cache_dir.unwrap_or_else(renderer::cache_dir),
                 profile: db_profile
                     .parse::<precompute::Profile>()
                     .map_err(value_error)?,

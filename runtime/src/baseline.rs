@@ -16,7 +16,7 @@
 //!
 //! The filter needs a dense image of every PSF: [`DenseKernels`] takes stored dense PSFs as
 //! they are, and integrates sparse ones exactly (`poisson`'s lattice inverse of their
-//! spreadlets); with a dense database ([`cached_dense_dbs`]) every kernel is the pre-filtered
+//! spreadlets); with a dense database ([`dense_build_config`]) every kernel is the pre-filtered
 //! PSF itself.
 
 use crate::synth::ms_since;

@@ -33,7 +33,7 @@ pub struct DbUsed {
     pub lens: Option<String>,
 }
 
-/// How a database was conditioned before use (see [`crate::condition`]).
+/// How a database was conditioned before use (the `condition` stage).
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct Conditioned {
     /// The model's name.

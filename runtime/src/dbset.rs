@@ -20,8 +20,8 @@ pub struct DbSet {
     /// Index of `main`'s first PSF in `combined`.
     pub main_offset: u32,
     /// For each PSF of `combined`: the index (in `combined`) of its first dense twin, or
-    /// [`NO_TWIN`]. Twins are the analytic PSF pre-filtered over the same cell
-    /// ([`crate::condition::analytic_cell_psf`]), or for small PSFs over each of its sub-cells
+    /// `NO_TWIN`. Twins are the analytic PSF pre-filtered over the same cell
+    /// (`condition::analytic_cell_psf`), or for small PSFs over each of its sub-cells
     /// ([`DbSet::hdr_twin_cells`]), made for the thin-lens and lens-motion models with a
     /// circular aperture. Very bright (HDR) pixels are drawn with them: a sparse PSF's small
     /// relative error, multiplied by a highlight of 100, shows as dark holes and haze beside
@@ -124,7 +124,7 @@ impl DbSet {
     }
 
     /// The HDR twin (index in `combined`) of PSF `psf_index` for a fragment of parameters
-    /// `params` (CoC radius px, motion length px), or [`NO_TWIN`].
+    /// `params` (CoC radius px, motion length px), or `NO_TWIN`.
     pub fn hdr_twin_for(&self, psf_index: u32, params: [f32; 2]) -> u32 {
         let i = psf_index as usize;
         match (self.hdr_twins.get(i), self.hdr_twin_cells.get(i)) {

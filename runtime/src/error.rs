@@ -25,6 +25,9 @@ pub enum Error {
     /// Reading or writing a file failed.
     #[error(transparent)]
     Format(#[from] formats::Error),
+    /// A deep OpenEXR is unreadable or breaks the deep reader's policy.
+    #[error(transparent)]
+    Deep(#[from] formats::DeepError),
     /// The camera's aperture image is unreadable or cannot be an aperture.
     #[error(transparent)]
     ApertureImage(#[from] formats::MaskError),

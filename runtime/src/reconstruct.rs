@@ -16,10 +16,6 @@
 //! samples overlap), always with its own PSF. Layering, splatting, integration and compositing
 //! are the synthesis stages, unchanged; [`normalize_density`] then divides by the coverage.
 
-use std::time::Instant;
-
-use crate::synth::ms_since;
-
 use formats::StochasticFrames;
 
 use crate::camera::Camera;
@@ -28,7 +24,8 @@ use crate::pipeline::classify::{
     classify_fragments, resolve_model, ClassifyError, DataWindow, Fragment,
 };
 use crate::pipeline::{Classified, Effects, PathCounts};
-use crate::synth::{record_classified, render_classified, SynthOptions, SynthStats};
+use crate::prepare::{Input, Plan};
+use crate::synth::{render_cpu, SynthOptions, SynthStats};
 use formats::RgbaImage;
 
 /// The effects a camera and stochastic frames call for.
@@ -288,37 +285,30 @@ fn push_footprint(qx: f32, qy: f32, sigma_px: f32, mut push: impl FnMut(f32, f32
 }
 
 /// Reconstructs depth of field and motion blur from stochastic frames with the synthesis
-/// pipeline. `dbs` must hold a database of the model the camera and samples call for.
+/// pipeline, on the CPU: [`crate::prepare::Plan`] with [`crate::prepare::Input::samples`],
+/// drawn by [`crate::synth::render_cpu`]. `dbs` must hold a database of the model the camera
+/// and samples call for.
+///
+/// ```no_run
+/// use spreadlet::{Camera, Renderer, StochasticFrames, SynthOptions};
+/// # fn main() -> Result<(), spreadlet::Error> {
+/// let frames = StochasticFrames::read_exr("stochastic_4spp.exr".as_ref())?;
+/// let camera = Camera::from_json_file("camera.json".as_ref())?;
+/// let mut renderer = Renderer::new(Default::default())?;
+/// renderer.reconstruct(&frames, &camera, &SynthOptions::default())?; // loads the databases
+/// let dbs = renderer.databases().expect("loaded by the first frame");
+/// let (image, _) = spreadlet::reconstruct(&frames, &camera, dbs, &SynthOptions::default())?;
+/// image.write_exr("out.exr".as_ref())?;
+/// # Ok(()) }
+/// ```
 pub fn reconstruct(
     frames: &StochasticFrames,
     camera: &Camera,
     dbs: &DbSet,
     options: &SynthOptions,
-) -> Result<(RgbaImage, SynthStats), ClassifyError> {
-    reconstruct_with(
-        frames,
-        camera,
-        dbs,
-        options,
-        SamplePlacement::for_spp(frames.spp),
-    )
-}
-
-/// [`reconstruct`] with a chosen [`SamplePlacement`].
-pub fn reconstruct_with(
-    frames: &StochasticFrames,
-    camera: &Camera,
-    dbs: &DbSet,
-    options: &SynthOptions,
-    placement: SamplePlacement,
-) -> Result<(RgbaImage, SynthStats), ClassifyError> {
-    let total = Instant::now();
-    let options = &for_samples(options);
-    let (classified, mut stats) = classify_samples(frames, camera, dbs, options, placement)?;
-    let mut image = render_classified(&classified, dbs, options, &mut stats);
-    normalize_density(&mut image);
-    stats.times.total_ms = ms_since(total);
-    Ok((image, stats))
+) -> Result<(RgbaImage, SynthStats), crate::Error> {
+    let prepared = Plan::new(Input::samples(frames), camera, options)?.prepare(dbs)?;
+    Ok(render_cpu(prepared, dbs))
 }
 
 /// `options` as reconstruction applies them: the coverage that "over" leaves missing is made up
@@ -331,13 +321,13 @@ pub fn for_samples(options: &SynthOptions) -> SynthOptions {
     options
 }
 
-/// The device-independent front of reconstruction, shared by the CPU path
-/// ([`reconstruct_with`]) and the GPU path (`gpu::reconstruct_gpu`): the samples moved back and
-/// classified, and the statistics started (effects, counts, classification time). The caller
-/// renders the records and then applies [`normalize_density`].
-pub fn classify_samples(
+/// Reconstruction's classification: the samples moved back and classified with `effects`
+/// ([`effects_of`]), and the statistics started (effects, size, options). The caller renders the
+/// records and then applies [`normalize_density`].
+pub(crate) fn classify_samples(
     frames: &StochasticFrames,
     camera: &Camera,
+    effects: Effects,
     dbs: &DbSet,
     options: &SynthOptions,
     placement: SamplePlacement,
@@ -350,17 +340,12 @@ pub fn classify_samples(
             img_h: frames.height,
         });
     }
-    let effects = effects_of(camera, frames);
-    let mut stats = SynthStats {
-        defocus: effects.defocus,
-        motion: effects.motion,
-        width: frames.width,
-        height: frames.height,
-        layers: options.classify.layers,
-        integrator: options.integrator,
-        ..SynthStats::default()
-    };
-    let t = Instant::now();
+    let stats = SynthStats::starting(
+        effects,
+        (frames.width, frames.height),
+        crate::gbuffer::Overscan::NONE,
+        options,
+    );
     let model = resolve_model(effects, dbs)?;
     let (fragments, dropped) = sample_fragments(frames, camera, effects, placement);
     let counts = PathCounts {
@@ -378,8 +363,6 @@ pub fn classify_samples(
         &options.classify,
         counts,
     )?;
-    stats.times.classify_ms = ms_since(t);
-    record_classified(&classified, dbs, &mut stats);
     Ok((classified, stats))
 }
 

@@ -19,6 +19,7 @@ use crate::dbset::DbSet;
 use crate::error::Error;
 use crate::gbuffer::GBuffer;
 use crate::pipeline::Effects;
+use crate::prepare::{Input, Plan, PreparedFrame};
 use crate::synth::{SynthOptions, SynthStats};
 use formats::{RgbaImage, StochasticFrames};
 
@@ -70,6 +71,11 @@ pub enum Method {
     /// Baseline: every output pixel gathers the input with its own pre-filtered PSF
     /// ([`Renderer::filter`]); databases are built with every PSF dense, as for `Dense`.
     Filter,
+}
+
+impl Method {
+    /// The methods' names, as the command line spells them.
+    pub const NAMES: [&'static str; 3] = baseline::METHODS;
 }
 
 /// What the renderer tells its caller while it works (the library prints nothing).
@@ -211,6 +217,19 @@ pub struct Renderer {
 
 impl Renderer {
     /// A renderer; nothing is loaded until the first frame needs it.
+    ///
+    /// ```
+    /// use spreadlet::{Backend, DbSource, Profile, Renderer, RendererOptions};
+    /// # fn main() -> Result<(), spreadlet::Error> {
+    /// let renderer = Renderer::new(RendererOptions {
+    ///     backend: Backend::Cpu,
+    ///     // Databases from this folder, built there with the quick profile when missing.
+    ///     databases: DbSource::Cache { dir: spreadlet::cache_dir(), profile: Profile::Quick },
+    ///     ..Default::default()
+    /// })?;
+    /// assert_eq!(renderer.database_loads(), 0);
+    /// # Ok(()) }
+    /// ```
     pub fn new(options: RendererOptions) -> Result<Self, Error> {
         #[cfg(not(feature = "gpu"))]
         if options.backend == Backend::Gpu {
@@ -250,16 +269,29 @@ impl Renderer {
     /// Adds depth of field and motion blur to a pinhole G-buffer as `camera` sees it.
     /// `options` apply to this call, on either device. A pinhole, still input comes back
     /// unchanged.
+    ///
+    /// ```
+    /// use spreadlet::{Backend, Camera, GBuffer, Renderer, RendererOptions, SynthOptions};
+    /// # fn main() -> Result<(), spreadlet::Error> {
+    /// // A 4 x 4 grey G-buffer, 2 scene units away, seen through a pinhole (no `f_stop`)
+    /// // that does not move: nothing to simulate, and no database is loaded.
+    /// let gbuffer = GBuffer::from_planes(4, 4, vec![[0.5, 0.5, 0.5, 1.0]; 16], Some(vec![2.0; 16]), None)?;
+    /// let camera = Camera::from_json_str(
+    ///     r#"{"width": 4, "height": 4, "focal_length_mm": 50, "sensor_width_mm": 36}"#,
+    /// )?;
+    /// let mut renderer = Renderer::new(RendererOptions { backend: Backend::Cpu, ..Default::default() })?;
+    /// let frame = renderer.synthesize(&gbuffer, &camera, &SynthOptions::default())?;
+    /// assert_eq!(frame.image.pixels, gbuffer.color);
+    /// assert!(!frame.stats.defocus && !frame.stats.motion);
+    /// # Ok(()) }
+    /// ```
     pub fn synthesize(
         &mut self,
         gbuffer: &GBuffer,
         camera: &Camera,
         options: &SynthOptions,
     ) -> Result<Frame, Error> {
-        options.validate()?;
-        let effects = Effects::of(camera, gbuffer);
-        let selected = self.databases_for(effects, camera)?;
-        self.run(Work::Synthesis(gbuffer), camera, selected, options)
+        self.render(Plan::new(Input::Flat(gbuffer), camera, options)?)
     }
 
     /// Depth of field and motion blur from several render layers of one frame (Blender view
@@ -267,53 +299,93 @@ impl Renderer {
     /// into the global depth layers, so what a blurred foreground hides is the background's
     /// real pixels. One layer (not declared still) gives exactly [`Renderer::synthesize`]'s
     /// result.
+    ///
+    /// ```no_run
+    /// use spreadlet::{Camera, GBuffer, Renderer, SynthOptions};
+    /// # fn main() -> Result<(), spreadlet::Error> {
+    /// // Every view layer of a Blender multilayer EXR with Combined and Depth passes.
+    /// let layers = GBuffer::read_view_layers("layers.exr".as_ref(), None)?;
+    /// let camera = Camera::from_json_file("camera.json".as_ref())?;
+    /// let mut renderer = Renderer::new(Default::default())?;
+    /// let frame = renderer.synthesize_layers(&layers, &camera, &SynthOptions::default())?;
+    /// frame.image.write_exr("out.exr".as_ref())?;
+    /// # Ok(()) }
+    /// ```
     pub fn synthesize_layers(
         &mut self,
         layers: &[crate::gbuffer::ViewLayer],
         camera: &Camera,
         options: &SynthOptions,
     ) -> Result<Frame, Error> {
-        options.validate()?;
-        let effects = crate::pipeline::classify::layered_effects(layers, camera);
-        let selected = self.databases_for(effects, camera)?;
-        self.run(Work::Layers(layers), camera, selected, options)
+        self.render(Plan::new(Input::Layers(layers), camera, options)?)
     }
 
     /// Depth of field and motion blur from a deep image ([`formats::DeepImage`]): every deep
     /// sample is splatted with its own PSF, so anti-aliased edges and semi-transparent
     /// surfaces blur by their own depths.
+    ///
+    /// ```no_run
+    /// use spreadlet::{Camera, DeepImage, Renderer, SynthOptions};
+    /// # fn main() -> Result<(), spreadlet::Error> {
+    /// let deep = DeepImage::read("deep.exr".as_ref())?;
+    /// let camera = Camera::from_json_file("camera.json".as_ref())?;
+    /// let mut renderer = Renderer::new(Default::default())?;
+    /// let frame = renderer.synthesize_deep(&deep, &camera, &SynthOptions::default())?;
+    /// frame.image.write_exr("out.exr".as_ref())?;
+    /// # Ok(()) }
+    /// ```
     pub fn synthesize_deep(
         &mut self,
         deep: &formats::DeepImage,
         camera: &Camera,
         options: &SynthOptions,
     ) -> Result<Frame, Error> {
-        options.validate()?;
-        let effects = crate::pipeline::classify::deep_effects(deep, camera);
-        let selected = self.databases_for(effects, camera)?;
-        self.run(Work::Deep(deep), camera, selected, options)
+        self.render(Plan::new(Input::Deep(deep), camera, options)?)
     }
 
     /// Reconstructs depth of field and motion blur from stochastic frames (each sample
     /// labelled with its lens position and time; `docs/STOCHASTIC.md`).
+    ///
+    /// ```no_run
+    /// use spreadlet::{Camera, Renderer, StochasticFrames, SynthOptions};
+    /// # fn main() -> Result<(), spreadlet::Error> {
+    /// let frames = StochasticFrames::read_exr("stochastic_1spp.exr".as_ref())?;
+    /// let camera = Camera::from_json_file("camera.json".as_ref())?;
+    /// let mut renderer = Renderer::new(Default::default())?;
+    /// let frame = renderer.reconstruct(&frames, &camera, &SynthOptions::default())?;
+    /// frame.image.write_exr("out.exr".as_ref())?;
+    /// # Ok(()) }
+    /// ```
     pub fn reconstruct(
         &mut self,
         frames: &StochasticFrames,
         camera: &Camera,
         options: &SynthOptions,
     ) -> Result<Frame, Error> {
-        options.validate()?;
-        if let Some(lens) = &camera.lens {
-            // A sample's label is a point on the thin lens's unit aperture: it says where the
-            // sample's pinhole image is only through the thin lens.
-            return Err(Error::Unsupported(format!(
-                "reconstruction through a real lens (camera.json lens {lens:?}) is not \
-                 supported: stochastic frames are labelled for the thin lens; remove `lens`"
-            )));
-        }
-        let effects = crate::reconstruct::effects_of(camera, frames);
-        let selected = self.databases_for(effects, camera)?;
-        self.run(Work::Reconstruction(frames), camera, selected, options)
+        self.render(Plan::new(Input::samples(frames), camera, options)?)
+    }
+
+    /// Any input, through the one seam: the databases its plan needs, then the frame prepared
+    /// once and drawn on this renderer's device.
+    ///
+    /// ```
+    /// use spreadlet::{Backend, Camera, GBuffer, Input, Plan, Renderer, RendererOptions, SynthOptions};
+    /// # fn main() -> Result<(), spreadlet::Error> {
+    /// let gbuffer = GBuffer::from_planes(2, 2, vec![[1.0, 0.0, 0.0, 1.0]; 4], Some(vec![3.0; 4]), None)?;
+    /// let camera = Camera::from_json_str(
+    ///     r#"{"width": 2, "height": 2, "focal_length_mm": 35, "sensor_width_mm": 36}"#,
+    /// )?;
+    /// let plan = Plan::new(Input::Flat(&gbuffer), &camera, &SynthOptions::default())?;
+    /// assert_eq!(plan.model(), None); // a pinhole that does not move needs no database
+    /// let mut renderer = Renderer::new(RendererOptions { backend: Backend::Cpu, ..Default::default() })?;
+    /// let frame = renderer.render(plan)?;
+    /// assert_eq!(frame.image.pixels, gbuffer.color);
+    /// # Ok(()) }
+    /// ```
+    pub fn render(&mut self, plan: Plan) -> Result<Frame, Error> {
+        let selected = self.databases_for(plan.effects(), plan.camera())?;
+        let prepared = plan.prepare(&selected.set)?;
+        self.run(prepared, selected)
     }
 
     /// The databases `effects` need: the held set when it serves them, else loaded now.
@@ -456,13 +528,7 @@ impl Renderer {
         Ok(Device::Cpu)
     }
 
-    fn run(
-        &mut self,
-        work: Work,
-        camera: &Camera,
-        selected: Selected,
-        options: &SynthOptions,
-    ) -> Result<Frame, Error> {
+    fn run(&mut self, prepared: PreparedFrame, selected: Selected) -> Result<Frame, Error> {
         let dbs = selected.set.as_ref();
         let frame = |image, stats, device, _stages: Option<GpuStages>| Frame {
             image,
@@ -482,36 +548,16 @@ impl Renderer {
                     gpu.synthesizer = Some(GpuSynthesizer::for_database(
                         &gpu.ctx,
                         dbs.combined.as_ref(),
-                        GpuSynthOptions::from_synth(options),
+                        GpuSynthOptions::from_synth(prepared.options()),
                     )?);
                 }
                 let name = format!("gpu ({})", gpu.ctx.adapter_name());
                 let synthesizer = gpu.synthesizer.as_mut().expect("set above");
-                let (image, stats, stages) = match work {
-                    Work::Synthesis(g) => {
-                        crate::gpu::synthesize_gpu(synthesizer, g, camera, dbs, options)?
-                    }
-                    Work::Layers(l) => {
-                        crate::gpu::synthesize_layers_gpu(synthesizer, l, camera, dbs, options)?
-                    }
-                    Work::Deep(d) => {
-                        crate::gpu::synthesize_deep_gpu(synthesizer, d, camera, dbs, options)?
-                    }
-                    Work::Reconstruction(f) => {
-                        crate::gpu::reconstruct_gpu(synthesizer, f, camera, dbs, options)?
-                    }
-                };
+                let (image, stats, stages) = crate::gpu::render_gpu(synthesizer, prepared, dbs)?;
                 Ok(frame(image, stats, name, Some(stages)))
             }
             Device::Cpu => {
-                let (image, stats) = match work {
-                    Work::Synthesis(g) => crate::synth::synthesize(g, camera, dbs, options)?,
-                    Work::Layers(l) => crate::synth::synthesize_layers(l, camera, dbs, options)?,
-                    Work::Deep(d) => crate::synth::synthesize_deep(d, camera, dbs, options)?,
-                    Work::Reconstruction(f) => {
-                        crate::reconstruct::reconstruct(f, camera, dbs, options)?
-                    }
-                };
+                let (image, stats) = crate::synth::render_cpu(prepared, dbs);
                 Ok(frame(image, stats, "cpu".to_string(), None))
             }
         }
@@ -520,6 +566,18 @@ impl Renderer {
     /// The filter baseline (every output pixel gathers the input with its own pre-filtered
     /// PSF; the paper's comparison), on the renderer's device, with the renderer's databases
     /// made dense. Returns the image, the device's name and the baseline's statistics.
+    ///
+    /// ```no_run
+    /// use spreadlet::{Camera, FilterOptions, GBuffer, Method, Renderer, RendererOptions};
+    /// # fn main() -> Result<(), spreadlet::Error> {
+    /// let gbuffer = GBuffer::read_exr("input.exr".as_ref(), &Default::default())?;
+    /// let camera = Camera::from_json_file("camera.json".as_ref())?;
+    /// let mut renderer =
+    ///     Renderer::new(RendererOptions { method: Method::Filter, ..Default::default() })?;
+    /// let frame = renderer.filter(&gbuffer, &camera, &FilterOptions::default())?;
+    /// frame.image.write_exr("filter.exr".as_ref())?;
+    /// # Ok(()) }
+    /// ```
     pub fn filter(
         &mut self,
         gbuffer: &GBuffer,
@@ -591,13 +649,4 @@ struct Selected {
     conditioning: Vec<Conditioned>,
     /// Time spent loading, milliseconds.
     ms: f64,
-}
-
-/// What [`Renderer::run`] runs.
-#[derive(Clone, Copy)]
-enum Work<'a> {
-    Synthesis(&'a GBuffer),
-    Layers(&'a [crate::gbuffer::ViewLayer]),
-    Deep(&'a formats::DeepImage),
-    Reconstruction(&'a StochasticFrames),
 }

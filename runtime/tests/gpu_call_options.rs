@@ -6,10 +6,10 @@
 mod gpu_support;
 mod support;
 
-use gpu_support::{context, max_diff};
+use gpu_support::{context, max_diff, synthesize_gpu};
 use psf_db::PsfModel;
 use spreadlet::dbset::DbSet;
-use spreadlet::gpu::{synthesize_gpu, GpuSynthOptions, GpuSynthesizer};
+use spreadlet::gpu::{GpuSynthOptions, GpuSynthesizer};
 use spreadlet::pipeline::{CompositeOptions, RotationSampling, SplatOptions};
 use spreadlet::synth::{synthesize, SynthOptions};
 
@@ -78,4 +78,38 @@ fn rotation_and_compositing_apply_per_call() {
         d <= 1e-4 * m.max(1.0),
         "GPU with defaults vs CPU: {d} (max {m})"
     );
+}
+
+/// Bad input fails while the frame is prepared, before any device draws it: the same typed
+/// error on the GPU as on the CPU (a G-buffer whose size is not the camera's).
+#[test]
+fn a_bad_input_is_the_same_typed_error_on_both_devices() {
+    use spreadlet::pipeline::classify::ClassifyError;
+    use spreadlet::{Backend, Error, Renderer, RendererOptions};
+    if context().is_none() {
+        return;
+    }
+    let camera = support::camera(32, 32, false, 0.0);
+    let gbuffer = spreadlet::GBuffer::from_planes(
+        16,
+        16,
+        vec![[0.5, 0.5, 0.5, 1.0]; 16 * 16],
+        Some(vec![2.0; 16 * 16]),
+        None,
+    )
+    .expect("G-buffer");
+    for backend in [Backend::Cpu, Backend::Gpu] {
+        let mut renderer = Renderer::new(RendererOptions {
+            backend,
+            ..Default::default()
+        })
+        .expect("renderer");
+        let err = renderer
+            .synthesize(&gbuffer, &camera, &SynthOptions::default())
+            .expect_err("a 16x16 G-buffer for a 32x32 camera");
+        assert!(
+            matches!(err, Error::Classify(ClassifyError::SizeMismatch { .. })),
+            "{backend:?}: {err:?}"
+        );
+    }
 }

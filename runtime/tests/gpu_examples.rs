@@ -7,12 +7,12 @@ mod gpu_support;
 
 use std::path::{Path, PathBuf};
 
-use gpu_support::{context, max_diff};
+use gpu_support::{context, max_diff, synthesize_gpu};
 use psf_db::{PsfDatabase, PsfModel};
 use spreadlet::camera::Camera;
 use spreadlet::dbset::DbSet;
 use spreadlet::gbuffer::{ChannelOptions, GBuffer};
-use spreadlet::gpu::{synthesize_gpu, GpuSynthOptions, GpuSynthesizer};
+use spreadlet::gpu::{GpuSynthOptions, GpuSynthesizer};
 use spreadlet::synth::{synthesize, SynthOptions};
 
 /// Centre crop edge, px (the examples are 512 x 512; lavapipe in CI stays fast at this size).

@@ -1,4 +1,4 @@
-//! Reconstruction on the GPU (`spreadlet::gpu::reconstruct_gpu`) matches the CPU path
+//! Reconstruction on the GPU (`spreadlet::gpu::render_gpu` of stochastic frames) matches the CPU path
 //! (`spreadlet::reconstruct::reconstruct`) on a small built-in scene with defocus and motion:
 //! the same records, SSIM >= 0.999 and a bounded largest difference.
 #![cfg(feature = "gpu")]
@@ -9,9 +9,10 @@ use gpu_support::{context, max_diff};
 use psf_db::PsfModel;
 use spreadlet::camera::Camera;
 use spreadlet::dbset::DbSet;
-use spreadlet::gpu::{reconstruct_gpu, GpuSynthOptions, GpuSynthesizer};
+use spreadlet::gpu::{render_gpu, GpuSynthOptions, GpuSynthesizer};
 use spreadlet::reconstruct::reconstruct;
 use spreadlet::synth::SynthOptions;
+use spreadlet::{Input, Plan};
 
 /// Frame edge, px (small: lavapipe in CI).
 const SIZE: u32 = 96;
@@ -50,8 +51,10 @@ fn gpu_reconstruction_matches_cpu() {
         GpuSynthOptions::from_synth(&options),
     )
     .expect("GPU synthesizer");
-    let (img, stats, _) =
-        reconstruct_gpu(&mut gpu, &frames, &camera, &dbs, &options).expect("GPU reconstruction");
+    let prepared = Plan::new(Input::samples(&frames), &camera, &options)
+        .and_then(|plan| plan.prepare(&dbs))
+        .expect("prepared");
+    let (img, stats, _) = render_gpu(&mut gpu, prepared, &dbs).expect("GPU reconstruction");
     assert_eq!(stats.counts, cpu_stats.counts);
     assert!(
         stats.defocus && stats.motion,

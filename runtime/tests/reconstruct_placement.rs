@@ -8,8 +8,9 @@ mod support;
 use psf_db::PsfModel;
 use scene::{Sample, StochasticFrames};
 use spreadlet::dbset::DbSet;
-use spreadlet::reconstruct::{classify_samples, effects_of, SamplePlacement};
+use spreadlet::reconstruct::{effects_of, SamplePlacement};
 use spreadlet::synth::SynthOptions;
+use spreadlet::{Input, Plan};
 use support::{camera, test_db};
 
 /// Motion of the test sample, pixels per frame.
@@ -44,10 +45,13 @@ fn footprint_keeps_the_psf_of_an_in_focus_moving_sample() {
     // One record per footprint pixel, of the cell holding its parameters.
     options.classify.continuous_lookup = false;
     let records = |placement| {
-        classify_samples(&frames, &cam, &dbs, &options, placement)
+        Plan::new(Input::Samples(&frames, placement), &cam, &options)
+            .and_then(|plan| plan.prepare(&dbs))
             .expect("prepare")
-            .0
+            .classified()
+            .expect("records")
             .records
+            .clone()
     };
     let nearest = records(SamplePlacement::Nearest);
     let footprint = records(SamplePlacement::for_spp(1));

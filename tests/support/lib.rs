@@ -17,7 +17,8 @@ fn profile_dir() -> PathBuf {
 
 /// Path of the workspace binary `name` (`spreadlet`, `precompute`, `spreadlet-scene`), built
 /// once per test process when `cargo test` did not build it already (as with `-p
-/// spreadlet-e2e` alone).
+/// spreadlet-e2e` alone). `cargo test --workspace` builds each of them for its own package's
+/// `tests/cli.rs`, so they are never older than the library the tests link.
 pub fn binary(name: &str) -> PathBuf {
     static BUILT: OnceLock<()> = OnceLock::new();
     let path = profile_dir().join(format!("{name}{}", std::env::consts::EXE_SUFFIX));
@@ -103,6 +104,16 @@ pub fn assert_success(out: &Output) -> String {
 /// `g.exr`, the 256-spp reference `ref.exr` and the camera `cam.json`, plus whatever `extra`
 /// asks for (`--deep F`, `--view-layers F --foreground NAMES`).
 pub fn render_scene_128(dir: &Path, scene: &str, extra: &[&str]) {
+    render_128(dir, scene, extra, true);
+}
+
+/// [`render_scene_128`] without the reference: the G-buffer `g.exr`, the camera `cam.json` and
+/// whatever `extra` asks for (`--stochastic F --spp N` too).
+pub fn render_inputs_128(dir: &Path, scene: &str, extra: &[&str]) {
+    render_128(dir, scene, extra, false);
+}
+
+fn render_128(dir: &Path, scene: &str, extra: &[&str], with_reference: bool) {
     let d = |n: &str| dir.join(n).to_str().expect("utf-8 path").to_string();
     let (g, reference, camera) = (d("g.exr"), d("ref.exr"), d("cam.json"));
     let mut args = vec![
@@ -116,15 +127,10 @@ pub fn render_scene_128(dir: &Path, scene: &str, extra: &[&str]) {
         &g,
     ];
     args.extend_from_slice(extra);
-    args.extend([
-        "--reference",
-        &reference,
-        "--ref-spp",
-        "256",
-        "--camera-out",
-        &camera,
-        "--quiet",
-    ]);
+    if with_reference {
+        args.extend(["--reference", &reference, "--ref-spp", "256"]);
+    }
+    args.extend(["--camera-out", &camera, "--quiet"]);
     assert_success(&run("spreadlet-scene", &args, &cache_dir()));
 }
 

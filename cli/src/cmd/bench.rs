@@ -55,8 +55,12 @@ pub(crate) struct BenchArgs {
 pub(crate) fn run(args: BenchArgs) -> Result<()> {
     let profile: precompute::Profile = args.db_profile.parse()?;
     if let Some(dir) = &args.device_check {
-        let (json, md) =
-            spreadlet_cli::device_check::run_to_folder(dir, args.quick, profile, args.rotation)?;
+        let (json, md) = spreadlet_harness::device_check::run_to_folder(
+            dir,
+            args.quick,
+            profile,
+            args.rotation,
+        )?;
         println!("wrote {} and {}", json.display(), md.display());
         return Ok(());
     }
@@ -67,7 +71,7 @@ pub(crate) fn run(args: BenchArgs) -> Result<()> {
                 cfg,
                 &dbcache::cache_dir(),
                 true,
-                &spreadlet_cli::print_cache_event,
+                &spreadlet_harness::print_cache_event,
             )?;
             Ok(spreadlet::condition::condition(&db)?.0)
         };
@@ -78,7 +82,7 @@ pub(crate) fn run(args: BenchArgs) -> Result<()> {
         } else {
             args.sizes.clone()
         };
-        let config = spreadlet_cli::bench::ScalingConfig {
+        let config = spreadlet_harness::bench::ScalingConfig {
             sizes,
             coc_radii: args.coc_radii.clone(),
             dense_max_size: args.dense_max_size,
@@ -86,7 +90,7 @@ pub(crate) fn run(args: BenchArgs) -> Result<()> {
             rotation: args.rotation,
             ..Default::default()
         };
-        let rows = spreadlet_cli::bench::run_scaling(&sparse, &dense, &config, true)?;
+        let rows = spreadlet_harness::bench::run_scaling(&sparse, &dense, &config, true)?;
         let database = format!(
             "thin-lens {} ({} PSFs, {} spreadlets, max extent {} px)",
             profile,
@@ -96,7 +100,7 @@ pub(crate) fn run(args: BenchArgs) -> Result<()> {
         );
         println!(
             "{}",
-            spreadlet_cli::bench::scaling_markdown(&rows, &database)
+            spreadlet_harness::bench::scaling_markdown(&rows, &database)
         );
         return Ok(());
     }
@@ -105,9 +109,9 @@ pub(crate) fn run(args: BenchArgs) -> Result<()> {
         &cfg,
         &dbcache::cache_dir(),
         true,
-        &spreadlet_cli::print_cache_event,
+        &spreadlet_harness::print_cache_event,
     )?;
-    let config = spreadlet_cli::bench::BenchConfig {
+    let config = spreadlet_harness::bench::BenchConfig {
         sizes: args.sizes,
         runs: args.runs.max(1),
         cpu: !args.no_cpu,
@@ -118,7 +122,7 @@ pub(crate) fn run(args: BenchArgs) -> Result<()> {
     };
     // As `DbSet` hands it to the pipeline: spreadlets in row order.
     let db = db.into_spreadlets_in_row_order();
-    let report = spreadlet_cli::bench::run_bench(&db, &config)?;
+    let report = spreadlet_harness::bench::run_bench(&db, &config)?;
     println!("{}", report.to_markdown());
     Ok(())
 }

@@ -30,7 +30,7 @@ pub(crate) struct DemoArgs {
 
 /// Runs `spreadlet demo`.
 pub(crate) fn run(args: DemoArgs) -> Result<()> {
-    let options = spreadlet_cli::demo::DemoOptions {
+    let options = spreadlet_harness::demo::DemoOptions {
         out: args.out.clone(),
         scene: args.scene,
         size: args.size,
@@ -39,8 +39,8 @@ pub(crate) fn run(args: DemoArgs) -> Result<()> {
         progress: !args.quiet,
         ..Default::default()
     };
-    let steps = spreadlet_cli::demo::run(&options)?;
-    println!("{}", spreadlet_cli::demo::table(&steps));
+    let steps = spreadlet_harness::demo::run(&options)?;
+    println!("{}", spreadlet_harness::demo::table(&steps));
     println!(
         "wrote {}: side_by_side.png (pinhole | synthesis | reconstruct_1spp | average_1spp | \
          average_16spp | reference), summary.json and the EXRs",

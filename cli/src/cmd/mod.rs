@@ -17,6 +17,11 @@ use std::sync::Arc;
 use anyhow::Result;
 use spreadlet::{DbSource, Event, Method, RendererOptions};
 
+/// Milliseconds since `t`.
+pub(crate) fn ms_since(t: std::time::Instant) -> f64 {
+    t.elapsed().as_secs_f64() * 1e3
+}
+
 /// Writes `value` as pretty JSON to `path`, atomically.
 pub(crate) fn write_json(path: &Path, value: &serde_json::Value) -> Result<()> {
     let text = serde_json::to_string_pretty(value)?;
@@ -38,11 +43,11 @@ pub(crate) fn renderer_options(
     let databases = match db {
         Some(path) => DbSource::File(path.to_path_buf()),
         None => DbSource::Cache {
-            dir: spreadlet::dbcache::cache_dir(),
+            dir: spreadlet::cache_dir(),
             profile: db_profile.parse()?,
         },
     };
-    let on_event: Option<spreadlet::renderer::EventSink> = if quiet {
+    let on_event: Option<spreadlet::EventSink> = if quiet {
         None
     } else {
         // The builder's own bar shows a build's progress.

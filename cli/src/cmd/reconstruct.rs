@@ -7,8 +7,9 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use clap::Args;
 
-use spreadlet::pipeline::{ClassifyOptions, Integrator};
-use spreadlet::{Backend, Camera, Method, Renderer, StochasticFrames, SynthOptions};
+use spreadlet::{
+    Backend, Camera, ClassifyOptions, Integrator, Method, Renderer, StochasticFrames, SynthOptions,
+};
 
 use super::camera_flags::{load_camera, CameraFlags};
 use super::frames::{frame_jobs, FrameJob, FramePaths};
@@ -85,8 +86,7 @@ pub(crate) fn run(args: ReconstructArgs) -> Result<()> {
         integrator: args.integrate,
         ..SynthOptions::default()
     };
-    options.validate()?;
-    spreadlet_cli::peer::check_reconstruct_method(&args.method)?;
+    spreadlet_harness::peer::check_reconstruct_method(&args.method)?;
     let jobs = frame_jobs(&FramePaths {
         input: &args.input,
         out: &args.out,
@@ -150,14 +150,14 @@ pub(crate) fn run(args: ReconstructArgs) -> Result<()> {
     }
     Ok(())
 }
-/// One frame of `reconstruct --method PEER` (spreadlet_cli::peer::reconstruct_peer).
+/// One frame of `reconstruct --method PEER` (spreadlet_harness::peer::reconstruct_peer).
 fn reconstruct_frame_peer(
     args: &ReconstructArgs,
     job: &FrameJob,
     frames: &StochasticFrames,
     camera: &Camera,
 ) -> Result<()> {
-    let run = spreadlet_cli::peer::reconstruct_peer(
+    let run = spreadlet_harness::peer::reconstruct_peer(
         &args.method,
         frames,
         camera,

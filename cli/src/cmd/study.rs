@@ -1,5 +1,5 @@
 //! `spreadlet study`: what accuracy costs in time, and the peer methods side by side (the
-//! harness in `spreadlet_cli::study` and `spreadlet_cli::peer_study`).
+//! harness in `spreadlet_harness::study` and `spreadlet_harness::peer_study`).
 
 use std::path::PathBuf;
 
@@ -53,26 +53,30 @@ pub(crate) struct StudyArgs {
 /// Runs `spreadlet study`.
 pub(crate) fn run(args: StudyArgs) -> Result<()> {
     if args.peers {
-        return spreadlet_cli::peer_study::run(&spreadlet_cli::peer_study::PeerStudyOptions {
-            out_dir: args.out,
-            full: args.full,
-            db_profile: args.db_profile,
-            quiet: args.quiet,
-        });
+        return spreadlet_harness::peer_study::run(
+            &spreadlet_harness::peer_study::PeerStudyOptions {
+                out_dir: args.out,
+                full: args.full,
+                db_profile: args.db_profile,
+                quiet: args.quiet,
+            },
+        );
     }
     let input = match (args.input, args.camera, args.reference) {
-        (Some(gbuffer), Some(camera), Some(reference)) => Some(spreadlet_cli::study::StudyInput {
-            gbuffer,
-            camera,
-            reference,
-        }),
+        (Some(gbuffer), Some(camera), Some(reference)) => {
+            Some(spreadlet_harness::study::StudyInput {
+                gbuffer,
+                camera,
+                reference,
+            })
+        }
         (None, None, None) => None,
         _ => bail!("--input, --camera and --reference go together"),
     };
     if args.runs == 0 || args.runs > 100 {
         bail!("--runs must be between 1 and 100, got {}", args.runs);
     }
-    let options = spreadlet_cli::study::StudyOptions {
+    let options = spreadlet_harness::study::StudyOptions {
         out_dir: args.out.clone(),
         scene: args.scene,
         size: args.size,
@@ -85,7 +89,7 @@ pub(crate) fn run(args: StudyArgs) -> Result<()> {
         gpu: !args.no_gpu,
         quiet: args.quiet,
     };
-    let rows = spreadlet_cli::study::run(&options)?;
+    let rows = spreadlet_harness::study::run(&options)?;
     let md = std::fs::read_to_string(args.out.join("study.md")).unwrap_or_default();
     let findings = md.split("## All configurations").next().unwrap_or_default();
     println!("{}", findings.trim_end());

@@ -1,24 +1,21 @@
 //! `spreadlet synth`: depth of field and motion blur from a pinhole G-buffer, one frame or a
 //! sequence, through [`spreadlet::Renderer`].
 
-use spreadlet::synth::ms_since;
 use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
 
-use spreadlet::baseline::{FilterOptions, METHODS};
-use spreadlet::gbuffer::{ChannelOptions, GBuffer, Layout, ViewLayer};
-use spreadlet::pipeline::{
-    ClassifyOptions, CompositeOptions, Effects, FrameEdges, Integrator, RotationSampling,
-    SplatOptions,
+use spreadlet::{
+    Backend, ChannelOptions, ClassifyOptions, CompositeOptions, DeepImage, FilterOptions,
+    FrameEdges, GBuffer, Integrator, Layout, Method, Renderer, RotationSampling, SplatOptions,
+    SynthOptions, ViewLayer,
 };
-use spreadlet::{Backend, DeepImage, Method, Renderer, SynthOptions};
 
 use super::camera_flags::{load_camera, CameraFlags};
 use super::frames::{frame_jobs, FrameJob, FramePaths};
-use super::{renderer_options, write_json};
+use super::{ms_since, renderer_options, write_json};
 
 #[derive(Args, Debug)]
 pub(crate) struct SynthArgs {
@@ -283,7 +280,6 @@ fn deep_frame(
     started: Instant,
 ) -> Result<()> {
     let options = args.synth_options();
-    options.validate()?;
     let frame = renderer.synthesize_deep(deep, camera, &options)?;
     let (image, stats) = (&frame.image, &frame.stats);
     write_frame_outputs(job, image, |write_ms| {
@@ -487,7 +483,6 @@ fn synth_frame(args: &SynthArgs, job: &FrameJob, renderer: &mut Renderer) -> Res
     let mut layers = read_layers(args, job)?;
     let read_ms = ms_since(t);
     let options = args.synth_options();
-    options.validate()?;
     let layer_names: Vec<String> = layers.iter().map(|l| l.name.clone()).collect();
     // A single layer declared still goes the layered way too: it needs no vectors.
     if layers.len() > 1 || layers[0].still {
@@ -501,13 +496,12 @@ fn synth_frame(args: &SynthArgs, job: &FrameJob, renderer: &mut Renderer) -> Res
         return layered_frame(args, job, &layers, &camera, renderer, read_ms, started);
     }
     let gbuffer = layers.remove(0).gbuffer;
-    if !METHODS.contains(&args.method.as_str()) {
+    if !Method::NAMES.contains(&args.method.as_str()) {
         return peer_frame(args, job, &gbuffer, &camera);
     }
     if args.method == "filter" {
         return filter_frame(args, job, &gbuffer, &camera, renderer);
     }
-    let effects = Effects::of(&camera, &gbuffer);
     let frame = renderer.synthesize(&gbuffer, &camera, &options)?;
     let (image, stats) = (&frame.image, &frame.stats);
     write_frame_outputs(job, image, |write_ms| {
@@ -518,12 +512,12 @@ fn synth_frame(args: &SynthArgs, job: &FrameJob, renderer: &mut Renderer) -> Res
              on the {}",
                 stats.width,
                 stats.height,
-                if effects.defocus {
+                if stats.defocus {
                     "defocus"
                 } else {
                     "no defocus"
                 },
-                if effects.motion { " + motion" } else { "" },
+                if stats.motion { " + motion" } else { "" },
                 stats.counts.sparse,
                 stats.counts.dense,
                 stats.counts.copied,
@@ -576,7 +570,8 @@ fn peer_frame(
     camera: &spreadlet::Camera,
 ) -> Result<()> {
     let t = Instant::now();
-    let image = spreadlet_cli::peer::synthesize_peer(&args.method, &gbuffer.frame_only(), camera)?;
+    let image =
+        spreadlet_harness::peer::synthesize_peer(&args.method, &gbuffer.frame_only(), camera)?;
     let ms = ms_since(t);
     image.write_exr(&job.out)?;
     if let Some(p) = &job.preview {

@@ -4,7 +4,8 @@
 //! - [`GpuContext`]: adapter and device acquisition, feature detection.
 //! - [`GpuSynthesizer`]: pipelines and the uploaded PSF database, reused across frames;
 //!   [`GpuSynthesizer::run`] takes the CPU path's classified records.
-//! - [`synthesize_gpu`]: the GPU twin of `synth::synthesize` (classification on the CPU).
+//! - [`render_gpu`]: the GPU device, drawing a [`crate::prepare::PreparedFrame`] as
+//!   `synth::render_cpu` does on the CPU.
 //! - [`GpuPyramid`]: the convolution pyramid alone (stage-level entry point).
 //! - [`GpuFilter`], [`filter_gpu`]: the filter baseline (gathering), twin of
 //!   `baseline::filter`.
@@ -33,7 +34,7 @@ pub use ::shaders::shader_sources_for_validation;
 pub use context::{GpuContext, REQUIRE_GPU_ENV};
 pub use error::GpuError;
 pub use filter::{filter_gpu, GpuFilter};
-pub use frontend::{reconstruct_gpu, synthesize_deep_gpu, synthesize_gpu, synthesize_layers_gpu};
+pub use frontend::render_gpu;
 pub use pyramid::{GpuPyramid, PyramidLevels};
 pub use synth::{
     AtomicMode, GpuStageTimes, GpuSynthOptions, GpuSynthesizer, SplatMode, SplatPlanes,

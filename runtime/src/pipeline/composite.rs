@@ -44,10 +44,8 @@
 //!
 //! Negative values (approximation ringing) are clamped to zero in the output.
 
-use super::classify::Classified;
 use super::integrate::IntegratedLayers;
-use super::splat::psf_reach;
-use super::types::SplatPath;
+use super::types::{psf_reach, Classified, SplatPath};
 use formats::RgbaImage;
 use psf_db::PsfDatabase;
 

@@ -14,10 +14,8 @@ pub mod integrate;
 pub mod splat;
 pub mod types;
 
-pub use classify::{
-    classify, Classified, ClassifyOptions, DataWindow, Effects, FrameEdges, LayerInfo, PathCounts,
-};
+pub use classify::{classify, ClassifyOptions, DataWindow, Effects, FrameEdges};
 pub use composite::{composite, CompositeOptions};
 pub use integrate::{integrate, IntegratedLayers, Integrator};
 pub use splat::{splat, LayerStack, RotationSampling, SplatOptions};
-pub use types::{FrameParams, SplatPath, SplatRecord};
+pub use types::{Classified, FrameParams, LayerInfo, PathCounts, SplatPath, SplatRecord};

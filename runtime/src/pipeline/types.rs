@@ -1,9 +1,11 @@
-//! Buffer records shared by the CPU path and the GPU path.
+//! What classification hands to the drawing stages of either device: the buffer records, the
+//! frame's constants, the per-layer summary, and each PSF's reach.
 //!
-//! Every struct here is `#[repr(C)]` and `bytemuck::Pod`; its WGSL twin lives in
-//! `shaders/common.wgsl` with the same field order. Change both or neither.
+//! [`SplatRecord`] and [`FrameParams`] are `#[repr(C)]` and `bytemuck::Pod`; their WGSL twins
+//! live in `shaders/common.wgsl` with the same field order. Change both or neither.
 
 use bytemuck::{Pod, Zeroable};
+use psf_db::PsfDatabase;
 
 /// One pixel (or one stochastic sample) after classification: where its PSF is centred, which
 /// database PSF it uses, which layer it goes to and with what colour.
@@ -63,4 +65,112 @@ pub struct FrameParams {
     pub record_count: u32,
     /// Colour channels per spreadlet value in the database (1 or 3).
     pub db_channels: u32,
+}
+
+/// Per-layer summary.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct LayerInfo {
+    /// Parallax (1/depth, per scene unit) at the far edge of the layer's bin.
+    pub parallax_min: f32,
+    /// Parallax at the near edge of the layer's bin.
+    pub parallax_max: f32,
+    /// Index of the layer's first record in [`Classified::records`].
+    pub first_record: usize,
+    /// Number of records in the layer.
+    pub record_count: usize,
+    /// Records drawn sparse.
+    pub sparse: usize,
+    /// Records drawn dense.
+    pub dense: usize,
+    /// Records copied.
+    pub copied: usize,
+}
+
+impl LayerInfo {
+    /// Adds the paths of the layer's `records` to `sparse`, `dense` and `copied`.
+    pub fn count_paths(&mut self, records: &[SplatRecord]) {
+        for r in records {
+            match r.path {
+                p if p == SplatPath::Sparse as u32 => self.sparse += 1,
+                p if p == SplatPath::Dense as u32 => self.dense += 1,
+                _ => self.copied += 1,
+            }
+        }
+    }
+}
+
+/// Record counts per path, over all layers.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct PathCounts {
+    /// Records splatted as sparse spreadlets.
+    pub sparse: usize,
+    /// Records drawn as dense fast-track PSFs.
+    pub dense: usize,
+    /// Records whose PSF lies under a pixel, copied.
+    pub copied: usize,
+    /// Input pixels dropped (non-finite colour, or zero colour and alpha).
+    pub dropped: usize,
+    /// Records whose PSF coordinates were outside the database and clamped.
+    pub clamped: usize,
+    /// Pixels split into a foreground and a background part by the edge fix.
+    pub edge_split: usize,
+    /// Pixels split into two layers by soft layering.
+    pub soft_split: usize,
+    /// Fragments drawn with a dense twin because they are very bright (also in `dense`).
+    pub hdr_dense: usize,
+    /// Records added beyond the input's outermost pixels ([`super::FrameEdges::Extend`]; also in
+    /// the path counts).
+    pub edge_extended: usize,
+    /// Fragments of background continued behind sharper occluders
+    /// ([`super::ClassifyOptions::fill_hidden`]).
+    pub hidden_filled: usize,
+}
+
+impl PathCounts {
+    /// Adds a layer's counts per path.
+    pub fn add_layer(&mut self, info: &LayerInfo) {
+        self.sparse += info.sparse;
+        self.dense += info.dense;
+        self.copied += info.copied;
+    }
+}
+
+/// Output of classification ([`super::classify::classify`]): the records every device
+/// draws.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Classified {
+    /// Frame constants (size, padding, layers, record count, database channels).
+    pub frame: FrameParams,
+    /// Records sorted by layer, then by pixel (row-major), then fragment.
+    pub records: Vec<SplatRecord>,
+    /// One entry per layer (index 0 = farthest).
+    pub layers: Vec<LayerInfo>,
+    /// Counts per path.
+    pub counts: PathCounts,
+}
+
+/// For every PSF of `db`, the largest distance (px, rounded up, plus one) of any of its
+/// spreadlets or dense pixels from its centre.
+pub fn psf_reach(db: &PsfDatabase) -> Vec<i32> {
+    (0..db.psf_count())
+        .map(|i| {
+            let r2 = match db.dense(i) {
+                Some(d) => {
+                    let xs = [d.origin[0], d.origin[0] + d.width as i32 - 1];
+                    let ys = [d.origin[1], d.origin[1] + d.height as i32 - 1];
+                    let mx = xs.iter().map(|x| x.abs()).max().unwrap_or(0);
+                    let my = ys.iter().map(|y| y.abs()).max().unwrap_or(0);
+                    mx * mx + my * my
+                }
+                None => db
+                    .spreadlets(i)
+                    .0
+                    .iter()
+                    .map(|p| i32::from(p[0]).pow(2) + i32::from(p[1]).pow(2))
+                    .max()
+                    .unwrap_or(0),
+            };
+            (f64::from(r2).sqrt().ceil() as i32) + 1
+        })
+        .collect()
 }

@@ -44,3 +44,23 @@ pub fn max_diff(a: &[f32], b: &[f32]) -> (f32, f32) {
     let m = b.iter().map(|v| v.abs()).fold(0.0, f32::max);
     (d, m)
 }
+
+/// The GPU device's image of a flat G-buffer, prepared as the CPU device's.
+pub fn synthesize_gpu(
+    gpu: &mut spreadlet::gpu::GpuSynthesizer,
+    gbuffer: &spreadlet::GBuffer,
+    camera: &spreadlet::Camera,
+    dbs: &spreadlet::DbSet,
+    options: &spreadlet::SynthOptions,
+) -> Result<
+    (
+        spreadlet::RgbaImage,
+        spreadlet::SynthStats,
+        spreadlet::gpu::GpuStageTimes,
+    ),
+    spreadlet::Error,
+> {
+    let prepared =
+        spreadlet::Plan::new(spreadlet::Input::Flat(gbuffer), camera, options)?.prepare(dbs)?;
+    Ok(spreadlet::gpu::render_gpu(gpu, prepared, dbs)?)
+}

@@ -158,8 +158,18 @@ pub fn classify_deep(
     dbs: &DbSet,
     options: &ClassifyOptions,
 ) -> Result<Classified, ClassifyError> {
+    classify_deep_with(deep, camera, deep_effects(deep, camera), dbs, options)
+}
+
+/// [`classify_deep`] with the effects already found ([`deep_effects`]).
+pub(crate) fn classify_deep_with(
+    deep: &DeepImage,
+    camera: &Camera,
+    effects: Effects,
+    dbs: &DbSet,
+    options: &ClassifyOptions,
+) -> Result<Classified, ClassifyError> {
     check_deep_size(deep, camera)?;
-    let effects = deep_effects(deep, camera);
     let model = resolve_model(effects, dbs)?;
     let mut fragments = deep_fragments(deep, camera, effects);
     let mut counts = PathCounts {

@@ -8,8 +8,9 @@
 use anyhow::Context;
 use formats::image::RgbaImage;
 use spreadlet::camera::Camera;
-use spreadlet::reconstruct::{effects_of, reconstruct_with, SamplePlacement};
+use spreadlet::reconstruct::{effects_of, SamplePlacement};
 use spreadlet::synth::SynthOptions;
+use spreadlet::{Input, Plan};
 
 fn ssim(a: &RgbaImage, b: &RgbaImage) -> anyhow::Result<f64> {
     let flat = |i: &RgbaImage| -> Vec<f32> { i.pixels.iter().flatten().copied().collect() };
@@ -50,7 +51,7 @@ fn main() -> anyhow::Result<()> {
     let reference = to_runtime(scene::render_reference(&scene, 1024, &render)?);
     let one = frames.first_samples(1);
     let effects = effects_of(&camera, &frames);
-    let dbs = spreadlet_cli::demo::cached_dbs(
+    let dbs = spreadlet_harness::demo::cached_dbs(
         effects,
         precompute::Profile::Quick,
         spreadlet::databases::aperture_of(&camera),
@@ -82,7 +83,9 @@ fn main() -> anyhow::Result<()> {
     ];
     placements.push(SamplePlacement::for_spp(1));
     for placement in placements {
-        let (image, stats) = reconstruct_with(&one, &camera, &dbs, &options, placement)?;
+        let prepared =
+            Plan::new(Input::Samples(&one, placement), &camera, &options)?.prepare(&dbs)?;
+        let (image, stats) = spreadlet::synth::render_cpu(prepared, &dbs);
         image.write_exr(&out.join(format!("reconstruct_{placement:?}.exr")))?;
         println!(
             "reconstruct_1spp, {placement:?} placement: {:.4} ({:.0} ms)",

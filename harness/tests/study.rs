@@ -3,7 +3,7 @@
 //! least as well as the sparsest spreadlet database, the Pareto front is consistent, and the
 //! Markdown table and the PNG plot are written.
 
-use spreadlet_cli::study::{findings, mark_pareto, run, StudyOptions, StudyRow, CSV_COLUMNS};
+use spreadlet_harness::study::{findings, mark_pareto, run, StudyOptions, StudyRow, CSV_COLUMNS};
 
 #[test]
 fn tiny_study_writes_csv_markdown_and_plot() {

@@ -4,7 +4,7 @@
 //! G-buffer itself (equal scores, flagged as ignoring depth of field), defocus-only peers are
 //! flagged on a moving scene, and the crops pick the best rows and the worst region.
 
-use spreadlet_cli::peer_study::{
+use spreadlet_harness::peer_study::{
     hardest_region, run_with, PeerStudyConfig, PeerStudyOptions, RowKind, COLUMNS,
 };
 

@@ -2,7 +2,7 @@
 //! PSF size, rotations, copies, several layers) the GPU image matches the CPU's.
 #![cfg(feature = "gpu")]
 
-use spreadlet_cli::bench;
+use spreadlet_harness::bench;
 
 #[path = "../../runtime/tests/gpu_support/mod.rs"]
 mod gpu_support;

@@ -12,7 +12,7 @@ fn main() -> anyhow::Result<()> {
     let cam = spreadlet::camera::Camera::from_json_str(&std::fs::read_to_string(&a[2])?)?;
     let (x, y): (i32, i32) = (a[3].parse().context("x")?, a[4].parse().context("y")?);
     let effects = spreadlet::pipeline::Effects::of(&cam, &g);
-    let dbs = spreadlet_cli::demo::cached_dbs(
+    let dbs = spreadlet_harness::demo::cached_dbs(
         effects,
         precompute::Profile::Quick,
         spreadlet::databases::aperture_of(&cam),

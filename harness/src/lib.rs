@@ -1,7 +1,7 @@
-//! The harness around the `spreadlet` library, used by the `spreadlet` binary: the demo on
-//! built-in data, the accuracy-against-time study, the benchmarks and the one-shot device
-//! check, and the peer methods (Blender-style and published DoF and MB methods) for
-//! comparison. None of it is needed to embed the renderer.
+//! The harness around the `spreadlet` library, reached through the `spreadlet` binary's `demo`,
+//! `study` and `bench` commands: the demo on built-in data, the accuracy-against-time study,
+//! the benchmarks and the one-shot device check, and the peer methods (Blender-style and
+//! published DoF and MB methods) for comparison. None of it is needed to embed the renderer.
 
 pub mod bench;
 pub mod demo;

@@ -1,0 +1,395 @@
+//! From fragments to splat records: each fragment's PSF, its depth layer(s) in constant
+//! parallax, occlusion between fragments that share a layer, and the records sorted by layer.
+
+use super::frame_edges::{distance_to, extend_beyond};
+use super::lookup::{front_turns_the_aperture, lookup_psf, Lookup};
+use super::*;
+use crate::camera::Camera;
+use crate::dbset::{DbSet, NO_TWIN};
+use crate::pipeline::types::{psf_reach, FrameParams, SplatPath, SplatRecord};
+use psf_db::{PsfDatabase, PsfModel};
+use rayon::prelude::*;
+
+/// Layers fragments and turns them into splat records: the nearest PSF of each (O(1) through
+/// the nested grid), its rotation, its drawing path, and its layer(s). `w x h` is the frame
+/// (the output); fragments are in frame coordinates and may lie outside it, within `data`
+/// (overscan). Beyond `data`, [`ClassifyOptions::frame_edges`] decides. `model` comes from
+/// [`resolve_model`]; `counts` carries what the caller already counted (dropped, edge splits).
+#[allow(clippy::too_many_arguments)]
+pub fn classify_fragments(
+    fragments: &[Fragment],
+    w: usize,
+    h: usize,
+    data: DataWindow,
+    camera: &Camera,
+    dbs: &DbSet,
+    model: Option<PsfModel>,
+    options: &ClassifyOptions,
+    mut counts: PathCounts,
+) -> Result<Classified, ClassifyError> {
+    if options.layers == 0 {
+        return Err(ClassifyError::NoLayers);
+    }
+    let combined = dbs.combined.as_ref();
+    let lens = camera.thin_lens();
+    let pixels_per_mm = camera.pixels_per_mm() as f32;
+    // Nothing to simulate: every pixel is copied, and one layer returns the input unchanged.
+    let n_layers = if model.is_some() {
+        options.layers as usize
+    } else {
+        1
+    };
+    let signed_coc = |d: f32| -> f32 { lens.map_or(0.0, |l| l.signed_coc_px(f64::from(d)) as f32) };
+    let (pmin, pmax) = fragments
+        .iter()
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), f| {
+            (a.min(f.parallax), b.max(f.parallax))
+        });
+    let span = if pmax > pmin { pmax - pmin } else { 0.0 };
+    // Layer coordinate: 0 at the far edge, n at the near edge.
+    let layer_coord = |p: f32| -> f32 {
+        if span > 0.0 {
+            ((p - pmin) / span * n_layers as f32).clamp(0.0, n_layers as f32)
+        } else {
+            0.0
+        }
+    };
+
+    // Layer weights: hard, or blended near the boundary between two layer centres. A sharp
+    // fragment is not split: its PSF barely differs between the two layers, and a surface
+    // split across two layers lets what lies behind it show through (up to a quarter where
+    // the weights are even).
+    let targets_of = |frag: &Fragment| {
+        let coc = signed_coc(frag.depth).abs();
+        let m = frag.motion;
+        let motion_len = (m[0] * m[0] + m[1] * m[1]).sqrt();
+        let sharp = coc.max(motion_len) < options.soft_layers_min_blur_px;
+        let band = options.soft_layers.filter(|_| !sharp);
+        layer_targets(layer_coord(frag.parallax), n_layers, band)
+    };
+    let transmission = occlusion_within_layers(fragments, n_layers, &targets_of);
+    let flip_front = front_turns_the_aperture(dbs);
+
+    let centre = [w as f32 * 0.5, h as f32 * 0.5];
+    // One fragment's records into `per_layer`, and what it counts into `counts`.
+    let emit = |index: usize,
+                frag: &Fragment,
+                per_layer: &mut [Vec<SplatRecord>],
+                counts: &mut PathCounts| {
+        if frag.weight <= 0.0 {
+            return;
+        }
+        let (x, y) = (frag.x, frag.y);
+        let color = frag.color;
+        let signed = signed_coc(frag.depth);
+        let coc = signed.abs();
+        let m = frag.motion;
+        let motion_len = (m[0] * m[0] + m[1] * m[1]).sqrt();
+        let bright = color[..3]
+            .iter()
+            .any(|&c| c * frag.weight > options.hdr_dense_threshold);
+        // A bright fragment stands alone (a highlight's bokeh is one PSF, not an average over
+        // a neighbourhood): it keeps the PSF of its own parameters.
+        let continuous = options.continuous_lookup && !bright;
+        let Lookup {
+            path,
+            psf_index,
+            clamped,
+            mut rot_cos,
+            mut rot_sin,
+            blend,
+        } = lookup_psf(
+            frag,
+            coc,
+            motion_len,
+            centre,
+            pixels_per_mm,
+            dbs,
+            model,
+            options,
+            continuous,
+        );
+        // In front of the focus plane the lens images its aperture turned half a turn: the
+        // databases hold the PSF behind it (see `front_turns_the_aperture`).
+        if flip_front && signed < 0.0 && model != Some(PsfModel::PhysicalLens) {
+            rot_cos = -rot_cos;
+            rot_sin = -rot_sin;
+        }
+        counts.clamped += usize::from(clamped);
+        // The twin of the sub-cell holding the fragment's own CoC and motion (a thin-lens
+        // cell is divided in CoC alone and ignores the motion).
+        let twin = dbs.hdr_twin_for(psf_index, [coc, motion_len]);
+        let to_twin = path != SplatPath::Copy && bright && twin != NO_TWIN;
+        let (path, psf_index) = if to_twin {
+            counts.hdr_dense += 1;
+            (SplatPath::Dense, twin)
+        } else {
+            (path, psf_index)
+        };
+
+        let (targets, n_targets) = targets_of(frag);
+        if n_targets == 2 {
+            counts.soft_split += 1;
+        }
+        // The fragment's PSF, or its cell's and its neighbour's with their shares.
+        // A twin is already the PSF of the fragment's own sub-cell.
+        let mut parts = [(path, psf_index, 1.0f32), (path, psf_index, 0.0)];
+        if let Some(b) = blend.filter(|b| !to_twin && b.psf_index != psf_index) {
+            parts[0].2 = 1.0 - b.share;
+            parts[1] = (b.path, b.psf_index, b.share);
+        }
+        let n_parts = if parts[1].2 > 0.0 { 2 } else { 1 };
+        for (t, &(layer, lw)) in targets[..n_targets].iter().enumerate() {
+            let weight = match &transmission {
+                Some(kept) => frag.weight * lw * kept[index][t],
+                None => frag.weight * lw,
+            };
+            for &(path, psf_index, share) in &parts[..n_parts] {
+                let weight = weight * share;
+                // Frame coordinates for now; shifted by the padding once it is known.
+                per_layer[layer].push(SplatRecord {
+                    center_x: x,
+                    center_y: y,
+                    psf_index,
+                    layer: layer as u32,
+                    rot_cos,
+                    rot_sin,
+                    weight,
+                    path: path as u32,
+                    color: color.map(|v| v * weight),
+                });
+            }
+        }
+    
+    };
+    // Fragments in chunks on every thread, each chunk's records per layer appended in chunk
+    // order: the same records in the same order as one pass over them.
+    const CHUNK: usize = 4096;
+    let chunks: Vec<(Vec<Vec<SplatRecord>>, PathCounts)> = fragments
+        .par_chunks(CHUNK)
+        .enumerate()
+        .map(|(c, chunk)| {
+            let mut per_layer = vec![Vec::new(); n_layers];
+            let mut counted = PathCounts::default();
+            for (k, frag) in chunk.iter().enumerate() {
+                emit(c * CHUNK + k, frag, &mut per_layer, &mut counted);
+            }
+            (per_layer, counted)
+        })
+        .collect();
+    let mut per_layer: Vec<Vec<SplatRecord>> = vec![Vec::new(); n_layers];
+    for (layers, counted) in chunks {
+        for (all, part) in per_layer.iter_mut().zip(layers) {
+            all.extend(part);
+        }
+        counts.clamped += counted.clamped;
+        counts.hdr_dense += counted.hdr_dense;
+        counts.soft_split += counted.soft_split;
+    }
+
+    Ok(assemble_layers(
+        per_layer,
+        w,
+        h,
+        data,
+        combined,
+        options,
+        counts,
+        (pmin, span),
+    ))
+}
+
+/// The frame's records from its layers' (frame coordinates): overscan records that cannot
+/// reach the frame dropped, the data's border extended outwards as
+/// [`ClassifyOptions::frame_edges`] says, row order within each layer, the padding every PSF
+/// needs, and the layers' summaries. `parallax` is the far edge and the span of the layers.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn assemble_layers(
+    mut per_layer: Vec<Vec<SplatRecord>>,
+    w: usize,
+    h: usize,
+    data: DataWindow,
+    combined: Option<&PsfDatabase>,
+    options: &ClassifyOptions,
+    mut counts: PathCounts,
+    parallax: (f32, f32),
+) -> Classified {
+    let (pmin, span) = parallax;
+    let n_layers = per_layer.len();
+    // Beyond the data: records of the outermost pixels, repeated outwards (or nothing).
+    let reach: Vec<i32> = combined.map_or_else(Vec::new, psf_reach);
+    let reach_of = |r: &SplatRecord| -> i32 {
+        if r.path == SplatPath::Copy as u32 {
+            0
+        } else {
+            reach.get(r.psf_index as usize).copied().unwrap_or(0)
+        }
+    };
+    let frame = DataWindow::frame(w, h);
+    for recs in &mut per_layer {
+        // Overscan pixels whose PSF cannot reach the frame add nothing to the output.
+        recs.retain(|r| distance_to(frame, r.center_x, r.center_y) <= reach_of(r) as f32);
+        if options.frame_edges == FrameEdges::Extend {
+            let extended = extend_beyond(recs, data, frame, &reach_of);
+            counts.edge_extended += extended.len();
+            recs.extend(extended);
+        }
+        // Row order within the layer (the splat visits bands of rows; the extension and the
+        // hidden background come after the pixels); stable, so the pixels' records keep their
+        // order.
+        if !recs.is_sorted_by_key(|r| (r.center_y, r.center_x)) {
+            recs.sort_by_key(|r| (r.center_y, r.center_x));
+        }
+    }
+    // Padding: every PSF, wherever its centre lies, must fit inside the padded layer.
+    let beyond = per_layer
+        .iter()
+        .flatten()
+        .map(|r| {
+            let ox = (-r.center_x).max(r.center_x - (w as i32 - 1)).max(0);
+            let oy = (-r.center_y).max(r.center_y - (h as i32 - 1)).max(0);
+            ox.max(oy) + reach_of(r)
+        })
+        .max()
+        .unwrap_or(0);
+    let pad = combined
+        .map_or(0, |d| d.max_extent_px())
+        .max(beyond.max(0) as u32)
+        + options.pad_margin;
+    let padded_width = w as u32 + 2 * pad;
+    let padded_height = h as u32 + 2 * pad;
+    for r in per_layer.iter_mut().flatten() {
+        r.center_x += pad as i32;
+        r.center_y += pad as i32;
+    }
+
+    let mut records = Vec::with_capacity(per_layer.iter().map(Vec::len).sum());
+    let mut layers = Vec::with_capacity(n_layers);
+    for (l, recs) in per_layer.into_iter().enumerate() {
+        let mut info = LayerInfo {
+            parallax_min: pmin + span * l as f32 / n_layers as f32,
+            parallax_max: pmin + span * (l + 1) as f32 / n_layers as f32,
+            first_record: records.len(),
+            record_count: recs.len(),
+            ..LayerInfo::default()
+        };
+        info.count_paths(&recs);
+        counts.add_layer(&info);
+        layers.push(info);
+        records.extend(recs);
+    }
+    let frame = FrameParams {
+        width: w as u32,
+        height: h as u32,
+        pad,
+        layers: n_layers as u32,
+        padded_width,
+        padded_height,
+        record_count: records.len() as u32,
+        db_channels: combined.map_or(1, |d| d.channels() as u32),
+    };
+    Classified {
+        frame,
+        records,
+        layers,
+        counts,
+    }
+}
+
+/// The layers a fragment at layer coordinate `u` (0 at the far edge, `n_layers` at the near
+/// edge) goes to, with their weights, and how many (1 or 2). With a soft band (layer units),
+/// a fragment near the boundary between two layer centres is split between them.
+/// For fragments from several sources (render layers, deep samples), the share of each
+/// fragment's weight in each of its target layers that the nearer sources of its pixel let
+/// through in that same layer: `prod (1 - coverage)` over the nearer sources, a source's
+/// coverage in a layer being the sum of its fragments' alpha x weight x layer weight there
+/// (capped at one). Fragments of one source (an edge split's two parts) do not occlude each
+/// other: their weights already share the pixel. Across layers compositing does the
+/// occluding. `None` when every fragment comes from one source (nothing to do).
+pub(super) fn occlusion_within_layers(
+    fragments: &[Fragment],
+    n_layers: usize,
+    targets_of: &dyn Fn(&Fragment) -> LayerTargets,
+) -> Option<Vec<[f32; 2]>> {
+    let first_source = fragments.first()?.source;
+    if fragments.iter().all(|f| f.source == first_source) {
+        return None;
+    }
+    let mut kept = vec![[1.0f32; 2]; fragments.len()];
+    // Fragments by pixel, each pixel's in input order (a stable sort).
+    let mut order: Vec<u32> = (0..fragments.len() as u32).collect();
+    order.sort_by_key(|&i| {
+        let f = &fragments[i as usize];
+        (f.y, f.x)
+    });
+    let mut through = vec![1.0f32; n_layers];
+    let mut coverage = vec![0.0f32; n_layers];
+    let mut touched: Vec<usize> = Vec::new();
+    // (nearest depth of the fragment's source in this pixel, source, fragment)
+    let mut entries: Vec<(f32, u32, u32)> = Vec::new();
+    let key = |i: u32| (fragments[i as usize].y, fragments[i as usize].x);
+    for pixel in order.chunk_by(|&a, &b| key(a) == key(b)) {
+        let source_of = |i: u32| fragments[i as usize].source;
+        if pixel.iter().all(|&i| source_of(i) == source_of(pixel[0])) {
+            continue;
+        }
+        entries.clear();
+        entries.extend(
+            pixel
+                .iter()
+                .map(|&i| (fragments[i as usize].depth, source_of(i), i)),
+        );
+        entries.sort_by_key(|e| (e.1, e.2));
+        for run in entries.chunk_by_mut(|a, b| a.1 == b.1) {
+            let nearest = run.iter().map(|e| e.0).fold(f32::INFINITY, f32::min);
+            run.iter_mut().for_each(|e| e.0 = nearest);
+        }
+        entries.sort_by(|a, b| a.0.total_cmp(&b.0).then((a.1, a.2).cmp(&(b.1, b.2))));
+        through.iter_mut().for_each(|t| *t = 1.0);
+        for run in entries.chunk_by(|a, b| a.1 == b.1) {
+            for &(_, _, i) in run {
+                let frag = &fragments[i as usize];
+                let (targets, n) = targets_of(frag);
+                let alpha = frag.color[3].clamp(0.0, 1.0) * frag.weight.max(0.0);
+                for (t, &(layer, lw)) in targets[..n].iter().enumerate() {
+                    kept[i as usize][t] = through[layer];
+                    coverage[layer] += alpha * lw;
+                    touched.push(layer);
+                }
+            }
+            for layer in touched.drain(..) {
+                through[layer] *= 1.0 - coverage[layer].min(1.0);
+                coverage[layer] = 0.0;
+            }
+        }
+    }
+    Some(kept)
+}
+
+/// A fragment's depth layers and its weight in each: one or two (soft layers) of the pair.
+pub(super) type LayerTargets = ([(usize, f32); 2], usize);
+
+pub(super) fn layer_targets(u: f32, n_layers: usize, band: Option<f32>) -> LayerTargets {
+    let mut targets = [(0usize, 0.0f32); 2];
+    match band {
+        Some(band) if band > 0.0 && n_layers > 1 => {
+            let t = (u - 0.5).clamp(0.0, (n_layers - 1) as f32);
+            let a = (t.floor() as usize).min(n_layers - 2);
+            let f = t - a as f32;
+            let near = ((f - 0.5) / band + 0.5).clamp(0.0, 1.0);
+            if near <= 0.0 {
+                targets[0] = (a, 1.0);
+                (targets, 1)
+            } else if near >= 1.0 {
+                targets[0] = (a + 1, 1.0);
+                (targets, 1)
+            } else {
+                ([(a, 1.0 - near), (a + 1, near)], 2)
+            }
+        }
+        _ => {
+            targets[0] = ((u.floor() as usize).min(n_layers - 1), 1.0);
+            (targets, 1)
+        }
+    }
+}
