@@ -210,6 +210,7 @@ pub fn scene_frame(
         records,
         layers: infos,
         counts,
+        database: None,
     }
 }
 

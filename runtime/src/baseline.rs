@@ -53,6 +53,12 @@ pub enum BaselineError {
     /// The effects need a database and the set has none.
     #[error("the filter baseline needs a database for these effects, and none was given")]
     NoDatabase,
+    /// The frame moves through a real lens, whose motion PSFs the splat builds per frame.
+    #[error(
+        "the filter baseline draws a real lens on still frames only; motion through it is \
+         drawn by the splat (spreadlet synth)"
+    )]
+    MotionThroughLens,
 }
 
 /// `cfg` with every PSF stored dense: the fast-track threshold (`dense_ratio`, spreadlets per
@@ -324,6 +330,9 @@ pub fn filter_plan(
             return Err(BaselineError::NoDatabase);
         }
         let classified = classify(gbuffer, camera, dbs, &classify_options)?;
+        if classified.database.is_some() {
+            return Err(BaselineError::MotionThroughLens);
+        }
         stats.clamped = classified.counts.clamped;
         let pad = classified.frame.pad as i32;
         for r in &classified.records {

@@ -199,13 +199,8 @@ pub fn load(
             DbSet::single(prepare(db)?)?
         }
         Source::Cache { dir, profile } if request.lens.is_some() => {
-            if needed == PsfModel::LensMotion {
-                return Err(Error::Unsupported(
-                    "a physical lens (camera.json `lens`) with motion blur is not supported: \
-                     render still frames, or use the thin lens for moving ones"
-                        .into(),
-                ));
-            }
+            // One physical-lens database serves still and moving pixels: a moving pixel's PSF
+            // is its lens PSF smeared along its motion, per frame (`motion_smear`).
             let mut cfg = dbcache::build_config(PsfModel::PhysicalLens, profile, 0);
             cfg.lens = request.lens.cloned();
             if let Some(adjust) = request.adjust {

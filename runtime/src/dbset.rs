@@ -154,8 +154,43 @@ impl DbSet {
 }
 
 /// A dense PSF image: offset of its top-left pixel from the centre (px), width, height, and
-/// one value per pixel (single channel, broadcast to the database's channels).
+/// one value per pixel (broadcast to the database's channels) or per pixel and channel
+/// (channel-interleaved).
 type DenseImage = ([i16; 2], u16, u16, Vec<f32>);
+
+/// `db` followed by the dense PSF images `extra` (with `db`'s channel count), in one database
+/// whose spreadlets are in row order; the images' indices follow `db`'s PSFs in order.
+pub fn extend_with_dense(
+    db: &PsfDatabase,
+    extra: &[crate::motion_smear::PsfImage],
+) -> Result<PsfDatabase, DbError> {
+    let mut images = Vec::with_capacity(extra.len());
+    for img in extra {
+        let too_far = |v: i32| i16::try_from(v).is_err();
+        if img.channels != db.channels()
+            || u16::try_from(img.width).is_err()
+            || u16::try_from(img.height).is_err()
+            || too_far(img.origin[0])
+            || too_far(img.origin[1])
+        {
+            return Err(DbError::Invalid(format!(
+                "a {} x {} PSF image of {} channels at {:?} does not fit a database of {} channels",
+                img.width,
+                img.height,
+                img.channels,
+                img.origin,
+                db.channels()
+            )));
+        }
+        images.push((
+            [img.origin[0] as i16, img.origin[1] as i16],
+            img.width as u16,
+            img.height as u16,
+            img.data.clone(),
+        ));
+    }
+    Ok(concatenate(&[db], &images)?.into_spreadlets_in_row_order())
+}
 
 /// Largest twin image (pixels) whose cell is divided into sub-cells: the blob a whole-cell
 /// twin draws shows most on small highlights, and large twins would multiply memory and load
@@ -255,23 +290,26 @@ fn concatenate(dbs: &[&PsfDatabase], extra: &[DenseImage]) -> Result<PsfDatabase
     // The combined database's space only indexes its PSFs (lookups go through the sources'
     // own spaces): one dimension while a 1-D nested grid holds them (at most 361 cells), two
     // beyond (the paper profile's 404 lens-motion PSFs plus their HDR twins).
+    // RGB PSFs (a real lens's) keep their model's label, whose space is two-dimensional.
     let range = [0.0, f64::from(total)];
-    let space = match ParamSpace::resolution_for_count(1, total) {
-        Some(n) => ParamSpace::for_model(PsfModel::ThinLens, &[range], n),
+    let one_dimension = ParamSpace::resolution_for_count(1, total).filter(|_| channels == 1);
+    let model = match one_dimension {
+        Some(_) => PsfModel::ThinLens,
+        None if channels == 1 => PsfModel::LensMotion,
+        None => PsfModel::PhysicalLens,
+    };
+    let space = match one_dimension {
+        Some(n) => ParamSpace::for_model(model, &[range], n),
         None => {
             let n = ParamSpace::resolution_for_count(2, total)
                 .ok_or_else(|| DbError::Invalid(format!("no index space holds {total} PSFs")))?;
-            ParamSpace::for_model(PsfModel::LensMotion, &[range, range], n)
+            ParamSpace::for_model(model, &[range, range], n)
         }
     }
     .map_err(|e| DbError::Invalid(e.to_string()))?;
     let capacity = space.psf_count();
     let mut header: DbHeader = last.header().clone();
-    header.model = if space.dim_count() == 1 {
-        PsfModel::ThinLens
-    } else {
-        PsfModel::LensMotion
-    };
+    header.model = model;
     header.space = space;
     header.stats = dbs
         .iter()
@@ -293,11 +331,15 @@ fn concatenate(dbs: &[&PsfDatabase], extra: &[DenseImage]) -> Result<PsfDatabase
         }
     }
     for (origin, w, h, data) in extra {
-        let values: Vec<f32> = data
-            .iter()
-            .flat_map(|&v| std::iter::repeat_n(v, channels))
-            .collect();
-        builder.push_dense(*origin, *w, *h, &values)?;
+        if data.len() == usize::from(*w) * usize::from(*h) && channels > 1 {
+            let values: Vec<f32> = data
+                .iter()
+                .flat_map(|&v| std::iter::repeat_n(v, channels))
+                .collect();
+            builder.push_dense(*origin, *w, *h, &values)?;
+        } else {
+            builder.push_dense(*origin, *w, *h, data)?;
+        }
     }
     for _ in total..capacity {
         builder.push_sparse(&[], &[])?;

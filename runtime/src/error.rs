@@ -34,7 +34,8 @@ pub enum Error {
     /// The camera's lens prescription is unreadable or cannot be a lens.
     #[error(transparent)]
     Lens(#[from] precompute::optics::PrescriptionError),
-    /// The camera asks for something its lens cannot do (a physical lens with motion blur).
+    /// The camera asks for something its lens cannot do (stochastic samples, labelled for the thin
+    /// lens, through a real lens).
     #[error("{0}")]
     Unsupported(String),
     /// The GPU path failed (no adapter when one was required, a device limit, a wgpu error).

@@ -70,6 +70,7 @@ internal_modules!(
     error,
     #[cfg(feature = "gpu")]
     gpu,
+    motion_smear,
     pipeline,
     prepare,
     reconstruct,

@@ -207,6 +207,19 @@ impl PreparedFrame {
     pub fn options(&self) -> &SynthOptions {
         &self.options
     }
+
+    /// The database the frame's records index: its own when classification added PSFs to the
+    /// set's (the physical-lens PSFs of its moving pixels smeared along their motion), else
+    /// `combined` (the set's).
+    pub fn database_or<'a>(
+        &'a self,
+        combined: Option<&'a psf_db::PsfDatabase>,
+    ) -> Option<&'a psf_db::PsfDatabase> {
+        match &self.content {
+            Content::Records(c) => c.database_or(combined),
+            Content::PassThrough(_) => combined,
+        }
+    }
 }
 
 /// What a device draws.

@@ -552,7 +552,20 @@ impl Renderer {
                     )?);
                 }
                 let name = format!("gpu ({})", gpu.ctx.adapter_name());
-                let synthesizer = gpu.synthesizer.as_mut().expect("set above");
+                // A frame with PSFs of its own (smeared along the motion through a real lens)
+                // uploads its database for this frame alone.
+                let mut own = None;
+                if prepared.database_or(None).is_some() {
+                    own = Some(GpuSynthesizer::for_database(
+                        &gpu.ctx,
+                        prepared.database_or(None),
+                        GpuSynthOptions::from_synth(prepared.options()),
+                    )?);
+                }
+                let synthesizer = match own.as_mut() {
+                    Some(s) => s,
+                    None => gpu.synthesizer.as_mut().expect("set above"),
+                };
                 let (image, stats, stages) = crate::gpu::render_gpu(synthesizer, prepared, dbs)?;
                 Ok(frame(image, stats, name, Some(stages)))
             }

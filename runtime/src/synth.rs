@@ -199,7 +199,8 @@ fn render_classified(
     stats: &mut SynthStats,
 ) -> RgbaImage {
     let t = Instant::now();
-    let stack = splat(classified, dbs.combined.as_ref(), &options.splat);
+    let db = classified.database_or(dbs.combined.as_ref());
+    let stack = splat(classified, db, &options.splat);
     stats.times.splat_ms = ms_since(t);
 
     let t = Instant::now();
@@ -209,7 +210,7 @@ fn render_classified(
 
     let t = Instant::now();
     let sharpness = if options.composite.restore_occluded {
-        crate::pipeline::composite::layer_sharpness(classified, dbs.combined.as_ref())
+        crate::pipeline::composite::layer_sharpness(classified, db)
     } else {
         Vec::new()
     };

@@ -153,6 +153,7 @@ fn classified(
         records,
         layers: infos,
         counts,
+        database: None,
     }
 }
 

@@ -479,6 +479,7 @@ fn stacked(n: usize, path: SplatPath, pad: u32, color: impl Fn(usize) -> f32) ->
         records,
         layers: vec![info],
         counts: PathCounts::default(),
+        database: None,
     }
 }
 

@@ -507,7 +507,7 @@ fn synth_frame(args: &SynthArgs, job: &FrameJob, renderer: &mut Renderer) -> Res
     write_frame_outputs(job, image, |write_ms| {
         if !args.quiet {
             eprintln!(
-                "{}x{} ({}{}): {} sparse, {} dense, {} copied, {} dropped; {} of {} layers; \
+                "{}x{} ({}{}): {} sparse, {} dense{}, {} copied, {} dropped; {} of {} layers; \
              synthesis {:.0} ms (classify {:.0}, splat {:.0}, integrate {:.0}, composite {:.0}) \
              on the {}",
                 stats.width,
@@ -520,6 +520,14 @@ fn synth_frame(args: &SynthArgs, job: &FrameJob, renderer: &mut Renderer) -> Res
                 if stats.motion { " + motion" } else { "" },
                 stats.counts.sparse,
                 stats.counts.dense,
+                if stats.counts.smeared > 0 {
+                    format!(
+                        " ({} lens PSFs smeared along the motion)",
+                        stats.counts.smeared
+                    )
+                } else {
+                    String::new()
+                },
                 stats.counts.copied,
                 stats.counts.dropped,
                 stats.layers_used,

@@ -22,8 +22,9 @@ impl GpuSynthOptions {
 }
 
 /// Draws a prepared frame on the GPU, as [`crate::synth::render_cpu`] does on the CPU. `gpu`
-/// must have been made for `dbs.combined` (see [`GpuSynthesizer::for_database`]; a different
-/// database is an error); reuse it across frames. `stats.times` holds classification (CPU)
+/// must have been made for the database the frame's records index
+/// ([`PreparedFrame::database_or`] of `dbs.combined`: see [`GpuSynthesizer::for_database`]; a
+/// different database is an error); reuse it across frames. `stats.times` holds classification (CPU)
 /// and the GPU stages; the GPU's own breakdown (upload, readback, whether timestamps were
 /// used) comes back too.
 pub fn render_gpu(
@@ -38,8 +39,6 @@ pub fn render_gpu(
         normalize_density,
         started,
     } = frame;
-    gpu.check_database(dbs.combined.as_ref())?;
-    gpu.apply_call_options(&options);
     let classified = match content {
         Content::PassThrough(image) => {
             stats.times.total_ms = ms_since(started);
@@ -47,9 +46,11 @@ pub fn render_gpu(
         }
         Content::Records(classified) => classified,
     };
+    let db = classified.database_or(dbs.combined.as_ref());
+    gpu.check_database(db)?;
+    gpu.apply_call_options(&options);
     if options.composite.restore_occluded {
-        gpu.layer_sharpness =
-            crate::pipeline::composite::layer_sharpness(&classified, dbs.combined.as_ref());
+        gpu.layer_sharpness = crate::pipeline::composite::layer_sharpness(&classified, db);
     }
     let result = gpu.run(&classified.frame, &classified.records, options.integrator);
     gpu.layer_sharpness.clear();

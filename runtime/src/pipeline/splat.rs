@@ -582,6 +582,7 @@ mod tests {
             }],
             records,
             counts: PathCounts::default(),
+            database: None,
         };
         for angle in [0.0f32, 0.3, 1.9, -2.4] {
             let mut records = Vec::new();

@@ -121,6 +121,9 @@ pub struct PathCounts {
     /// Records added beyond the input's outermost pixels ([`super::FrameEdges::Extend`]; also in
     /// the path counts).
     pub edge_extended: usize,
+    /// Moving fragments seen through a real lens, drawn with their lens PSF smeared along
+    /// their motion (also in `dense`).
+    pub smeared: usize,
     /// Fragments of background continued behind sharper occluders
     /// ([`super::ClassifyOptions::fill_hidden`]).
     pub hidden_filled: usize,
@@ -147,6 +150,17 @@ pub struct Classified {
     pub layers: Vec<LayerInfo>,
     /// Counts per path.
     pub counts: PathCounts,
+    /// The database the records index when it is not the set's combined one: the combined
+    /// PSFs followed by this frame's own (the physical-lens PSFs of its moving pixels smeared
+    /// along their motion, [`crate::motion_smear`]). `None`: the set's combined database.
+    pub database: Option<std::sync::Arc<PsfDatabase>>,
+}
+
+impl Classified {
+    /// The database the records index: the frame's own, else `combined` (the set's).
+    pub fn database_or<'a>(&'a self, combined: Option<&'a PsfDatabase>) -> Option<&'a PsfDatabase> {
+        self.database.as_deref().or(combined)
+    }
 }
 
 /// For every PSF of `db`, the largest distance (px, rounded up, plus one) of any of its

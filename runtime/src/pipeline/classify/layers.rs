@@ -6,6 +6,7 @@ use super::lookup::{front_turns_the_aperture, lookup_psf, Lookup};
 use super::*;
 use crate::camera::Camera;
 use crate::dbset::{DbSet, NO_TWIN};
+use crate::motion_smear::SmearKey;
 use crate::pipeline::types::{psf_reach, FrameParams, SplatPath, SplatRecord};
 use psf_db::{PsfDatabase, PsfModel};
 use rayon::prelude::*;
@@ -71,6 +72,31 @@ pub fn classify_fragments(
     let flip_front = front_turns_the_aperture(dbs);
 
     let centre = [w as f32 * 0.5, h as f32 * 0.5];
+    // Through a real lens, the moving fragments' lens PSFs smeared along their motion: built
+    // once per key, appended to the frame's own copy of the database.
+    let smeared = match (model, combined) {
+        (Some(PsfModel::PhysicalLens), Some(all)) => {
+            let key_of = |frag: &Fragment| {
+                let m = frag.motion;
+                let motion_len = (m[0] * m[0] + m[1] * m[1]).sqrt();
+                lookup_psf(
+                    frag,
+                    0.0,
+                    motion_len,
+                    centre,
+                    pixels_per_mm,
+                    dbs,
+                    model,
+                    options,
+                    false,
+                )
+                .smear
+            };
+            SmearedPsfs::build(fragments, key_of, all)?
+        }
+        _ => SmearedPsfs::default(),
+    };
+    let combined = smeared.database.as_deref().or(combined);
     // One fragment's records into `per_layer`, and what it counts into `counts`.
     let emit = |index: usize,
                 frag: &Fragment,
@@ -98,6 +124,7 @@ pub fn classify_fragments(
             mut rot_cos,
             mut rot_sin,
             blend,
+            smear,
         } = lookup_psf(
             frag,
             coc,
@@ -116,6 +143,13 @@ pub fn classify_fragments(
             rot_sin = -rot_sin;
         }
         counts.clamped += usize::from(clamped);
+        let (path, psf_index) = match smear.and_then(|k| smeared.index_of(k)) {
+            Some(i) => {
+                counts.smeared += 1;
+                (SplatPath::Dense, i)
+            }
+            None => (path, psf_index),
+        };
         // The twin of the sub-cell holding the fragment's own CoC and motion (a thin-lens
         // cell is divided in CoC alone and ignores the motion).
         let twin = dbs.hdr_twin_for(psf_index, [coc, motion_len]);
@@ -185,9 +219,10 @@ pub fn classify_fragments(
         counts.clamped += counted.clamped;
         counts.hdr_dense += counted.hdr_dense;
         counts.soft_split += counted.soft_split;
+        counts.smeared += counted.smeared;
     }
 
-    Ok(assemble_layers(
+    let mut classified = assemble_layers(
         per_layer,
         w,
         h,
@@ -196,7 +231,64 @@ pub fn classify_fragments(
         options,
         counts,
         (pmin, span),
-    ))
+    );
+    classified.database = smeared.database;
+    Ok(classified)
+}
+
+/// The smeared PSFs of one frame ([`crate::motion_smear`]): the database its records index
+/// (the set's combined PSFs, then one dense PSF per key) and the keys in order.
+#[derive(Default)]
+struct SmearedPsfs {
+    database: Option<std::sync::Arc<PsfDatabase>>,
+    /// Sorted, each with its index in `database` (`None`: its lens PSF is empty).
+    keys: Vec<(SmearKey, Option<u32>)>,
+}
+
+impl SmearedPsfs {
+    /// The smeared PSFs that `fragments` call for (`key_of`), from the lens PSFs of `all`.
+    fn build(
+        fragments: &[Fragment],
+        key_of: impl Fn(&Fragment) -> Option<SmearKey> + Sync,
+        all: &PsfDatabase,
+    ) -> Result<Self, ClassifyError> {
+        let mut keys: Vec<SmearKey> = fragments
+            .par_iter()
+            .filter(|f| f.weight > 0.0)
+            .filter_map(&key_of)
+            .collect();
+        if keys.is_empty() {
+            return Ok(Self::default());
+        }
+        keys.par_sort_unstable();
+        keys.dedup();
+        let images = keys
+            .par_iter()
+            .map(|&k| crate::motion_smear::smeared_psf(all, k))
+            .collect::<Result<Vec<_>, _>>()?;
+        let base = all.psf_count() as u32;
+        let mut extra = Vec::new();
+        let mut indexed = Vec::with_capacity(keys.len());
+        for (key, image) in keys.into_iter().zip(images) {
+            let index = image.map(|img| {
+                extra.push(img);
+                base + extra.len() as u32 - 1
+            });
+            indexed.push((key, index));
+        }
+        let database = crate::dbset::extend_with_dense(all, &extra)
+            .map_err(|e| ClassifyError::PhysicalLens(e.to_string()))?;
+        Ok(Self {
+            database: Some(std::sync::Arc::new(database)),
+            keys: indexed,
+        })
+    }
+
+    /// Index in [`SmearedPsfs::database`] of the PSF smeared as `key` says.
+    fn index_of(&self, key: SmearKey) -> Option<u32> {
+        let i = self.keys.binary_search_by(|(k, _)| k.cmp(&key)).ok()?;
+        self.keys[i].1
+    }
 }
 
 /// The frame's records from its layers' (frame coordinates): overscan records that cannot
@@ -293,6 +385,7 @@ pub(super) fn assemble_layers(
         records,
         layers,
         counts,
+        database: None,
     }
 }
 

@@ -4,6 +4,7 @@
 
 use super::*;
 use crate::dbset::DbSet;
+use crate::motion_smear::SmearKey;
 use crate::pipeline::types::SplatPath;
 use psf_db::{PsfDatabase, PsfModel};
 
@@ -18,6 +19,9 @@ pub(super) struct Lookup {
     pub(super) rot_sin: f32,
     /// The neighbouring cell the PSF is blended with, if any.
     pub(super) blend: Option<Blend>,
+    /// For a moving fragment seen through a real lens: its lens PSF smeared along its motion
+    /// (which replaces `psf_index` once the frame's smeared PSFs are built).
+    pub(super) smear: Option<SmearKey>,
 }
 
 /// The second PSF of a blended lookup ([`ClassifyOptions::continuous_lookup`]).
@@ -31,7 +35,9 @@ pub(super) struct Blend {
 
 /// The PSF of `frag` (CoC `coc` and motion `motion_len`, pixels), O(1) through the nested
 /// grid: still pixels from the thin-lens database, moving ones from the lens-motion one,
-/// everything from a physical-lens one; copied when both are under
+/// everything from a physical-lens one (a fragment moving at least
+/// [`ClassifyOptions::copy_threshold_px`] also gets the key of its lens PSF smeared along the
+/// motion, [`crate::motion_smear`]); copied when both are under
 /// [`ClassifyOptions::copy_threshold_px`]. `centre` is the frame's centre, pixels.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn lookup_psf(
@@ -55,6 +61,7 @@ pub(super) fn lookup_psf(
     let (mut rot_cos, mut rot_sin) = (1.0f32, 0.0f32);
     let offset = dbs.main_offset;
     let mut blend = None;
+    let mut smear = None;
     // The neighbour along `dim` that a continuous lookup blends the PSF of `s` with.
     let neighbour = |db: &PsfDatabase, s: [f32; 2], dim: usize, offset: u32| {
         if !continuous {
@@ -78,7 +85,15 @@ pub(super) fn lookup_psf(
                 rot_sin = dy / r;
             }
             // The physical-lens space is over inverse depth (1 / scene units).
-            let (idx, cl) = db.lookup([1.0 / frag.depth, r / pixels_per_mm]);
+            let (idx, mut cl) = db.lookup([1.0 / frag.depth, r / pixels_per_mm]);
+            if motion_len >= options.copy_threshold_px {
+                // The motion in the PSF's frame, whose +x is the radial direction.
+                let along = m[0] * rot_cos + m[1] * rot_sin;
+                let across = -m[0] * rot_sin + m[1] * rot_cos;
+                let (key, clamped) = SmearKey::new(idx + offset, [along, across]);
+                smear = Some(key);
+                cl |= clamped;
+            }
             (path_of(all, idx + offset), idx + offset, cl)
         }
         (Some(_), _, Some(all))
@@ -116,6 +131,7 @@ pub(super) fn lookup_psf(
         rot_cos,
         rot_sin,
         blend,
+        smear,
     }
 }
 

@@ -98,6 +98,9 @@ pub enum ClassifyError {
     /// A physical-lens database describes another camera or lacks its prescription.
     #[error("physical-lens database: {0}")]
     PhysicalLens(String),
+    /// A moving pixel's physical-lens PSF could not be smeared along its motion.
+    #[error("motion blur through a real lens: {0}")]
+    MotionSmear(#[from] crate::motion_smear::SmearError),
 }
 
 /// Knobs of classification.
@@ -401,7 +404,10 @@ pub fn resolve_model(effects: Effects, dbs: &DbSet) -> Result<Option<PsfModel>, 
             };
             let ok = match needed {
                 PsfModel::ThinLens => true,
-                PsfModel::LensMotion => found == PsfModel::LensMotion,
+                // A physical-lens database smears its PSFs along the motion per frame.
+                PsfModel::LensMotion => {
+                    found == PsfModel::LensMotion || found == PsfModel::PhysicalLens
+                }
                 PsfModel::PhysicalLens => found == PsfModel::PhysicalLens,
             };
             if !ok {
