@@ -23,7 +23,8 @@ pub struct DbSet {
     /// `NO_TWIN`. Twins are the analytic PSF pre-filtered over the same cell
     /// (`condition::analytic_cell_psf`), or for small PSFs over each of its sub-cells
     /// ([`DbSet::hdr_twin_cells`]), made for the thin-lens and lens-motion models with a
-    /// circular aperture. Very bright (HDR) pixels are drawn with them: a sparse PSF's small
+    /// circular aperture; for a sparse physical-lens PSF, the image its spreadlets integrate
+    /// to with their negative residue clamped. Very bright (HDR) pixels are drawn with them: a sparse PSF's small
     /// relative error, multiplied by a highlight of 100, shows as dark holes and haze beside
     /// it (the comets example: SSIM 0.9710 without, see docs/BENCHMARKS.md), and a PSF
     /// pre-filtered over a whole cell as a soft blob larger than the highlight's own bokeh.
@@ -211,6 +212,9 @@ fn dense_twins(db: &PsfDatabase, bound: i32) -> Vec<Option<(TwinCell, Vec<DenseI
         && db.header().aperture.ratio == 1.0
         && db.header().aperture.image_hash == 0;
     let motion = db.model() == PsfModel::LensMotion;
+    if db.model() == PsfModel::PhysicalLens {
+        return physical_twins(db);
+    }
     (0..db.psf_count())
         .into_par_iter()
         .map(|i| {
@@ -266,6 +270,43 @@ fn dense_twins(db: &PsfDatabase, bound: i32) -> Vec<Option<(TwinCell, Vec<DenseI
                 }
             }
             Some((twin_cell, images))
+        })
+        .collect()
+}
+
+/// The dense twins of a physical-lens database's sparse PSFs: each the image its spreadlets
+/// integrate to, with the sparse fit's negative residue clamped ([`crate::motion_smear::psf_image`]):
+/// no analytic PSF describes a real lens, and a bright drop times a negative residue draws
+/// dark specks around its bokeh. One twin per cell (the cell is not divided).
+fn physical_twins(db: &PsfDatabase) -> Vec<Option<(TwinCell, Vec<DenseImage>)>> {
+    use rayon::prelude::*;
+    (0..db.psf_count())
+        .into_par_iter()
+        .map(|i| {
+            if db.dense(i).is_some() {
+                return None;
+            }
+            let img = crate::motion_smear::psf_image(db, i)?;
+            let fits = |v: i32| i16::try_from(v).is_ok();
+            if !fits(img.origin[0])
+                || !fits(img.origin[1])
+                || u16::try_from(img.width).is_err()
+                || u16::try_from(img.height).is_err()
+            {
+                return None;
+            }
+            let cell = TwinCell {
+                min: [0.0; 2],
+                max: [0.0; 2],
+                splits: [1, 1],
+            };
+            let image = (
+                [img.origin[0] as i16, img.origin[1] as i16],
+                img.width as u16,
+                img.height as u16,
+                img.data,
+            );
+            Some((cell, vec![image]))
         })
         .collect()
 }
@@ -414,6 +455,66 @@ mod tests {
             twins > 0 && divided > 0,
             "{twins} twins, {divided} cells divided"
         );
+    }
+
+    /// A physical-lens PSF's sparse fit can integrate to small negative values (its
+    /// residue); times a bright drop they are dark specks. Its dense twin, which bright
+    /// fragments draw, is the same image with them clamped and each channel's sum kept.
+    #[test]
+    fn physical_lens_psfs_get_non_negative_twins() {
+        let space = ParamSpace::for_model(PsfModel::PhysicalLens, &[[0.5, 4.0], [0.0, 10.0]], 2)
+            .expect("space");
+        let count = space.psf_count() as usize;
+        let mut b = DatabaseBuilder::new(DbHeader::new(PsfModel::PhysicalLens, space, 16));
+        // A 5x5 box with a ring of negative residue one pixel outside it, per channel scaled.
+        let mut image = poisson::Plane::new(13, 13);
+        for y in 2..11 {
+            for x in 2..11 {
+                let inner = (4..9).contains(&x) && (4..9).contains(&y);
+                let ring = (3..10).contains(&x) && (3..10).contains(&y) && !inner;
+                let v = if inner {
+                    1.0 / 25.0
+                } else if ring {
+                    -0.002
+                } else {
+                    0.0
+                };
+                image.set(x, y, v);
+            }
+        }
+        let lap = poisson::laplacian(&image);
+        let (mut pos, mut val) = (Vec::new(), Vec::new());
+        for y in 0..13 {
+            for x in 0..13 {
+                let v = lap.get(x, y);
+                if v != 0.0 {
+                    pos.push([x as i16 - 6, y as i16 - 6]);
+                    val.extend([v, 0.9 * v, 1.1 * v]);
+                }
+            }
+        }
+        for _ in 0..count {
+            b.push_sparse(&pos, &val).expect("push");
+        }
+        let set = DbSet::single(b.finish().expect("db")).expect("set");
+        let all = set.combined.as_ref().expect("combined");
+        for i in 0..count {
+            let t = set.hdr_twin_for(i as u32, [0.0, 0.0]);
+            assert_ne!(t, NO_TWIN, "PSF {i} has no twin");
+            let d = all.dense(t as usize).expect("twin is dense");
+            assert_eq!(d.channels, 3);
+            let sum_of = |c: usize| -> f64 {
+                (0..d.width * d.height)
+                    .map(|k| f64::from(d.data[k * 3 + c]))
+                    .sum()
+            };
+            assert!(d.data.iter().all(|&v| v >= 0.0), "a negative twin value");
+            let box_sum = 1.0 - 24.0 * 0.002;
+            for (c, scale) in [1.0, 0.9, 1.1].into_iter().enumerate() {
+                let want = box_sum * scale;
+                assert!((sum_of(c) - want).abs() < 1e-4, "channel {c}: {} vs {want}", sum_of(c));
+            }
+        }
     }
 
     /// More PSFs than a 1-D nested grid holds (361): the paper profile's 404 lens-motion PSFs

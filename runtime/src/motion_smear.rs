@@ -139,9 +139,11 @@ pub enum SmearError {
     },
 }
 
-/// PSF `index` of `db` as an image: a dense PSF as stored, a sparse one integrated from its
-/// spreadlets (the exact inverse of the one Laplacian stencil, on a plane two pixels wider on
-/// every side than the spreadlets). `None` for an empty PSF.
+/// PSF `index` of `db` as a non-negative image: a dense PSF as stored, a sparse one integrated
+/// from its spreadlets (the exact inverse of the one Laplacian stencil, on a plane two pixels
+/// wider on every side than the spreadlets) with the sparse fit's negative residue clamped to
+/// zero and each channel scaled back to its sum (a bright pixel times a negative residue
+/// draws a dark speck). `None` for an empty PSF.
 pub fn psf_image(db: &PsfDatabase, index: usize) -> Option<PsfImage> {
     let channels = db.channels();
     if let Some(d) = db.dense(index) {
@@ -177,9 +179,12 @@ pub fn psf_image(db: &PsfDatabase, index: usize) -> Option<PsfImage> {
             lap.add(x, y, values[k * channels + c]);
         }
         let image = poisson::integrate_exact(&lap);
+        let sum: f64 = image.data.iter().map(|&v| f64::from(v)).sum();
+        let kept: f64 = image.data.iter().map(|&v| f64::from(v.max(0.0))).sum();
+        let scale = if kept > 0.0 { (sum / kept) as f32 } else { 0.0 };
         for y in 0..height {
             for x in 0..width {
-                data[(y * width + x) * channels + c] = image.get(x, y);
+                data[(y * width + x) * channels + c] = image.get(x, y).max(0.0) * scale;
             }
         }
     }
