@@ -351,6 +351,17 @@ fn concatenate(dbs: &[&PsfDatabase], extra: &[DenseImage]) -> Result<PsfDatabase
     let capacity = space.psf_count();
     let mut header: DbHeader = last.header().clone();
     header.model = model;
+    // The extra images (twins, PSFs smeared along a motion) may reach beyond the sources' PSF
+    // bound, which the file format checks every dense PSF against.
+    for (origin, w, h, _) in extra {
+        let (x0, y0) = (i32::from(origin[0]), i32::from(origin[1]));
+        let reach = [x0, y0, x0 + i32::from(*w) - 1, y0 + i32::from(*h) - 1]
+            .into_iter()
+            .map(i32::unsigned_abs)
+            .max()
+            .unwrap_or(0);
+        header.psf_resolution = header.psf_resolution.max(reach);
+    }
     header.space = space;
     header.stats = dbs
         .iter()
@@ -515,6 +526,31 @@ mod tests {
                 assert!((sum_of(c) - want).abs() < 1e-4, "channel {c}: {} vs {want}", sum_of(c));
             }
         }
+    }
+
+    /// A PSF smeared along a long motion reaches far beyond the database's own PSF bound (the
+    /// camera pan through a real lens failed with "dense PSF ... outside +-29"): the frame's
+    /// database widens its bound to hold it.
+    #[test]
+    fn smeared_psfs_may_reach_beyond_the_database_bound() {
+        let db = test_db(PsfModel::ThinLens);
+        let bound = db.header().psf_resolution as i32;
+        let (w, h) = (2 * bound as usize + 41, 3);
+        let streak = crate::motion_smear::PsfImage {
+            origin: [-(w as i32) / 2, -1],
+            width: w,
+            height: h,
+            channels: db.channels(),
+            data: vec![1.0 / (w * h) as f32; w * h * db.channels()],
+        };
+        let extended = extend_with_dense(&db, &[streak]).expect("extended");
+        let i = db.psf_count();
+        let d = extended.dense(i).expect("the streak is dense");
+        assert_eq!((d.width, d.height), (w, h));
+        assert!(extended.header().psf_resolution as i32 >= (w as i32) / 2);
+        // And it survives the file format's checks.
+        let bytes = extended.to_bytes().expect("bytes");
+        assert_eq!(PsfDatabase::from_bytes(&bytes).expect("read back"), extended);
     }
 
     /// More PSFs than a 1-D nested grid holds (361): the paper profile's 404 lens-motion PSFs

@@ -16,16 +16,17 @@
 //! the field position change along the segment; `tests::factorised_motion_psf_matches_brute_force`
 //! measures that against light tracing every instant through the lens.
 //!
-//! The smear is applied in the PSF's own frame (radial along +x), so the segment's direction is
-//! the motion's angle relative to the radial direction; the record then turns the smeared PSF
-//! onto the radial direction as for a still pixel. A segment reversed is the same segment, so
-//! the relative angle is taken modulo pi.
+//! The smeared PSF is built in the image's frame: the lens PSF turned onto the pixel's radial
+//! direction, then smeared along the motion, so the record draws it unrotated (a turned dense
+//! draw costs four bilinear taps per pixel). A segment reversed is the same segment, so the
+//! motion's angle is taken modulo pi.
 //!
-//! The smeared PSFs are built per frame, for the (cell, length, angle) keys its moving pixels
-//! use, and appended to the frame's database as dense PSFs. Keys are quantised so that a
-//! streak's ends are off by at most about a quarter pixel: the length in steps of 1/4 px up to
-//! 8 px and of 2 % beyond, the angle in steps of at most 1/length radians (the tip of a streak
-//! of length `L` moves `L/2 * dtheta/2` px at most).
+//! The smeared PSFs are built per frame, for the (cell, turn, length, angle) keys its moving
+//! pixels use, and appended to the frame's database as dense PSFs. Keys are quantised so that
+//! a streak's ends and a PSF's rim are off by at most about a quarter pixel: the length in
+//! steps of 1/4 px up to 8 px and of 2 % beyond, the angle in steps of at most 1/length radians
+//! (the tip of a streak of length `L` moves `L/2 * dtheta/2` px at most), the turn in steps of
+//! at most 1/(2 reach) radians.
 
 use psf_db::PsfDatabase;
 
@@ -42,22 +43,30 @@ pub const MAX_SMEAR_PX: f32 = 512.0;
 const MAX_SMEARED_PIXELS: usize = 4 << 20;
 
 /// Which smeared PSF a moving fragment uses: its physical-lens cell (index in the set's
-/// combined database), its motion length and its angle to the radial direction, quantised.
+/// combined database), the turn of that PSF onto the fragment's radial direction, and its
+/// motion's length and angle, quantised. The smeared PSF is built in the image's frame (turned,
+/// then smeared), so a record draws it unrotated: a dense draw turned by the record costs four
+/// bilinear taps per pixel, an unrotated one a single add.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub struct SmearKey {
     /// Index of the lens PSF in the combined database.
     pub cell: u32,
     /// Quantised motion length (see [`SmearKey::length_px`]).
     pub length_step: u32,
-    /// Quantised angle from the radial direction, in `[0, angle_steps)`, modulo pi.
+    /// Quantised angle of the motion from +x (y down), in `[0, angle_steps)`, modulo pi.
     pub angle_step: u32,
+    /// Quantised turn of the lens PSF's +x onto the radial direction, in `[0, turn_steps)`.
+    pub turn_step: u32,
+    /// Turn steps over a full turn: finer for a wider PSF (its rim moves `reach * dturn`).
+    pub turn_steps: u32,
 }
 
 impl SmearKey {
-    /// The key of lens PSF `cell` smeared along `motion_rel` (px, in the PSF's frame: the
-    /// radial direction along +x, y down). Returns the key and whether the length was clamped.
-    pub fn new(cell: u32, motion_rel: [f32; 2]) -> (Self, bool) {
-        let len = (motion_rel[0] * motion_rel[0] + motion_rel[1] * motion_rel[1]).sqrt();
+    /// The key of lens PSF `cell` (reaching `reach_px` from its centre) turned onto `radial`
+    /// (unit vector, x right, y down) and smeared along `motion` (px over the shutter, x
+    /// right, y down). Returns the key and whether the length was clamped.
+    pub fn new(cell: u32, motion: [f32; 2], radial: [f32; 2], reach_px: f32) -> (Self, bool) {
+        let len = (motion[0] * motion[0] + motion[1] * motion[1]).sqrt();
         let clamped = len > MAX_SMEAR_PX;
         let len = len.min(MAX_SMEAR_PX);
         let length_step = if len <= FINE_LENGTH_MAX_PX {
@@ -66,13 +75,22 @@ impl SmearKey {
             let fine = (FINE_LENGTH_MAX_PX / FINE_LENGTH_STEP_PX) as u32;
             fine + ((len / FINE_LENGTH_MAX_PX).ln() / COARSE_LENGTH_RATIO.ln()).round() as u32
         };
+        // The rim of a PSF reaching r px moves r * dturn when turned: at most 1/4 px off.
+        let turn_steps = (std::f32::consts::TAU * reach_px.max(1.0) / 0.5)
+            .ceil()
+            .clamp(8.0, 4096.0) as u32;
+        let turn = radial[1].atan2(radial[0]).rem_euclid(std::f32::consts::TAU);
+        let turn_step =
+            ((turn / std::f32::consts::TAU * turn_steps as f32).round() as u32) % turn_steps;
         let key = SmearKey {
             cell,
             length_step,
             angle_step: 0,
+            turn_step,
+            turn_steps,
         };
         let n = key.angle_steps();
-        let angle = motion_rel[1].atan2(motion_rel[0]).rem_euclid(std::f32::consts::PI);
+        let angle = motion[1].atan2(motion[0]).rem_euclid(std::f32::consts::PI);
         let step = ((angle / std::f32::consts::PI * n as f32).round() as u32) % n;
         (
             SmearKey {
@@ -99,9 +117,14 @@ impl SmearKey {
         (std::f32::consts::PI * len).ceil().max(4.0) as u32
     }
 
-    /// The angle of the segment from the radial direction, radians in `[0, pi)`.
+    /// The angle of the motion from +x, radians in `[0, pi)`.
     pub fn angle_rad(&self) -> f32 {
         self.angle_step as f32 * std::f32::consts::PI / self.angle_steps() as f32
+    }
+
+    /// The turn of the lens PSF's +x onto the radial direction, radians in `[0, 2 pi)`.
+    pub fn turn_rad(&self) -> f32 {
+        self.turn_step as f32 * std::f32::consts::TAU / self.turn_steps as f32
     }
 }
 
@@ -147,13 +170,14 @@ pub enum SmearError {
 pub fn psf_image(db: &PsfDatabase, index: usize) -> Option<PsfImage> {
     let channels = db.channels();
     if let Some(d) = db.dense(index) {
-        return Some(PsfImage {
+        let image = PsfImage {
             origin: d.origin,
             width: d.width,
             height: d.height,
             channels: d.channels,
             data: d.data.to_vec(),
-        });
+        };
+        return Some(image.trimmed());
     }
     let (positions, values) = db.spreadlets(index);
     if positions.is_empty() {
@@ -188,13 +212,67 @@ pub fn psf_image(db: &PsfDatabase, index: usize) -> Option<PsfImage> {
             }
         }
     }
-    Some(PsfImage {
+    let image = PsfImage {
         origin,
         width,
         height,
         channels,
         data,
-    })
+    };
+    Some(image.trimmed())
+}
+
+/// Below this fraction of an image's largest value a border row or column counts as empty.
+const TRIM_FRACTION: f32 = 1e-4;
+
+impl PsfImage {
+    /// The image without its border rows and columns whose every value is below
+    /// [`TRIM_FRACTION`] of the largest, each channel scaled back to its sum. A stored PSF's
+    /// box is often much wider than its light; a smear's cost and a dense draw's grow with it.
+    pub fn trimmed(self) -> PsfImage {
+        let ch = self.channels;
+        let peak = self.data.iter().fold(0.0f32, |m, &v| m.max(v.abs()));
+        let floor = peak * TRIM_FRACTION;
+        let lit = |x: usize, y: usize| {
+            let i = (y * self.width + x) * ch;
+            self.data[i..i + ch].iter().any(|v| v.abs() > floor)
+        };
+        let rows: Vec<usize> = (0..self.height)
+            .filter(|&y| (0..self.width).any(|x| lit(x, y)))
+            .collect();
+        let cols: Vec<usize> = (0..self.width)
+            .filter(|&x| (0..self.height).any(|y| lit(x, y)))
+            .collect();
+        let (Some(&y0), Some(&y1), Some(&x0), Some(&x1)) =
+            (rows.first(), rows.last(), cols.first(), cols.last())
+        else {
+            return self;
+        };
+        if (x0, y0, x1, y1) == (0, 0, self.width - 1, self.height - 1) {
+            return self;
+        }
+        let (w, h) = (x1 - x0 + 1, y1 - y0 + 1);
+        let mut data = Vec::with_capacity(w * h * ch);
+        for y in y0..=y1 {
+            let row = (y * self.width + x0) * ch;
+            data.extend_from_slice(&self.data[row..row + w * ch]);
+        }
+        for c in 0..ch {
+            let before: f64 = self.data.iter().skip(c).step_by(ch).map(|&v| f64::from(v)).sum();
+            let after: f64 = data.iter().skip(c).step_by(ch).map(|&v| f64::from(v)).sum();
+            if after > 0.0 {
+                let scale = (before / after) as f32;
+                data.iter_mut().skip(c).step_by(ch).for_each(|v| *v *= scale);
+            }
+        }
+        PsfImage {
+            origin: [self.origin[0] + x0 as i32, self.origin[1] + y0 as i32],
+            width: w,
+            height: h,
+            channels: ch,
+            data,
+        }
+    }
 }
 
 /// `psf` convolved with a uniform segment of `length` px centred on the PSF centre, at
@@ -258,12 +336,73 @@ pub fn smear(psf: &PsfImage, length: f32, angle: f32) -> Result<PsfImage, SmearE
     })
 }
 
-/// The smeared PSF of `key` from the lens PSFs of `db` (`None` for an empty lens PSF).
+/// The smeared PSF of `key` from the lens PSFs of `db`, in the image's frame (`None` for an
+/// empty lens PSF).
 pub fn smeared_psf(db: &PsfDatabase, key: SmearKey) -> Result<Option<PsfImage>, SmearError> {
     let Some(psf) = psf_image(db, key.cell as usize) else {
         return Ok(None);
     };
-    smear(&psf, key.length_px(), key.angle_rad()).map(Some)
+    smear(&turn(&psf, key.turn_rad()), key.length_px(), key.angle_rad()).map(Some)
+}
+
+/// `psf` turned by `angle` radians about its centre (its +x onto `(cos, sin)`, y down), as
+/// the splat turns a record's PSF: each output pixel samples the PSF bilinearly at the point
+/// that turns onto it. Each channel keeps its sum.
+pub fn turn(psf: &PsfImage, angle: f32) -> PsfImage {
+    let (sin, cos) = angle.sin_cos();
+    let ch = psf.channels;
+    // The turned box: the four corners of the PSF's box (pixel centres +- 1/2) turned.
+    let (x0, y0) = (psf.origin[0] as f32 - 0.5, psf.origin[1] as f32 - 0.5);
+    let (x1, y1) = (x0 + psf.width as f32, y0 + psf.height as f32);
+    let corners = [(x0, y0), (x1, y0), (x0, y1), (x1, y1)]
+        .map(|(x, y)| (cos * x - sin * y, sin * x + cos * y));
+    let lo_x = corners.iter().map(|c| c.0).fold(f32::INFINITY, f32::min).floor() as i32 - 1;
+    let lo_y = corners.iter().map(|c| c.1).fold(f32::INFINITY, f32::min).floor() as i32 - 1;
+    let hi_x = corners.iter().map(|c| c.0).fold(f32::NEG_INFINITY, f32::max).ceil() as i32 + 1;
+    let hi_y = corners.iter().map(|c| c.1).fold(f32::NEG_INFINITY, f32::max).ceil() as i32 + 1;
+    let (width, height) = ((hi_x - lo_x + 1) as usize, (hi_y - lo_y + 1) as usize);
+    let mut data = vec![0f32; width * height * ch];
+    let at = |x: i32, y: i32, c: usize| -> f32 {
+        let (u, v) = (x - psf.origin[0], y - psf.origin[1]);
+        if u < 0 || v < 0 || u >= psf.width as i32 || v >= psf.height as i32 {
+            0.0
+        } else {
+            psf.data[(v as usize * psf.width + u as usize) * ch + c]
+        }
+    };
+    for j in 0..height {
+        for i in 0..width {
+            let (qx, qy) = ((lo_x + i as i32) as f32, (lo_y + j as i32) as f32);
+            // The PSF point that turns onto this pixel.
+            let (px, py) = (cos * qx + sin * qy, -sin * qx + cos * qy);
+            let (fx, fy) = (px.floor(), py.floor());
+            let (tx, ty) = (px - fx, py - fy);
+            let (ix, iy) = (fx as i32, fy as i32);
+            for c in 0..ch {
+                let v = (1.0 - tx) * (1.0 - ty) * at(ix, iy, c)
+                    + tx * (1.0 - ty) * at(ix + 1, iy, c)
+                    + (1.0 - tx) * ty * at(ix, iy + 1, c)
+                    + tx * ty * at(ix + 1, iy + 1, c);
+                data[(j * width + i) * ch + c] = v;
+            }
+        }
+    }
+    for c in 0..ch {
+        let before: f64 = psf.data.iter().skip(c).step_by(ch).map(|&v| f64::from(v)).sum();
+        let after: f64 = data.iter().skip(c).step_by(ch).map(|&v| f64::from(v)).sum();
+        if after > 0.0 {
+            let scale = (before / after) as f32;
+            data.iter_mut().skip(c).step_by(ch).for_each(|v| *v *= scale);
+        }
+    }
+    PsfImage {
+        origin: [lo_x, lo_y],
+        width,
+        height,
+        channels: ch,
+        data,
+    }
+    .trimmed()
 }
 
 #[cfg(test)]
@@ -349,12 +488,84 @@ mod tests {
         }
     }
 
+    /// A PSF in a box much wider than its light is cut to its light, in place, with each
+    /// channel's sum kept.
+    #[test]
+    fn trimming_keeps_the_light_in_place() {
+        let mut psf = disk(3.0, 2);
+        let (w0, h0) = (psf.width, psf.height);
+        // Pad with empty columns on the left and rows at the bottom, and a faint floor.
+        let (pad_x, pad_y) = (9usize, 6usize);
+        let (w, h) = (w0 + pad_x, h0 + pad_y);
+        let mut data = vec![1e-9f32; w * h * 2];
+        for y in 0..h0 {
+            for x in 0..w0 {
+                for c in 0..2 {
+                    data[(y * w + x + pad_x) * 2 + c] = psf.data[(y * w0 + x) * 2 + c];
+                }
+            }
+        }
+        let before = moments(
+            &PsfImage {
+                origin: [psf.origin[0] - pad_x as i32, psf.origin[1]],
+                width: w,
+                height: h,
+                channels: 2,
+                data: data.clone(),
+            },
+            0,
+        );
+        psf = PsfImage {
+            origin: [psf.origin[0] - pad_x as i32, psf.origin[1]],
+            width: w,
+            height: h,
+            channels: 2,
+            data,
+        }
+        .trimmed();
+        assert!(psf.width <= w0 && psf.height <= h0, "{} x {}", psf.width, psf.height);
+        let after = moments(&psf, 0);
+        assert!((after.0 - before.0).abs() < 1e-6, "sum {} -> {}", before.0, after.0);
+        assert!((after.1[0] - before.1[0]).abs() < 1e-3 && (after.1[1] - before.1[1]).abs() < 1e-3);
+    }
+
+    /// Turning keeps the sum and moves the centroid and the spread as a rotation does: a box
+    /// off centre turned a quarter turn lands where the quarter turn puts it.
+    #[test]
+    fn turning_moves_a_psf_as_a_rotation_does() {
+        let mut data = vec![0f32; 9 * 5];
+        for y in 1..4 {
+            for x in 5..9 {
+                data[y * 9 + x] = 1.0 / 12.0;
+            }
+        }
+        // Box over x in [1, 4], y in [-1, 1] relative to the centre.
+        let psf = PsfImage {
+            origin: [-4, -2],
+            width: 9,
+            height: 5,
+            channels: 1,
+            data,
+        };
+        let (s0, c0, v0) = moments(&psf, 0);
+        let turned = turn(&psf, std::f32::consts::FRAC_PI_2);
+        let (s1, c1, v1) = moments(&turned, 0);
+        assert!((s1 - s0).abs() < 1e-5);
+        // +x turns onto +y (y down).
+        assert!((c1[0] + c0[1]).abs() < 0.05 && (c1[1] - c0[0]).abs() < 0.05, "{c0:?} -> {c1:?}");
+        assert!((v1[0] - v0[1]).abs() < 0.3 && (v1[1] - v0[0]).abs() < 0.3, "{v0:?} -> {v1:?}");
+    }
+
     #[test]
     fn keys_quantise_lengths_and_angles_finely() {
         for len in [0.6f32, 3.3, 8.0, 9.7, 37.0, 200.0] {
             for angle in [0.0f32, 0.3, 1.5, 2.9, -1.0] {
                 let m = [len * angle.cos(), len * angle.sin()];
-                let (key, clamped) = SmearKey::new(7, m);
+                let (key, clamped) = SmearKey::new(7, m, [0.6, -0.8], 10.0);
+                let turn = (-0.8f32).atan2(0.6).rem_euclid(std::f32::consts::TAU);
+                let mut dt = (key.turn_rad() - turn).abs();
+                dt = dt.min(std::f32::consts::TAU - dt);
+                assert!(10.0 * dt <= 0.26, "turn {turn} -> {}", key.turn_rad());
                 assert!(!clamped);
                 assert_eq!(key.cell, 7);
                 let l = key.length_px();
@@ -370,7 +581,7 @@ mod tests {
                 assert!(tip <= 0.3, "length {len} angle {angle}: tip off by {tip} px");
             }
         }
-        let (_, clamped) = SmearKey::new(0, [MAX_SMEAR_PX + 10.0, 0.0]);
+        let (_, clamped) = SmearKey::new(0, [MAX_SMEAR_PX + 10.0, 0.0], [1.0, 0.0], 4.0);
         assert!(clamped);
     }
 

@@ -74,8 +74,16 @@ pub fn classify_fragments(
     let centre = [w as f32 * 0.5, h as f32 * 0.5];
     // Through a real lens, the moving fragments' lens PSFs smeared along their motion: built
     // once per key, appended to the frame's own copy of the database.
+    let moving_lens = model == Some(PsfModel::PhysicalLens)
+        && fragments
+            .iter()
+            .any(|f| f.motion[0] != 0.0 || f.motion[1] != 0.0);
+    let reach: Vec<i32> = match combined {
+        Some(all) if moving_lens => psf_reach(all),
+        _ => Vec::new(),
+    };
     let smeared = match (model, combined) {
-        (Some(PsfModel::PhysicalLens), Some(all)) => {
+        (Some(PsfModel::PhysicalLens), Some(all)) if moving_lens => {
             let key_of = |frag: &Fragment| {
                 let m = frag.motion;
                 let motion_len = (m[0] * m[0] + m[1] * m[1]).sqrt();
@@ -89,6 +97,7 @@ pub fn classify_fragments(
                     model,
                     options,
                     false,
+                    &reach,
                 )
                 .smear
             };
@@ -135,6 +144,7 @@ pub fn classify_fragments(
             model,
             options,
             continuous,
+            &reach,
         );
         // In front of the focus plane the lens images its aperture turned half a turn: the
         // databases hold the PSF behind it (see `front_turns_the_aperture`).
@@ -145,7 +155,9 @@ pub fn classify_fragments(
         counts.clamped += usize::from(clamped);
         let (path, psf_index) = match smear.and_then(|k| smeared.index_of(k)) {
             Some(i) => {
+                // Built in the image's frame: drawn unrotated.
                 counts.smeared += 1;
+                (rot_cos, rot_sin) = (1.0, 0.0);
                 (SplatPath::Dense, i)
             }
             None => (path, psf_index),

@@ -38,7 +38,8 @@ pub(super) struct Blend {
 /// everything from a physical-lens one (a fragment moving at least
 /// [`ClassifyOptions::copy_threshold_px`] also gets the key of its lens PSF smeared along the
 /// motion, [`crate::motion_smear`]); copied when both are under
-/// [`ClassifyOptions::copy_threshold_px`]. `centre` is the frame's centre, pixels.
+/// [`ClassifyOptions::copy_threshold_px`]. `centre` is the frame's centre, pixels; `reach` each
+/// combined PSF's reach, px (only a moving fragment through a real lens reads it).
 #[allow(clippy::too_many_arguments)]
 pub(super) fn lookup_psf(
     frag: &Fragment,
@@ -50,6 +51,7 @@ pub(super) fn lookup_psf(
     model: Option<PsfModel>,
     options: &ClassifyOptions,
     continuous: bool,
+    reach: &[i32],
 ) -> Lookup {
     let (thin, main, combined) = (
         dbs.thin_lens.as_ref(),
@@ -87,10 +89,9 @@ pub(super) fn lookup_psf(
             // The physical-lens space is over inverse depth (1 / scene units).
             let (idx, mut cl) = db.lookup([1.0 / frag.depth, r / pixels_per_mm]);
             if motion_len >= options.copy_threshold_px {
-                // The motion in the PSF's frame, whose +x is the radial direction.
-                let along = m[0] * rot_cos + m[1] * rot_sin;
-                let across = -m[0] * rot_sin + m[1] * rot_cos;
-                let (key, clamped) = SmearKey::new(idx + offset, [along, across]);
+                let j = idx + offset;
+                let reach = reach.get(j as usize).copied().unwrap_or(0) as f32;
+                let (key, clamped) = SmearKey::new(j, m, [rot_cos, rot_sin], reach);
                 smear = Some(key);
                 cl |= clamped;
             }
