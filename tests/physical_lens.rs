@@ -627,6 +627,26 @@ fn motion_blur_through_a_real_lens_beats_the_thin_lens() {
     let counts = &stats["synthesis"]["counts"];
     let smeared = counts["smeared"].as_u64().expect("smeared count");
     assert!(smeared > 500, "{counts}");
+    // The same database named by hand (`--db`) serves the moving frame too.
+    let db_path = dbs[0]["path"].as_str().expect("database path").to_string();
+    let by_hand = run(
+        "spreadlet",
+        &[
+            "synth",
+            "--input",
+            &d("g.exr"),
+            "--camera",
+            &d("cam.json"),
+            "--out",
+            &d("by-hand.exr"),
+            "--db",
+            &db_path,
+            "--backend",
+            "cpu",
+        ],
+        &cache,
+    );
+    assert_success(&by_hand);
 
     let read = |n: &str| formats::RgbaImage::read_exr(std::path::Path::new(&d(n))).expect(n);
     let reference = read("ref.exr");
@@ -640,6 +660,11 @@ fn motion_blur_through_a_real_lens_beats_the_thin_lens() {
         .expect("scores");
         (scores.ssim, scores.flip_mean)
     };
+    assert_eq!(
+        read("by-hand.exr").pixels,
+        read("phys.exr").pixels,
+        "--db gave another image"
+    );
     let (phys, thin) = (score(&read("phys.exr")), score(&read("thin.exr")));
     println!("SSIM / FLIP mean: physical lens {phys:?}, thin lens {thin:?}");
     assert!(phys.0 > thin.0, "SSIM: physical {phys:?}, thin {thin:?}");

@@ -253,10 +253,11 @@ pub fn explicit_database(path: &Path, needed: PsfModel) -> Result<PsfDatabase, C
         path: path.display().to_string(),
         source,
     })?;
+    // A physical-lens database serves every pixel, moving ones by smearing its PSFs.
     let found = db.model();
     let ok = found == needed
         || (needed == PsfModel::ThinLens && found == PsfModel::LensMotion)
-        || found == PsfModel::PhysicalLens && needed != PsfModel::LensMotion;
+        || found == PsfModel::PhysicalLens;
     if !ok {
         return Err(CacheError::WrongModel {
             path: path.display().to_string(),
