@@ -101,7 +101,7 @@ pub fn classify_fragments(
                 )
                 .smear
             };
-            SmearedPsfs::build(fragments, key_of, all)?
+            SmearedPsfs::build(fragments, key_of, all, &reach)?
         }
         _ => SmearedPsfs::default(),
     };
@@ -259,10 +259,13 @@ struct SmearedPsfs {
 
 impl SmearedPsfs {
     /// The smeared PSFs that `fragments` call for (`key_of`), from the lens PSFs of `all`.
+    /// `reach` is each PSF's reach in `all`, px; the frame's smeared images are bounded by
+    /// [`crate::motion_smear::MAX_FRAME_SMEARED_PIXELS`].
     fn build(
         fragments: &[Fragment],
         key_of: impl Fn(&Fragment) -> Option<SmearKey> + Sync,
         all: &PsfDatabase,
+        reach: &[i32],
     ) -> Result<Self, ClassifyError> {
         let mut keys: Vec<SmearKey> = fragments
             .par_iter()
@@ -274,6 +277,20 @@ impl SmearedPsfs {
         }
         keys.par_sort_unstable();
         keys.dedup();
+        let pixels: usize = keys
+            .iter()
+            .map(|k| {
+                let r = reach.get(k.cell as usize).copied().unwrap_or(0) as f32;
+                k.estimated_pixels(r)
+            })
+            .sum();
+        if pixels > crate::motion_smear::MAX_FRAME_SMEARED_PIXELS {
+            return Err(crate::motion_smear::SmearError::FrameTooLarge {
+                keys: keys.len(),
+                pixels,
+            }
+            .into());
+        }
         let images = keys
             .par_iter()
             .map(|&k| crate::motion_smear::smeared_psf(all, k))
