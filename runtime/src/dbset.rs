@@ -24,10 +24,11 @@ pub struct DbSet {
     /// (`condition::analytic_cell_psf`), or for small PSFs over each of its sub-cells
     /// ([`DbSet::hdr_twin_cells`]), made for the thin-lens and lens-motion models with a
     /// circular aperture; for a sparse physical-lens PSF, the image its spreadlets integrate
-    /// to with their negative residue clamped. Very bright (HDR) pixels are drawn with them: a sparse PSF's small
-    /// relative error, multiplied by a highlight of 100, shows as dark holes and haze beside
-    /// it (the comets example: SSIM 0.9710 without, see docs/BENCHMARKS.md), and a PSF
-    /// pre-filtered over a whole cell as a soft blob larger than the highlight's own bokeh.
+    /// to with their negative residue clamped. Very bright (HDR) pixels are drawn with them:
+    /// a sparse PSF's small relative error, multiplied by a highlight of 100, shows as dark
+    /// holes and haze beside it (the comets example: SSIM 0.9710 without, see
+    /// docs/BENCHMARKS.md), and a PSF pre-filtered over a whole cell as a soft blob larger
+    /// than the highlight's own bokeh.
     pub hdr_twins: Vec<u32>,
     /// For each PSF of `combined` with twins: its cell in the source database's parameters
     /// (CoC radius px, motion length px) and how many sub-cells per axis its twins cover. The
@@ -275,9 +276,10 @@ fn dense_twins(db: &PsfDatabase, bound: i32) -> Vec<Option<(TwinCell, Vec<DenseI
 }
 
 /// The dense twins of a physical-lens database's sparse PSFs: each the image its spreadlets
-/// integrate to, with the sparse fit's negative residue clamped ([`crate::motion_smear::psf_image`]):
-/// no analytic PSF describes a real lens, and a bright drop times a negative residue draws
-/// dark specks around its bokeh. One twin per cell (the cell is not divided).
+/// integrate to, with the sparse fit's negative residue clamped
+/// ([`crate::motion_smear::psf_image`]): no analytic PSF describes a real lens, and a bright
+/// drop times a negative residue draws dark specks around its bokeh. One twin per cell (the
+/// cell is not divided).
 fn physical_twins(db: &PsfDatabase) -> Vec<Option<(TwinCell, Vec<DenseImage>)>> {
     use rayon::prelude::*;
     (0..db.psf_count())
