@@ -11,7 +11,8 @@ use std::process::Command;
 use spreadlet::formats::{DeepCompression, DeepImage, DeepSample};
 use spreadlet::GBuffer;
 use spreadlet_e2e::{
-    assert_clean_failure, assert_success, cache_dir, compare_scores, render_scene_128, run,
+    assert_clean_failure, assert_gpu_run_matches, assert_success, cache_dir, compare_scores,
+    render_scene_128, run,
 };
 
 fn p(path: &Path) -> String {
@@ -212,24 +213,7 @@ fn a_deep_render_flattens_to_its_gbuffer_and_blurs_better_than_it() {
     // The GPU runs the same records through its stages (lavapipe in CI).
     let gpu = dir.path().join("gpu.exr");
     let ran = synth(&dir.path().join("deep.exr"), &camera, &gpu, "gpu");
-    if ran.status.success() {
-        let a = GBuffer::read_exr(&gpu, &Default::default()).expect("gpu output");
-        let b = GBuffer::read_exr(&from_deep, &Default::default()).expect("cpu output");
-        let worst = a
-            .color
-            .iter()
-            .zip(&b.color)
-            .flat_map(|(x, y)| (0..4).map(move |k| (x[k] - y[k]).abs() / y[k].abs().max(1.0)))
-            .fold(0.0f32, f32::max);
-        assert!(worst < 1e-4, "GPU and CPU differ by {worst}");
-    } else {
-        assert!(
-            std::env::var("SPREADLET_REQUIRE_GPU").as_deref() != Ok("1"),
-            "SPREADLET_REQUIRE_GPU=1 but the GPU run failed: {}",
-            String::from_utf8_lossy(&ran.stderr)
-        );
-        eprintln!("no GPU: the deep input's GPU run is not checked");
-    }
+    assert_gpu_run_matches(&ran, &gpu, &from_deep, "the deep input");
 }
 
 fn sample(a: f32, z: f32) -> DeepSample {

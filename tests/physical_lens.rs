@@ -17,7 +17,10 @@ use precompute::sampler::psf_rng;
 use precompute::trace::{trace_psf, RayCount};
 use precompute::{BuildConfig, BuildPlan, LensOptions, Profile, PsfImage};
 use psf_db::PsfModel;
-use spreadlet_e2e::{assert_clean_failure, assert_success, run};
+use spreadlet_e2e::{
+    assert_clean_failure, assert_gpu_run_matches, assert_success, compare_scores, run,
+};
+use std::path::Path;
 
 /// A plan for the physical-lens model through `lens` focused at `focus_m`, on a sensor of
 /// `sensor_mm` mapped onto the test profile's 480 px.
@@ -306,26 +309,7 @@ fn the_motion_psf_of_a_real_lens_matches_light_tracing() {
         data,
     };
     let smeared = spreadlet::motion_smear::smear(&image, len as f32, angle as f32).expect("smear");
-    let n = 2 * half + 1;
-    let mut renderer = vec![vec![0.0f64; n * n]; 3];
-    for y in 0..smeared.height {
-        for x in 0..smeared.width {
-            let px = x as i32 + smeared.origin[0] + half as i32;
-            let py = y as i32 + smeared.origin[1] + half as i32;
-            if px < 0 || py < 0 || px >= n as i32 || py >= n as i32 {
-                continue;
-            }
-            for (c, plane) in renderer.iter_mut().enumerate() {
-                plane[py as usize * n + px as usize] +=
-                    f64::from(smeared.data[(y * smeared.width + x) * 3 + c]);
-            }
-        }
-    }
-    for p in &mut renderer {
-        let sum: f64 = p.iter().sum();
-        p.iter_mut().for_each(|v| *v /= sum);
-    }
-
+    let renderer = on_lattice(&smeared, half);
     for (c, light) in brute.iter().enumerate() {
         let mb = moments_along(light, half, dir);
         for (name, other) in [
@@ -356,23 +340,34 @@ fn the_motion_psf_of_a_real_lens_matches_light_tracing() {
         }
     }
     // The motion shows: the spread along it far exceeds the still PSF's.
-    let still_green: Vec<f64> = {
-        let mut p = vec![0.0f64; n * n];
-        for y in 0..still.height {
-            for x in 0..still.width {
-                let px = x as i64 - still.centre[0] as i64 + half as i64;
-                let py = y as i64 - still.centre[1] as i64 + half as i64;
-                if px >= 0 && py >= 0 && px < n as i64 && py < n as i64 {
-                    p[py as usize * n + px as usize] +=
-                        f64::from(still.planes[1][y * still.width + x]);
-                }
-            }
-        }
-        p
-    };
-    let ms = moments_along(&still_green, half, dir);
+    let ms = moments_along(&on_lattice(&image, half)[1], half, dir);
     let mb = moments_along(&brute[1], half, dir);
     assert!(mb[2] > ms[2] + 3.0, "still {ms:?}, moving {mb:?}");
+}
+
+/// `img`'s channels on the `2 half + 1` square lattice centred on its PSF centre (what falls
+/// outside is dropped), each normalised to sum to one.
+fn on_lattice(img: &spreadlet::motion_smear::PsfImage, half: usize) -> Vec<Vec<f64>> {
+    let n = 2 * half + 1;
+    let mut planes = vec![vec![0.0f64; n * n]; img.channels];
+    for y in 0..img.height {
+        for x in 0..img.width {
+            let px = x as i32 + img.origin[0] + half as i32;
+            let py = y as i32 + img.origin[1] + half as i32;
+            if px < 0 || py < 0 || px >= n as i32 || py >= n as i32 {
+                continue;
+            }
+            for (c, plane) in planes.iter_mut().enumerate() {
+                plane[py as usize * n + px as usize] +=
+                    f64::from(img.data[(y * img.width + x) * img.channels + c]);
+            }
+        }
+    }
+    for p in &mut planes {
+        let sum: f64 = p.iter().sum();
+        p.iter_mut().for_each(|v| *v /= sum);
+    }
+    planes
 }
 
 /// A thin lens of f = 100 mm stopped to f/16 (a dispersion-free table, pbrt's format) images
@@ -553,8 +548,8 @@ fn motion_blur_through_a_real_lens_beats_the_thin_lens() {
     let dir = tempfile::tempdir().expect("tmp");
     let cache = spreadlet_e2e::cache_dir();
     let d = |n: &str| dir.path().join(n).to_str().expect("utf-8").to_string();
-    let scene_path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("scene/scenes/hard/falling-rain.json");
+    let scene_path =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("scene/scenes/hard/falling-rain.json");
     let scene_json = std::fs::read_to_string(&scene_path)
         .expect("falling-rain scene")
         .replace("\"double-gauss-50mm\"", "\"singlet-51mm\"")
@@ -648,24 +643,14 @@ fn motion_blur_through_a_real_lens_beats_the_thin_lens() {
     );
     assert_success(&by_hand);
 
-    let read = |n: &str| formats::RgbaImage::read_exr(std::path::Path::new(&d(n))).expect(n);
-    let reference = read("ref.exr");
-    let score = |img: &formats::RgbaImage| {
-        let (scores, _) = metrics::score_rgb(
-            img.pixels.as_flattened(),
-            reference.pixels.as_flattened(),
-            img.width,
-            img.height,
-        )
-        .expect("scores");
-        (scores.ssim, scores.flip_mean)
-    };
+    let read = |n: &str| formats::RgbaImage::read_exr(Path::new(&d(n))).expect(n);
     assert_eq!(
         read("by-hand.exr").pixels,
         read("phys.exr").pixels,
         "--db gave another image"
     );
-    let (phys, thin) = (score(&read("phys.exr")), score(&read("thin.exr")));
+    let score = |n: &str| compare_scores(Path::new(&d(n)), Path::new(&d("ref.exr")));
+    let (phys, thin) = (score("phys.exr"), score("thin.exr"));
     println!("SSIM / FLIP mean: physical lens {phys:?}, thin lens {thin:?}");
     assert!(phys.0 > thin.0, "SSIM: physical {phys:?}, thin {thin:?}");
     assert!(phys.1 < thin.1, "FLIP: physical {phys:?}, thin {thin:?}");
@@ -673,23 +658,12 @@ fn motion_blur_through_a_real_lens_beats_the_thin_lens() {
     // The GPU draws the frame's own database (the smeared PSFs) as the CPU does (lavapipe in
     // CI).
     let ran = synth(&d("cam.json"), &d("gpu.exr"), &d("gpu.json"), "gpu");
-    if ran.status.success() {
-        let (a, b) = (read("gpu.exr"), read("phys.exr"));
-        let worst = a
-            .pixels
-            .iter()
-            .zip(&b.pixels)
-            .flat_map(|(x, y)| (0..4).map(move |k| (x[k] - y[k]).abs() / y[k].abs().max(1.0)))
-            .fold(0.0f32, f32::max);
-        assert!(worst < 1e-4, "GPU and CPU differ by {worst}");
-    } else {
-        assert!(
-            std::env::var("SPREADLET_REQUIRE_GPU").as_deref() != Ok("1"),
-            "SPREADLET_REQUIRE_GPU=1 but the GPU run failed: {}",
-            String::from_utf8_lossy(&ran.stderr)
-        );
-        eprintln!("no GPU: motion through a real lens is not checked on the GPU");
-    }
+    assert_gpu_run_matches(
+        &ran,
+        Path::new(&d("gpu.exr")),
+        Path::new(&d("phys.exr")),
+        "motion through a real lens",
+    );
 }
 
 /// A sensor larger than the lens's image circle: the corner PSFs get no light, and the build

@@ -168,13 +168,10 @@ pub fn extend_with_dense(
 ) -> Result<PsfDatabase, DbError> {
     let mut images = Vec::with_capacity(extra.len());
     for img in extra {
-        let too_far = |v: i32| i16::try_from(v).is_err();
-        if img.channels != db.channels()
-            || u16::try_from(img.width).is_err()
-            || u16::try_from(img.height).is_err()
-            || too_far(img.origin[0])
-            || too_far(img.origin[1])
-        {
+        let dense = (img.channels == db.channels())
+            .then(|| dense_image(img))
+            .flatten();
+        let Some(dense) = dense else {
             return Err(DbError::Invalid(format!(
                 "a {} x {} PSF image of {} channels at {:?} does not fit a database of {} channels",
                 img.width,
@@ -183,15 +180,21 @@ pub fn extend_with_dense(
                 img.origin,
                 db.channels()
             )));
-        }
-        images.push((
-            [img.origin[0] as i16, img.origin[1] as i16],
-            img.width as u16,
-            img.height as u16,
-            img.data.clone(),
-        ));
+        };
+        images.push(dense);
     }
     Ok(concatenate(&[db], &images)?.into_spreadlets_in_row_order())
+}
+
+/// `img` in the database's dense form, or `None` where its size or origin does not fit the
+/// format's fields (u16 sizes, i16 origin).
+fn dense_image(img: &crate::motion_smear::PsfImage) -> Option<DenseImage> {
+    Some((
+        [i16::try_from(img.origin[0]).ok()?, i16::try_from(img.origin[1]).ok()?],
+        u16::try_from(img.width).ok()?,
+        u16::try_from(img.height).ok()?,
+        img.data.clone(),
+    ))
 }
 
 /// Largest twin image (pixels) whose cell is divided into sub-cells: the blob a whole-cell
@@ -288,26 +291,12 @@ fn physical_twins(db: &PsfDatabase) -> Vec<Option<(TwinCell, Vec<DenseImage>)>> 
             if db.dense(i).is_some() {
                 return None;
             }
-            let img = crate::motion_smear::psf_image(db, i)?;
-            let fits = |v: i32| i16::try_from(v).is_ok();
-            if !fits(img.origin[0])
-                || !fits(img.origin[1])
-                || u16::try_from(img.width).is_err()
-                || u16::try_from(img.height).is_err()
-            {
-                return None;
-            }
+            let image = dense_image(&crate::motion_smear::psf_image(db, i)?)?;
             let cell = TwinCell {
                 min: [0.0; 2],
                 max: [0.0; 2],
                 splits: [1, 1],
             };
-            let image = (
-                [img.origin[0] as i16, img.origin[1] as i16],
-                img.width as u16,
-                img.height as u16,
-                img.data,
-            );
             Some((cell, vec![image]))
         })
         .collect()

@@ -219,7 +219,7 @@ pub fn psf_image(db: &PsfDatabase, index: usize) -> Option<PsfImage> {
     let origin = [x0 - MARGIN, y0 - MARGIN];
     let width = (x1 - x0 + 1 + 2 * MARGIN) as usize;
     let height = (y1 - y0 + 1 + 2 * MARGIN) as usize;
-    let mut data = vec![0f32; width * height * channels];
+    let mut integrated = vec![0f32; width * height * channels];
     for c in 0..channels {
         let mut lap = poisson::Plane::new(width, height);
         for (k, p) in positions.iter().enumerate() {
@@ -228,15 +228,12 @@ pub fn psf_image(db: &PsfDatabase, index: usize) -> Option<PsfImage> {
             lap.add(x, y, values[k * channels + c]);
         }
         let image = poisson::integrate_exact(&lap);
-        let sum: f64 = image.data.iter().map(|&v| f64::from(v)).sum();
-        let kept: f64 = image.data.iter().map(|&v| f64::from(v.max(0.0))).sum();
-        let scale = if kept > 0.0 { (sum / kept) as f32 } else { 0.0 };
-        for y in 0..height {
-            for x in 0..width {
-                data[(y * width + x) * channels + c] = image.get(x, y).max(0.0) * scale;
-            }
+        for (i, &v) in image.data.iter().enumerate() {
+            integrated[i * channels + c] = v;
         }
     }
+    let mut data: Vec<f32> = integrated.iter().map(|&v| v.max(0.0)).collect();
+    keep_channel_sums(&integrated, &mut data, channels);
     let image = PsfImage {
         origin,
         width,
@@ -245,6 +242,21 @@ pub fn psf_image(db: &PsfDatabase, index: usize) -> Option<PsfImage> {
         data,
     };
     Some(image.trimmed())
+}
+
+/// Scales each channel of `after` (channel-interleaved, `ch` channels) to the sum it has in
+/// `before`; a channel with nothing left stays as it is.
+fn keep_channel_sums(before: &[f32], after: &mut [f32], ch: usize) {
+    let sum = |data: &[f32], c: usize| -> f64 {
+        data.iter().skip(c).step_by(ch).map(|&v| f64::from(v)).sum()
+    };
+    for c in 0..ch {
+        let (was, is) = (sum(before, c), sum(after, c));
+        if is > 0.0 {
+            let scale = (was / is) as f32;
+            after.iter_mut().skip(c).step_by(ch).for_each(|v| *v *= scale);
+        }
+    }
 }
 
 /// Below this fraction of an image's largest value a border row or column counts as empty.
@@ -282,14 +294,7 @@ impl PsfImage {
             let row = (y * self.width + x0) * ch;
             data.extend_from_slice(&self.data[row..row + w * ch]);
         }
-        for c in 0..ch {
-            let before: f64 = self.data.iter().skip(c).step_by(ch).map(|&v| f64::from(v)).sum();
-            let after: f64 = data.iter().skip(c).step_by(ch).map(|&v| f64::from(v)).sum();
-            if after > 0.0 {
-                let scale = (before / after) as f32;
-                data.iter_mut().skip(c).step_by(ch).for_each(|v| *v *= scale);
-            }
-        }
+        keep_channel_sums(&self.data, &mut data, ch);
         PsfImage {
             origin: [self.origin[0] + x0 as i32, self.origin[1] + y0 as i32],
             width: w,
@@ -412,14 +417,7 @@ pub fn turn(psf: &PsfImage, angle: f32) -> PsfImage {
             }
         }
     }
-    for c in 0..ch {
-        let before: f64 = psf.data.iter().skip(c).step_by(ch).map(|&v| f64::from(v)).sum();
-        let after: f64 = data.iter().skip(c).step_by(ch).map(|&v| f64::from(v)).sum();
-        if after > 0.0 {
-            let scale = (before / after) as f32;
-            data.iter_mut().skip(c).step_by(ch).for_each(|v| *v *= scale);
-        }
-    }
+    keep_channel_sums(&psf.data, &mut data, ch);
     PsfImage {
         origin: [lo_x, lo_y],
         width,

@@ -150,6 +150,32 @@ pub fn compare_scores(image: &Path, reference: &Path) -> (f64, f64) {
     )
 }
 
+/// Checks a `spreadlet synth --backend gpu` run (`ran`, which wrote `gpu`) against the CPU's
+/// image of the same frame (`cpu`): every channel of every pixel within 1e-4 (relative above
+/// 1). Without a usable GPU the run may fail, unless `SPREADLET_REQUIRE_GPU=1`; `what` names
+/// the case that then goes unchecked.
+pub fn assert_gpu_run_matches(ran: &Output, gpu: &Path, cpu: &Path, what: &str) {
+    if ran.status.success() {
+        let read = |p: &Path| formats::RgbaImage::read_exr(p).expect("an output image");
+        let (a, b) = (read(gpu), read(cpu));
+        assert_eq!((a.width, a.height), (b.width, b.height));
+        let worst = a
+            .pixels
+            .iter()
+            .zip(&b.pixels)
+            .flat_map(|(x, y)| (0..4).map(move |k| (x[k] - y[k]).abs() / y[k].abs().max(1.0)))
+            .fold(0.0f32, f32::max);
+        assert!(worst < 1e-4, "{what}: GPU and CPU differ by {worst}");
+    } else {
+        assert!(
+            std::env::var("SPREADLET_REQUIRE_GPU").as_deref() != Ok("1"),
+            "SPREADLET_REQUIRE_GPU=1 but the GPU run failed: {}",
+            String::from_utf8_lossy(&ran.stderr)
+        );
+        eprintln!("no GPU: {what} is not checked on the GPU");
+    }
+}
+
 /// Runs `name args...` like [`run`], but kills it after `limit` and fails the test then (a
 /// hang is a failure). Returns its output.
 pub fn run_with_timeout(

@@ -72,8 +72,9 @@ pub fn classify_fragments(
     let flip_front = front_turns_the_aperture(dbs);
 
     let centre = [w as f32 * 0.5, h as f32 * 0.5];
-    // Through a real lens, the moving fragments' lens PSFs smeared along their motion: built
-    // once per key, appended to the frame's own copy of the database.
+    // Through a real lens, each moving fragment's lens PSF smeared along its motion: one key
+    // per fragment (with whether its length was clamped), each key's PSF built once and
+    // appended to the frame's own copy of the database.
     let moving_lens = model == Some(PsfModel::PhysicalLens)
         && fragments
             .iter()
@@ -82,27 +83,41 @@ pub fn classify_fragments(
         Some(all) if moving_lens => psf_reach(all),
         _ => Vec::new(),
     };
-    let smeared = match (model, combined) {
-        (Some(PsfModel::PhysicalLens), Some(all)) if moving_lens => {
-            let key_of = |frag: &Fragment| {
-                let m = frag.motion;
-                let motion_len = (m[0] * m[0] + m[1] * m[1]).sqrt();
-                lookup_psf(
-                    frag,
-                    0.0,
-                    motion_len,
-                    centre,
-                    pixels_per_mm,
-                    dbs,
-                    model,
-                    options,
-                    false,
-                    &reach,
-                )
-                .smear
-            };
-            SmearedPsfs::build(fragments, key_of, all, &reach)?
+    let smear_keys: Vec<Option<(SmearKey, bool)>> = match combined {
+        Some(_) if moving_lens => {
+            fragments
+                .par_iter()
+                .map(|frag| {
+                    let m = frag.motion;
+                    let motion_len = (m[0] * m[0] + m[1] * m[1]).sqrt();
+                    if frag.weight <= 0.0 || motion_len < options.copy_threshold_px {
+                        return None;
+                    }
+                    let found = lookup_psf(
+                        frag,
+                        0.0,
+                        motion_len,
+                        centre,
+                        pixels_per_mm,
+                        dbs,
+                        model,
+                        options,
+                        false,
+                    );
+                    if found.path == SplatPath::Copy {
+                        return None;
+                    }
+                    let i = found.psf_index;
+                    let reach = reach.get(i as usize).copied().unwrap_or(0) as f32;
+                    let radial = [found.rot_cos, found.rot_sin];
+                    Some(SmearKey::new(i, m, radial, reach))
+                })
+                .collect()
         }
+        _ => Vec::new(),
+    };
+    let smeared = match combined {
+        Some(all) if !smear_keys.is_empty() => SmearedPsfs::build(&smear_keys, all, &reach)?,
         _ => SmearedPsfs::default(),
     };
     let combined = smeared.database.as_deref().or(combined);
@@ -133,7 +148,6 @@ pub fn classify_fragments(
             mut rot_cos,
             mut rot_sin,
             blend,
-            smear,
         } = lookup_psf(
             frag,
             coc,
@@ -144,7 +158,6 @@ pub fn classify_fragments(
             model,
             options,
             continuous,
-            &reach,
         );
         // In front of the focus plane the lens images its aperture turned half a turn: the
         // databases hold the PSF behind it (see `front_turns_the_aperture`).
@@ -152,8 +165,9 @@ pub fn classify_fragments(
             rot_cos = -rot_cos;
             rot_sin = -rot_sin;
         }
-        counts.clamped += usize::from(clamped);
-        let (path, psf_index) = match smear.and_then(|k| smeared.index_of(k)) {
+        let smear = smear_keys.get(index).copied().flatten();
+        counts.clamped += usize::from(clamped || smear.is_some_and(|(_, clamped)| clamped));
+        let (path, psf_index) = match smear.and_then(|(k, _)| smeared.index_of(k)) {
             Some(i) => {
                 // Built in the image's frame: drawn unrotated.
                 counts.smeared += 1;
@@ -258,20 +272,15 @@ struct SmearedPsfs {
 }
 
 impl SmearedPsfs {
-    /// The smeared PSFs that `fragments` call for (`key_of`), from the lens PSFs of `all`.
-    /// `reach` is each PSF's reach in `all`, px; the frame's smeared images are bounded by
+    /// The smeared PSFs of the fragments' keys (`None`: not smeared), from the lens PSFs of
+    /// `all` (whose PSFs reach `reach` px); the frame's smeared images are bounded by
     /// [`crate::motion_smear::MAX_FRAME_SMEARED_PIXELS`].
     fn build(
-        fragments: &[Fragment],
-        key_of: impl Fn(&Fragment) -> Option<SmearKey> + Sync,
+        fragment_keys: &[Option<(SmearKey, bool)>],
         all: &PsfDatabase,
         reach: &[i32],
     ) -> Result<Self, ClassifyError> {
-        let mut keys: Vec<SmearKey> = fragments
-            .par_iter()
-            .filter(|f| f.weight > 0.0)
-            .filter_map(&key_of)
-            .collect();
+        let mut keys: Vec<SmearKey> = fragment_keys.iter().flatten().map(|&(k, _)| k).collect();
         if keys.is_empty() {
             return Ok(Self::default());
         }

@@ -4,7 +4,6 @@
 
 use super::*;
 use crate::dbset::DbSet;
-use crate::motion_smear::SmearKey;
 use crate::pipeline::types::SplatPath;
 use psf_db::{PsfDatabase, PsfModel};
 
@@ -19,9 +18,6 @@ pub(super) struct Lookup {
     pub(super) rot_sin: f32,
     /// The neighbouring cell the PSF is blended with, if any.
     pub(super) blend: Option<Blend>,
-    /// For a moving fragment seen through a real lens: its lens PSF smeared along its motion
-    /// (which replaces `psf_index` once the frame's smeared PSFs are built).
-    pub(super) smear: Option<SmearKey>,
 }
 
 /// The second PSF of a blended lookup ([`ClassifyOptions::continuous_lookup`]).
@@ -35,11 +31,9 @@ pub(super) struct Blend {
 
 /// The PSF of `frag` (CoC `coc` and motion `motion_len`, pixels), O(1) through the nested
 /// grid: still pixels from the thin-lens database, moving ones from the lens-motion one,
-/// everything from a physical-lens one (a fragment moving at least
-/// [`ClassifyOptions::copy_threshold_px`] also gets the key of its lens PSF smeared along the
-/// motion, [`crate::motion_smear`]); copied when both are under
-/// [`ClassifyOptions::copy_threshold_px`]. `centre` is the frame's centre, pixels; `reach` each
-/// combined PSF's reach, px (only a moving fragment through a real lens reads it).
+/// everything from a physical-lens one (whose moving fragments the caller then smears along
+/// their motion, [`crate::motion_smear`]); copied when both are under
+/// [`ClassifyOptions::copy_threshold_px`]. `centre` is the frame's centre, pixels.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn lookup_psf(
     frag: &Fragment,
@@ -51,7 +45,6 @@ pub(super) fn lookup_psf(
     model: Option<PsfModel>,
     options: &ClassifyOptions,
     continuous: bool,
-    reach: &[i32],
 ) -> Lookup {
     let (thin, main, combined) = (
         dbs.thin_lens.as_ref(),
@@ -63,7 +56,6 @@ pub(super) fn lookup_psf(
     let (mut rot_cos, mut rot_sin) = (1.0f32, 0.0f32);
     let offset = dbs.main_offset;
     let mut blend = None;
-    let mut smear = None;
     // The neighbour along `dim` that a continuous lookup blends the PSF of `s` with.
     let neighbour = |db: &PsfDatabase, s: [f32; 2], dim: usize, offset: u32| {
         if !continuous {
@@ -87,14 +79,7 @@ pub(super) fn lookup_psf(
                 rot_sin = dy / r;
             }
             // The physical-lens space is over inverse depth (1 / scene units).
-            let (idx, mut cl) = db.lookup([1.0 / frag.depth, r / pixels_per_mm]);
-            if motion_len >= options.copy_threshold_px {
-                let j = idx + offset;
-                let reach = reach.get(j as usize).copied().unwrap_or(0) as f32;
-                let (key, clamped) = SmearKey::new(j, m, [rot_cos, rot_sin], reach);
-                smear = Some(key);
-                cl |= clamped;
-            }
+            let (idx, cl) = db.lookup([1.0 / frag.depth, r / pixels_per_mm]);
             (path_of(all, idx + offset), idx + offset, cl)
         }
         (Some(_), _, Some(all))
@@ -132,7 +117,6 @@ pub(super) fn lookup_psf(
         rot_cos,
         rot_sin,
         blend,
-        smear,
     }
 }
 
