@@ -127,11 +127,9 @@ impl BuildPlan {
                     format!("{:.6}", tracer.pinhole_distance_mm),
                 ));
                 notes.push(("lens".into(), system.prescription.name.clone()));
-                // Inverse depth: the blur grows linearly in it, so a uniform grid spends its
-                // PSFs evenly over blur sizes.
                 let [near, far] = opts.depth_range;
                 let ranges = [[1.0 / far, 1.0 / near], [0.0, opts.max_eccentricity_mm]];
-                let space = ParamSpace::for_model(cfg.model, &ranges, n)?;
+                let space = physical_lens_space(ranges, count)?;
                 let presc = opts.prescription(&system, tracer.pinhole_distance_mm, width_px);
                 (space, Box::new(tracer), Some(presc))
             }
@@ -416,6 +414,38 @@ impl StderrProgress {
         #[cfg(feature = "progress-bar")]
         self.bar.finish_and_clear();
     }
+}
+
+/// Eccentricity boxes per inverse-depth box of the physical-lens grid: the PSF's size moves
+/// with inverse depth over the whole range, its shape with eccentricity mostly towards the
+/// corners, where the eccentricity axis's remapping puts its boxes.
+const PHYSICAL_DEPTH_PER_ECCENTRICITY: f64 = 1.6;
+
+/// The physical-lens space over `ranges` (inverse depth, 1 / scene units; eccentricity, mm):
+/// a regular grid of about `count` boxes. Inverse depth is uniform, as the blur grows linearly
+/// in it, so each box spans the same blur in pixels, near or far; eccentricity is remapped with
+/// the model's beta (below 1), so boxes narrow towards the corners, where vignetting cuts the
+/// cat's eye fastest. A nested grid's boxes are widest where both coordinates are large, a near
+/// object in a corner: there a PSF stood for blurs 47 % apart and eccentricities 3 mm apart.
+pub fn physical_lens_space(
+    ranges: [[f64; 2]; 2],
+    count: u32,
+) -> Result<ParamSpace, psf_db::SpaceError> {
+    let across = (f64::from(count) / PHYSICAL_DEPTH_PER_ECCENTRICITY)
+        .sqrt()
+        .round()
+        .max(1.0) as u32;
+    let along = count.div_ceil(across).max(1);
+    let dims = ranges
+        .iter()
+        .zip(PsfModel::PhysicalLens.default_beta())
+        .map(|(r, &beta)| psf_db::Dimension {
+            min: r[0],
+            max: r[1],
+            beta,
+        })
+        .collect();
+    ParamSpace::regular(dims, [along, across])
 }
 
 /// One processed PSF.

@@ -11,6 +11,11 @@ pub enum SpaceError {
     /// The grid resolution is 0 or above [`crate::grid::MAX_GRID_RESOLUTION`].
     #[error("grid resolution {0} is outside 1..=65536")]
     Resolution(u32),
+    /// A regular grid with no cell along a dimension, or more than the largest resolution.
+    #[error(
+        "a regular grid needs at least 1 cell per dimension and at most 65536 in all, got {0:?}"
+    )]
+    RegularCells([u32; 2]),
     /// A dimension whose range is empty or not finite, or whose beta is not positive.
     #[error("dimension {index}: need finite min < max and beta > 0, got min {min}, max {max}, beta {beta}")]
     BadDimension {

@@ -36,7 +36,7 @@ pub use crate::builder::DatabaseBuilder;
 /// The first 8 bytes of every database file.
 pub const MAGIC: [u8; 8] = *b"SPRDLT\0\x01";
 /// The format version this build writes and reads.
-pub const FORMAT_VERSION: u32 = 4;
+pub const FORMAT_VERSION: u32 = 5;
 /// `dense_slot` value of a PSF stored as spreadlets.
 pub const SPARSE_SLOT: u32 = u32::MAX;
 /// Largest header accepted, bytes (the header holds per-PSF statistics: a few MB at most).

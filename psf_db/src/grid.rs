@@ -243,6 +243,119 @@ impl NestedGrid {
     }
 }
 
+/// A regular grid over `[0, n)^2` of `cells[0] x cells[1]` equal boxes, numbered with
+/// dimension 0 major: cell `i0 cells[1] + i1`. `n = cells[0] cells[1]`, so every box edge is a
+/// whole number of grid units. The physical-lens model samples on it: its PSF changes as fast
+/// for a near object in the frame's corner as anywhere, where a nested grid's cells are widest.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RegularGrid {
+    cells: [u32; 2],
+}
+
+impl RegularGrid {
+    /// A grid of `cells[0] x cells[1]` boxes (each at least 1, the product at most
+    /// [`MAX_GRID_RESOLUTION`]).
+    pub fn new(cells: [u32; 2]) -> Result<Self, SpaceError> {
+        let n = u64::from(cells[0]) * u64::from(cells[1]);
+        if cells.contains(&0) || n > u64::from(MAX_GRID_RESOLUTION) {
+            return Err(SpaceError::RegularCells(cells));
+        }
+        Ok(RegularGrid { cells })
+    }
+
+    /// Boxes per dimension.
+    pub fn cells(&self) -> [u32; 2] {
+        self.cells
+    }
+
+    /// Grid units per dimension, `cells[0] cells[1]`.
+    pub fn n(&self) -> u32 {
+        self.cells[0] * self.cells[1]
+    }
+
+    /// Number of boxes.
+    pub fn cell_count(&self) -> u32 {
+        self.n()
+    }
+
+    /// Edge of a box along dimension `k`, grid units.
+    fn edge(&self, k: usize) -> u32 {
+        self.n() / self.cells[k]
+    }
+
+    /// The box containing grid point `u`, clamped to `[0, n)`; NaN counts as 0. O(1).
+    #[inline]
+    pub fn index_of(&self, u: [f64; 2]) -> u32 {
+        let n = f64::from(self.n());
+        let along = |k: usize| {
+            let x = if u[k] >= 0.0 { u[k].min(n) } else { 0.0 }; // NaN -> 0
+            ((x / f64::from(self.edge(k))).floor() as u32).min(self.cells[k] - 1)
+        };
+        along(0) * self.cells[1] + along(1)
+    }
+
+    /// The box (grid units) of cell `i`; `None` when `i >= cell_count()`.
+    pub fn cell_box(&self, i: u32) -> Option<CellBox> {
+        if i >= self.cell_count() {
+            return None;
+        }
+        let k = [i / self.cells[1], i % self.cells[1]];
+        let side = |d: usize| {
+            let e = f64::from(self.edge(d));
+            (f64::from(k[d]) * e, f64::from(k[d] + 1) * e)
+        };
+        let ((a0, b0), (a1, b1)) = (side(0), side(1));
+        Some(CellBox {
+            min: [a0, a1],
+            max: [b0, b1],
+        })
+    }
+}
+
+/// The cells a parameter space's PSFs sample: the paper's nested grid, or a regular one.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Grid {
+    /// Cells whose edge grows with the smaller grid coordinate (thin lens, lens motion).
+    Nested(NestedGrid),
+    /// Equal boxes (physical lens).
+    Regular(RegularGrid),
+}
+
+impl Grid {
+    /// Grid units per dimension.
+    pub fn n(&self) -> u32 {
+        match self {
+            Grid::Nested(g) => g.n(),
+            Grid::Regular(g) => g.n(),
+        }
+    }
+
+    /// Number of cells.
+    pub fn cell_count(&self) -> u32 {
+        match self {
+            Grid::Nested(g) => g.cell_count(),
+            Grid::Regular(g) => g.cell_count(),
+        }
+    }
+
+    /// The cell containing grid point `u` (grid units), clamped to the grid; NaN counts as 0.
+    #[inline]
+    pub fn index_of(&self, u: [f64; 2]) -> u32 {
+        match self {
+            Grid::Nested(g) => g.index_of(u),
+            Grid::Regular(g) => g.index_of(u),
+        }
+    }
+
+    /// The box (grid units) of cell `i`; `None` when `i >= cell_count()`.
+    pub fn cell_box(&self, i: u32) -> Option<CellBox> {
+        match self {
+            Grid::Nested(g) => g.cell_box(i),
+            Grid::Regular(g) => g.cell_box(i),
+        }
+    }
+}
+
 fn cells_per_axis(n: u32, l: u32) -> u32 {
     (n - triangular(l)).div_ceil(l + 1)
 }
@@ -259,6 +372,31 @@ fn cells_in_level(dims: u32, n: u32, l: u32) -> u32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Every box's centre maps back to it, the boxes tile the square exactly, and points
+    /// outside (or NaN) clamp to the edge boxes.
+    #[test]
+    fn regular_boxes_tile_the_square_and_centres_map_back() {
+        for cells in [[1, 1], [16, 10], [3, 2], [7, 13]] {
+            let g = RegularGrid::new(cells).unwrap();
+            let n = f64::from(g.n());
+            assert_eq!(g.cell_count(), cells[0] * cells[1]);
+            let mut area = 0.0;
+            for i in 0..g.cell_count() {
+                let b = g.cell_box(i).unwrap();
+                assert_eq!(g.index_of(b.center()), i, "{cells:?} box {i}");
+                assert_eq!(g.index_of(b.min), i, "{cells:?} box {i}: its lower corner");
+                area += (b.max[0] - b.min[0]) * (b.max[1] - b.min[1]);
+            }
+            assert_eq!(area, n * n, "{cells:?}");
+            assert!(g.cell_box(g.cell_count()).is_none());
+            assert_eq!(g.index_of([-3.0, f64::NAN]), 0);
+            assert_eq!(g.index_of([n, 2.0 * n]), g.cell_count() - 1);
+            assert_eq!(g.index_of([0.0, n]), cells[1] - 1);
+        }
+        assert!(RegularGrid::new([0, 4]).is_err());
+        assert!(RegularGrid::new([300, 300]).is_err());
+    }
 
     #[test]
     fn paper_example_9x9_has_28_cells() {

@@ -31,7 +31,7 @@ pub use format::{
     Aperture, BuildInfo, DatabaseBuilder, DbHeader, DenseEntry, DenseView, Dispersion,
     LensPrescription, PsfDatabase, PsfStats, FORMAT_VERSION, MAGIC, SPARSE_SLOT,
 };
-pub use grid::{CellBox, GridSpec, NestedGrid};
+pub use grid::{CellBox, Grid, GridSpec, NestedGrid, RegularGrid};
 pub use model::{ParseModelError, PsfModel};
 pub use shard::{merge_shards, ShardRange};
 pub use space::{Dimension, ParamSpace, ParamSpaceSpec};

@@ -7,7 +7,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::error::SpaceError;
-use crate::grid::{CellBox, NestedGrid};
+use crate::grid::{CellBox, Grid, NestedGrid, RegularGrid};
 use crate::model::PsfModel;
 
 /// One dimension of a parameter space, in the dimension's physical unit (px, scene units, mm).
@@ -28,21 +28,34 @@ pub struct ParamSpaceSpec {
     pub dims: Vec<Dimension>,
     /// Grid resolution in grid units per dimension.
     pub n: u32,
+    /// Boxes per dimension of a regular grid (`n` is then their product); `None` for the
+    /// nested grid.
+    pub regular: Option<[u32; 2]>,
 }
 
-/// A sampled PSF parameter space: ranges, power remapping and the nested grid over it.
-/// Coordinates are `[f64; 2]` / `[f32; 2]` whose second entry is ignored in 1D spaces.
+/// A sampled PSF parameter space: ranges, power remapping and the grid over it (the paper's
+/// nested grid, or a regular one). Coordinates are `[f64; 2]` / `[f32; 2]` whose second entry
+/// is ignored in 1D spaces.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(try_from = "ParamSpaceSpec", into = "ParamSpaceSpec")]
 pub struct ParamSpace {
     dims: Vec<Dimension>,
-    grid: NestedGrid,
+    grid: Grid,
 }
 
 impl TryFrom<ParamSpaceSpec> for ParamSpace {
     type Error = SpaceError;
     fn try_from(spec: ParamSpaceSpec) -> Result<Self, SpaceError> {
-        ParamSpace::new(spec.dims, spec.n)
+        match spec.regular {
+            None => ParamSpace::new(spec.dims, spec.n),
+            Some(cells) => {
+                let space = ParamSpace::regular(spec.dims, cells)?;
+                if space.n() != spec.n {
+                    return Err(SpaceError::RegularCells(cells));
+                }
+                Ok(space)
+            }
+        }
     }
 }
 
@@ -50,31 +63,52 @@ impl From<ParamSpace> for ParamSpaceSpec {
     fn from(s: ParamSpace) -> Self {
         ParamSpaceSpec {
             n: s.grid.n(),
+            regular: match &s.grid {
+                Grid::Nested(_) => None,
+                Grid::Regular(g) => Some(g.cells()),
+            },
             dims: s.dims,
         }
     }
+}
+
+/// Checks that every dimension has a finite, non-empty range and a finite positive beta.
+fn check_dims(dims: &[Dimension]) -> Result<(), SpaceError> {
+    for (i, d) in dims.iter().enumerate() {
+        let ok = d.min.is_finite()
+            && d.max.is_finite()
+            && d.min < d.max
+            && d.beta.is_finite()
+            && d.beta > 0.0;
+        if !ok {
+            return Err(SpaceError::BadDimension {
+                index: i,
+                min: d.min,
+                max: d.max,
+                beta: d.beta,
+            });
+        }
+    }
+    Ok(())
 }
 
 impl ParamSpace {
     /// A space over `dims` (1 or 2 entries, finite `min < max`, finite `beta > 0`) with grid
     /// resolution `n`.
     pub fn new(dims: Vec<Dimension>, n: u32) -> Result<Self, SpaceError> {
-        for (i, d) in dims.iter().enumerate() {
-            let ok = d.min.is_finite()
-                && d.max.is_finite()
-                && d.min < d.max
-                && d.beta.is_finite()
-                && d.beta > 0.0;
-            if !ok {
-                return Err(SpaceError::BadDimension {
-                    index: i,
-                    min: d.min,
-                    max: d.max,
-                    beta: d.beta,
-                });
-            }
+        check_dims(&dims)?;
+        let grid = Grid::Nested(NestedGrid::new(dims.len(), n)?);
+        Ok(ParamSpace { dims, grid })
+    }
+
+    /// A two-dimensional space over `dims` (as [`Self::new`]) sampled by a regular grid of
+    /// `cells[0] x cells[1]` boxes, equal in the remapped coordinates.
+    pub fn regular(dims: Vec<Dimension>, cells: [u32; 2]) -> Result<Self, SpaceError> {
+        if dims.len() != 2 {
+            return Err(SpaceError::Dims(dims.len()));
         }
-        let grid = NestedGrid::new(dims.len(), n)?;
+        check_dims(&dims)?;
+        let grid = Grid::Regular(RegularGrid::new(cells)?);
         Ok(ParamSpace { dims, grid })
     }
 
@@ -112,8 +146,8 @@ impl ParamSpace {
         self.dims.len()
     }
 
-    /// The nested grid over the remapped coordinates.
-    pub fn grid(&self) -> &NestedGrid {
+    /// The grid over the remapped coordinates.
+    pub fn grid(&self) -> &Grid {
         &self.grid
     }
 
@@ -293,6 +327,46 @@ mod tests {
             space.neighbour_blend([coc, 1.0], 2).is_none(),
             "no third dimension"
         );
+    }
+
+    /// A regular space survives its serialised form, looks up every box's centre as that
+    /// box, and refuses a resolution that does not match its boxes.
+    #[test]
+    fn a_regular_space_round_trips_and_looks_up_its_centres() {
+        let dims = vec![
+            Dimension {
+                min: 0.001,
+                max: 3.3,
+                beta: 1.0,
+            },
+            Dimension {
+                min: 0.0,
+                max: 21.4,
+                beta: 0.6,
+            },
+        ];
+        let space = ParamSpace::regular(dims.clone(), [16, 10]).unwrap();
+        assert_eq!(space.psf_count(), 160);
+        let spec = ParamSpaceSpec::from(space.clone());
+        assert_eq!(spec.regular, Some([16, 10]));
+        assert_eq!(ParamSpace::try_from(spec.clone()).unwrap(), space);
+        for i in 0..space.psf_count() {
+            let c = space.cell_center(i).unwrap();
+            assert_eq!(
+                space.lookup([c[0] as f32, c[1] as f32]),
+                (i, false),
+                "box {i}"
+            );
+        }
+        // Boxes narrow towards the largest eccentricity.
+        let width = |i: u32| {
+            let b = space.cell_box(i).unwrap();
+            b.max[1] - b.min[1]
+        };
+        assert!(width(9) < 0.5 * width(0), "{} vs {}", width(9), width(0));
+        let bad = ParamSpaceSpec { n: 7, ..spec };
+        assert!(ParamSpace::try_from(bad).is_err());
+        assert!(ParamSpace::regular(dims[..1].to_vec(), [4, 1]).is_err());
     }
 
     #[test]
