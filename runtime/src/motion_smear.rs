@@ -36,6 +36,9 @@ const FINE_LENGTH_MAX_PX: f32 = 8.0;
 const FINE_LENGTH_STEP_PX: f32 = 0.25;
 /// Relative length step beyond [`FINE_LENGTH_MAX_PX`].
 const COARSE_LENGTH_RATIO: f32 = 1.02;
+/// A lens PSF narrower than this (px, its trimmed image's smaller side) is smeared with taps a
+/// quarter pixel apart rather than one.
+const NARROW_PSF_PX: usize = 8;
 /// Largest motion length smeared, px: a longer one is clamped (and counted as clamped).
 pub const MAX_SMEAR_PX: f32 = 512.0;
 /// Largest smeared PSF image, pixels: its width times height. Beyond it the smear's taps are
@@ -63,6 +66,9 @@ pub struct SmearKey {
     pub turn_step: u32,
     /// Turn steps over a full turn: finer for a wider PSF (its rim moves `reach * dturn`).
     pub turn_steps: u32,
+    /// Angle steps four times finer (a lens PSF reaching under [`NARROW_PSF_PX`] / 2 px: its
+    /// streak is a thin line, whose tip a step moves visibly between neighbouring pixels).
+    pub fine_angles: bool,
 }
 
 impl SmearKey {
@@ -70,14 +76,31 @@ impl SmearKey {
     /// (unit vector, x right, y down) and smeared along `motion` (px over the shutter, x
     /// right, y down). Returns the key and whether the length was clamped.
     pub fn new(cell: u32, motion: [f32; 2], radial: [f32; 2], reach_px: f32) -> (Self, bool) {
+        Self::dithered(cell, motion, radial, reach_px, 0.5)
+    }
+
+    /// [`SmearKey::new`] with the length's quantisation dithered: the length step below or
+    /// above the motion's length, the one above where `threshold` (in `[0, 1)`) is at least
+    /// one minus the length's fraction of the way between them. Over pixels whose thresholds
+    /// are spread evenly over `[0, 1)`, the smeared PSF is then the linear interpolation
+    /// between the two steps, continuous in the length, where rounding (`threshold` 1/2)
+    /// steps: a surface whose motion varies smoothly shows no line where the rounding turns.
+    pub fn dithered(
+        cell: u32,
+        motion: [f32; 2],
+        radial: [f32; 2],
+        reach_px: f32,
+        threshold: f32,
+    ) -> (Self, bool) {
         let len = (motion[0] * motion[0] + motion[1] * motion[1]).sqrt();
         let clamped = len > MAX_SMEAR_PX;
         let len = len.min(MAX_SMEAR_PX);
+        let quantise = |steps: f32| (steps + threshold).floor() as u32;
         let length_step = if len <= FINE_LENGTH_MAX_PX {
-            (len / FINE_LENGTH_STEP_PX).round() as u32
+            quantise(len / FINE_LENGTH_STEP_PX)
         } else {
             let fine = (FINE_LENGTH_MAX_PX / FINE_LENGTH_STEP_PX) as u32;
-            fine + ((len / FINE_LENGTH_MAX_PX).ln() / COARSE_LENGTH_RATIO.ln()).round() as u32
+            fine + quantise((len / FINE_LENGTH_MAX_PX).ln() / COARSE_LENGTH_RATIO.ln())
         };
         // The rim of a PSF reaching r px moves r * dturn when turned: at most 1/4 px off.
         let turn_steps = (std::f32::consts::TAU * reach_px.max(1.0) / 0.5)
@@ -92,6 +115,7 @@ impl SmearKey {
             angle_step: 0,
             turn_step,
             turn_steps,
+            fine_angles: 2.0 * reach_px < NARROW_PSF_PX as f32,
         };
         let n = key.angle_steps();
         let angle = motion[1].atan2(motion[0]).rem_euclid(std::f32::consts::PI);
@@ -115,10 +139,12 @@ impl SmearKey {
         }
     }
 
-    /// How many angle steps cover pi at this key's length: at least 1/length radians apart.
+    /// How many angle steps cover pi at this key's length: at least 1/length radians apart
+    /// (1/(4 length) with [`SmearKey::fine_angles`]).
     pub fn angle_steps(&self) -> u32 {
+        let per_px = if self.fine_angles { 4.0 } else { 1.0 };
         let len = self.length_px();
-        (std::f32::consts::PI * len).ceil().max(4.0) as u32
+        (std::f32::consts::PI * len * per_px).ceil().max(4.0) as u32
     }
 
     /// The angle of the motion from +x, radians in `[0, pi)`.
@@ -327,7 +353,13 @@ pub fn smear(psf: &PsfImage, length: f32, angle: f32) -> Result<PsfImage, SmearE
     }
     let ch = psf.channels;
     let mut out = vec![0f32; width * height * ch];
-    let taps = (length.ceil() as usize + 1).max(1);
+    // A tap's bilinear weights widen a PSF by up to a pixel, most at half-pixel shifts: on a
+    // PSF only a few pixels wide, taps a pixel apart draw a beaded streak whose beads move
+    // with the angle, and neighbouring pixels' streaks no longer add up to a flat surface.
+    // Narrow PSFs get taps a quarter pixel apart.
+    let narrow = psf.width.min(psf.height) < NARROW_PSF_PX;
+    let taps_per_px = if narrow { 4.0 } else { 1.0 };
+    let taps = ((length * taps_per_px).ceil() as usize + 1).max(1);
     let share = 1.0 / taps as f32;
     for k in 0..taps {
         let t = ((k as f32 + 0.5) / taps as f32 - 0.5) * length;

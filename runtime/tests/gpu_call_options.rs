@@ -30,7 +30,11 @@ fn rotation_and_compositing_apply_per_call() {
         Some(support::test_db(PsfModel::LensMotion).clone()),
     )
     .expect("databases");
-    let defaults = SynthOptions::default();
+    // Moving pixels drawn with the lens-motion database's PSFs: turned by the record, so that
+    // rotation sampling matters, and indexing the set's database, which the one synthesizer
+    // holds (a frame with PSFs of its own needs a synthesizer for them, as `Renderer` makes).
+    let mut defaults = SynthOptions::default();
+    defaults.classify.smear_motion = false;
     let mut gpu = GpuSynthesizer::for_database(
         ctx,
         dbs.combined.as_ref(),
@@ -45,7 +49,7 @@ fn rotation_and_compositing_apply_per_call() {
             renormalize_coverage: false,
             restore_occluded: false,
         },
-        ..SynthOptions::default()
+        ..defaults.clone()
     };
     let flat =
         |i: &spreadlet::RgbaImage| -> Vec<f32> { i.pixels.iter().flatten().copied().collect() };

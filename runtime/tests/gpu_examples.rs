@@ -7,12 +7,11 @@ mod gpu_support;
 
 use std::path::{Path, PathBuf};
 
-use gpu_support::{context, max_diff, synthesize_gpu};
+use gpu_support::{context, max_diff, render_gpu_fresh};
 use psf_db::{PsfDatabase, PsfModel};
 use spreadlet::camera::Camera;
 use spreadlet::dbset::DbSet;
 use spreadlet::gbuffer::{ChannelOptions, GBuffer};
-use spreadlet::gpu::{GpuSynthOptions, GpuSynthesizer};
 use spreadlet::synth::{synthesize, SynthOptions};
 
 /// Centre crop edge, px (the examples are 512 x 512; lavapipe in CI stays fast at this size).
@@ -94,14 +93,10 @@ fn shared_examples_gpu_matches_cpu() {
         };
         let options = SynthOptions::default();
         let (cpu, cpu_stats) = synthesize(&g, &cam, &dbs, &options).expect("CPU synthesis");
-        let mut gpu = GpuSynthesizer::for_database(
-            ctx,
-            dbs.combined.as_ref(),
-            GpuSynthOptions::from_synth(&options),
-        )
-        .expect("GPU synthesizer");
-        let (img, stats, times) =
-            synthesize_gpu(&mut gpu, &g, &cam, &dbs, &options).expect("GPU synthesis");
+        let prepared = spreadlet::Plan::new(spreadlet::Input::Flat(&g), &cam, &options)
+            .and_then(|plan| plan.prepare(&dbs))
+            .expect("prepared");
+        let (img, stats, times) = render_gpu_fresh(ctx, prepared, &dbs);
         assert_eq!(stats.counts, cpu_stats.counts);
         let a: Vec<f32> = img.pixels.iter().flatten().copied().collect();
         let b: Vec<f32> = cpu.pixels.iter().flatten().copied().collect();

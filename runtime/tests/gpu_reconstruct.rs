@@ -5,11 +5,10 @@
 
 mod gpu_support;
 
-use gpu_support::{context, max_diff};
+use gpu_support::{context, max_diff, render_gpu_fresh};
 use psf_db::PsfModel;
 use spreadlet::camera::Camera;
 use spreadlet::dbset::DbSet;
-use spreadlet::gpu::{render_gpu, GpuSynthOptions, GpuSynthesizer};
 use spreadlet::reconstruct::reconstruct;
 use spreadlet::synth::SynthOptions;
 use spreadlet::{Input, Plan};
@@ -45,16 +44,10 @@ fn gpu_reconstruction_matches_cpu() {
         DbSet::new(Some(db(PsfModel::ThinLens)), Some(db(PsfModel::LensMotion))).expect("db set");
     let options = SynthOptions::default();
     let (cpu, cpu_stats) = reconstruct(&frames, &camera, &dbs, &options).expect("CPU");
-    let mut gpu = GpuSynthesizer::for_database(
-        ctx,
-        dbs.combined.as_ref(),
-        GpuSynthOptions::from_synth(&options),
-    )
-    .expect("GPU synthesizer");
     let prepared = Plan::new(Input::samples(&frames), &camera, &options)
         .and_then(|plan| plan.prepare(&dbs))
         .expect("prepared");
-    let (img, stats, _) = render_gpu(&mut gpu, prepared, &dbs).expect("GPU reconstruction");
+    let (img, stats, _) = render_gpu_fresh(ctx, prepared, &dbs);
     assert_eq!(stats.counts, cpu_stats.counts);
     assert!(
         stats.defocus && stats.motion,

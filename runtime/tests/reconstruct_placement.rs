@@ -42,8 +42,9 @@ fn footprint_keeps_the_psf_of_an_in_focus_moving_sample() {
     };
     assert!(effects_of(&cam, &frames).motion);
     let mut options = SynthOptions::default();
-    // One record per footprint pixel, of the cell holding its parameters.
+    // One record per footprint pixel, of the lens-motion cell holding its parameters.
     options.classify.continuous_lookup = false;
+    options.classify.smear_motion = false;
     let records = |placement| {
         Plan::new(Input::Samples(&frames, placement), &cam, &options)
             .and_then(|plan| plan.prepare(&dbs))

@@ -143,3 +143,26 @@ fn a_motion_ramp_across_the_motion_blurs_smoothly() {
     let (_, step) = largest_step(&profile, 4);
     assert!(step < 0.01, "a step or dip of {:.2} %", 100.0 * step);
 }
+
+#[test]
+fn a_motion_ramp_along_the_motion_blurs_smoothly_smeared_from_the_thin_lens() {
+    let camera = camera(W as u32, H as u32, false, 1.0);
+    let dbs = DbSet::new(
+        Some(quick_db(PsfModel::ThinLens)),
+        Some(quick_db(PsfModel::LensMotion)),
+    )
+    .expect("db set");
+    let g = grey_gbuffer(|_| 2.0, |x| [ramp(x, 2.0, 40.0), 0.0]);
+    let (image, stats) = synthesize(&g, &camera, &dbs, &SynthOptions::default()).expect("synth");
+    assert!(
+        stats.counts.smeared > W * H / 2,
+        "{} of {} pixels smeared",
+        stats.counts.smeared,
+        W * H
+    );
+    let (step, _) = report(
+        "motion 2-40 px along x, thin-lens PSFs smeared",
+        &row_profile(&image),
+    );
+    assert!(step < 0.01, "a step or dip of {:.2} %", 100.0 * step);
+}

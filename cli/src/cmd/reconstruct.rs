@@ -71,6 +71,10 @@ pub(crate) struct ReconstructArgs {
     /// Write statistics (effects, counts per path, stage times) as JSON.
     #[arg(long)]
     pub(crate) stats: Option<PathBuf>,
+    /// Draw moving samples with the lens-motion database's PSF of their cell instead of the
+    /// thin-lens PSF smeared along their own motion (for comparison).
+    #[arg(long)]
+    pub(crate) motion_database: bool,
     /// Print no progress.
     #[arg(long, short)]
     pub(crate) quiet: bool,
@@ -81,6 +85,7 @@ pub(crate) fn run(args: ReconstructArgs) -> Result<()> {
     let options = SynthOptions {
         classify: ClassifyOptions {
             layers: args.layers,
+            smear_motion: !args.motion_database,
             ..ClassifyOptions::default()
         },
         integrator: args.integrate,

@@ -93,6 +93,12 @@ pub(crate) struct SynthArgs {
     /// then shows a line at each cell boundary; for comparison).
     #[arg(long)]
     pub(crate) nearest_cell: bool,
+    /// Draw moving pixels with the lens-motion database's PSF of their cell (turned onto the
+    /// motion, blended with the neighbouring cell) instead of the thin-lens PSF of their CoC
+    /// smeared along their own motion (for comparison: streak ends are then soft over a
+    /// cell's width, and a frame where everything moves is several times slower).
+    #[arg(long)]
+    pub(crate) motion_database: bool,
     /// Poisson integrator (exact by default: the pyramid's small relative error becomes
     /// visible around HDR highlights).
     #[arg(long, value_enum, default_value_t = Integrator::default())]
@@ -145,6 +151,7 @@ impl SynthArgs {
                 frame_edges: self.frame_edges,
                 fill_hidden: !self.no_hidden_fill,
                 continuous_lookup: !self.nearest_cell,
+                smear_motion: !self.motion_database,
                 ..ClassifyOptions::default()
             },
             splat: SplatOptions {

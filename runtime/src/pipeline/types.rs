@@ -121,8 +121,9 @@ pub struct PathCounts {
     /// Records added beyond the input's outermost pixels ([`super::FrameEdges::Extend`]; also in
     /// the path counts).
     pub edge_extended: usize,
-    /// Moving fragments seen through a real lens, drawn with their lens PSF smeared along
-    /// their motion (also in `dense`).
+    /// Moving fragments drawn with their lens PSF smeared along their own motion (through a
+    /// real lens, or the thin lens with [`super::ClassifyOptions::smear_motion`]; also in
+    /// `dense`).
     pub smeared: usize,
     /// Fragments of background continued behind sharper occluders
     /// ([`super::ClassifyOptions::fill_hidden`]).

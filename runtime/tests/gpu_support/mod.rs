@@ -64,3 +64,25 @@ pub fn synthesize_gpu(
         spreadlet::Plan::new(spreadlet::Input::Flat(gbuffer), camera, options)?.prepare(dbs)?;
     Ok(spreadlet::gpu::render_gpu(gpu, prepared, dbs)?)
 }
+
+/// The GPU device's image of a prepared frame, drawn by a synthesizer made for the database
+/// its records index: the set's, or the frame's own where it has PSFs of its own (moving
+/// pixels' PSFs smeared along their motion), as `Renderer` does.
+pub fn render_gpu_fresh(
+    ctx: &GpuContext,
+    prepared: spreadlet::PreparedFrame,
+    dbs: &spreadlet::DbSet,
+) -> (
+    spreadlet::RgbaImage,
+    spreadlet::SynthStats,
+    spreadlet::gpu::GpuStageTimes,
+) {
+    use spreadlet::gpu::{GpuSynthOptions, GpuSynthesizer};
+    let mut gpu = GpuSynthesizer::for_database(
+        ctx,
+        prepared.database_or(dbs.combined.as_ref()),
+        GpuSynthOptions::from_synth(prepared.options()),
+    )
+    .expect("GPU synthesizer");
+    spreadlet::gpu::render_gpu(&mut gpu, prepared, dbs).expect("GPU synthesis")
+}

@@ -6,7 +6,7 @@ use super::lookup::{front_turns_the_aperture, lookup_psf, Lookup};
 use super::*;
 use crate::camera::Camera;
 use crate::dbset::{DbSet, NO_TWIN};
-use crate::motion_smear::SmearKey;
+use crate::motion_smear::{PsfImage, SmearKey};
 use crate::pipeline::types::{psf_reach, FrameParams, SplatPath, SplatRecord};
 use psf_db::{PsfDatabase, PsfModel};
 use rayon::prelude::*;
@@ -73,18 +73,25 @@ pub fn classify_fragments(
 
     let centre = [w as f32 * 0.5, h as f32 * 0.5];
     // Through a real lens, each moving fragment's lens PSF smeared along its motion: one key
-    // per fragment (with whether its length was clamped), each key's PSF built once and
-    // appended to the frame's own copy of the database.
-    let moving_lens = model == Some(PsfModel::PhysicalLens)
-        && fragments
-            .iter()
-            .any(|f| f.motion[0] != 0.0 || f.motion[1] != 0.0);
+    // per fragment (with whether its parameters were clamped), each key's PSF built once and
+    // appended to the frame's own copy of the database. Through the thin lens the same, from
+    // the thin-lens PSF of its CoC, where `smear_motion` asks for it.
+    let any_moving = fragments
+        .iter()
+        .any(|f| f.motion[0] != 0.0 || f.motion[1] != 0.0);
+    let thin_smear = match (model, dbs.thin_lens.as_ref()) {
+        (Some(PsfModel::LensMotion), Some(thin)) if options.smear_motion && any_moving => {
+            Some(thin)
+        }
+        _ => None,
+    };
+    let moving_lens = model == Some(PsfModel::PhysicalLens) && any_moving;
     let reach: Vec<i32> = match combined {
-        Some(all) if moving_lens => psf_reach(all),
+        Some(all) if moving_lens || thin_smear.is_some() => psf_reach(all),
         _ => Vec::new(),
     };
     let smear_keys: Vec<Option<(SmearKey, bool)>> = match combined {
-        Some(_) if moving_lens => {
+        Some(_) if moving_lens || thin_smear.is_some() => {
             fragments
                 .par_iter()
                 .map(|frag| {
@@ -92,6 +99,18 @@ pub fn classify_fragments(
                     let motion_len = (m[0] * m[0] + m[1] * m[1]).sqrt();
                     if frag.weight <= 0.0 || motion_len < options.copy_threshold_px {
                         return None;
+                    }
+                    if let Some(thin) = thin_smear {
+                        // The thin-lens database comes first in the combined one. In front
+                        // of the focus plane the aperture's image is turned half a turn.
+                        let signed = signed_coc(frag.depth);
+                        let (i, clamped) = thin.lookup([signed.abs(), 0.0]);
+                        let turned = flip_front && signed < 0.0;
+                        let radial = if turned { [-1.0, 0.0] } else { [1.0, 0.0] };
+                        let reach = reach.get(i as usize).copied().unwrap_or(0) as f32;
+                        let threshold = ordered_dither(frag.x, frag.y);
+                        let (key, too_long) = SmearKey::dithered(i, m, radial, reach, threshold);
+                        return Some((key, clamped || too_long));
                     }
                     let found = lookup_psf(
                         frag,
@@ -166,15 +185,18 @@ pub fn classify_fragments(
             rot_sin = -rot_sin;
         }
         let smear = smear_keys.get(index).copied().flatten();
-        counts.clamped += usize::from(clamped || smear.is_some_and(|(_, clamped)| clamped));
-        let (path, psf_index) = match smear.and_then(|(k, _)| smeared.index_of(k)) {
+        // A thin-lens smear replaces the lens-motion lookup, and its range with it.
+        let lookup_clamped = clamped && !(thin_smear.is_some() && smear.is_some());
+        counts.clamped += usize::from(lookup_clamped || smear.is_some_and(|(_, c)| c));
+        let (path, psf_index, blend) = match smear.and_then(|(k, _)| smeared.index_of(k)) {
             Some(i) => {
-                // Built in the image's frame: drawn unrotated.
+                // Built in the image's frame at the fragment's own motion: drawn unrotated,
+                // and not blended with a neighbouring cell.
                 counts.smeared += 1;
                 (rot_cos, rot_sin) = (1.0, 0.0);
-                (SplatPath::Dense, i)
+                (SplatPath::Dense, i, None)
             }
-            None => (path, psf_index),
+            None => (path, psf_index, blend),
         };
         // The twin of the sub-cell holding the fragment's own CoC and motion (a thin-lens
         // cell is divided in CoC alone and ignores the motion).
@@ -262,6 +284,18 @@ pub fn classify_fragments(
     Ok(classified)
 }
 
+/// A threshold in `[0, 1)` for pixel `(x, y)`: Roberts' R2 low-discrepancy sequence over the
+/// plane, `frac(a x + b y)` with `1/a`, `1/b` the powers of the plastic number. Its thresholds
+/// are spread evenly along every row, every column and every small block, so that the pixels
+/// along a moving edge, whichever way it runs, round a quantity between two steps in the
+/// proportion of its fraction (a 4 x 4 Bayer matrix gives a column only four of its sixteen
+/// thresholds, and a column's streaks came out a step too long).
+fn ordered_dither(x: i32, y: i32) -> f32 {
+    const A: f64 = 0.754_877_666_246_692_8;
+    const B: f64 = 0.569_840_290_998_053_3;
+    (f64::from(x) * A + f64::from(y) * B).rem_euclid(1.0) as f32
+}
+
 /// The smeared PSFs of one frame ([`crate::motion_smear`]): the database its records index
 /// (the set's combined PSFs, then one dense PSF per key) and the keys in order.
 #[derive(Default)]
@@ -300,9 +334,36 @@ impl SmearedPsfs {
             }
             .into());
         }
+        // Each lens PSF turned once (a sparse one is integrated from its spreadlets first),
+        // then smeared for every key that uses it: many keys share a cell and a turn.
+        let mut turned: Vec<(u32, u32, u32)> = keys
+            .iter()
+            .map(|k| (k.cell, k.turn_step, k.turn_steps))
+            .collect();
+        turned.par_sort_unstable();
+        turned.dedup();
+        let bases: Vec<Option<PsfImage>> = turned
+            .par_iter()
+            .map(|&(cell, turn_step, turn_steps)| {
+                // As `SmearKey::turn_rad`.
+                let angle = turn_step as f32 * std::f32::consts::TAU / turn_steps as f32;
+                crate::motion_smear::psf_image(all, cell as usize)
+                    .map(|psf| crate::motion_smear::turn(&psf, angle))
+            })
+            .collect();
         let images = keys
             .par_iter()
-            .map(|&k| crate::motion_smear::smeared_psf(all, k))
+            .map(|k| {
+                let i = turned
+                    .binary_search(&(k.cell, k.turn_step, k.turn_steps))
+                    .expect("every key's turn is listed");
+                match &bases[i] {
+                    Some(base) => {
+                        crate::motion_smear::smear(base, k.length_px(), k.angle_rad()).map(Some)
+                    }
+                    None => Ok(None),
+                }
+            })
             .collect::<Result<Vec<_>, _>>()?;
         let base = all.psf_count() as u32;
         let mut extra = Vec::new();

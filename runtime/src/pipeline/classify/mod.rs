@@ -143,6 +143,15 @@ pub struct ClassifyOptions {
     /// their HDR twin) and physical-lens lookups take their one cell. Off: every fragment
     /// its one cell, one record.
     pub continuous_lookup: bool,
+    /// Draw a moving fragment seen through the thin lens with its thin-lens PSF smeared
+    /// along its own motion over the shutter ([`crate::motion_smear`], the factorisation the
+    /// physical lens uses too, exact for a point moving at constant depth), built per frame,
+    /// instead of the lens-motion database's PSF of its cell. A streak then ends where the
+    /// motion says (length quantised in 2 % steps, dithered between neighbouring pixels), not
+    /// over a cell several pixels wide, and is drawn unrotated in one record rather than
+    /// turned and blended with a neighbouring cell. Needs the thin-lens database beside the
+    /// lens-motion one; off, or without it, the lens-motion cell's PSF is drawn.
+    pub smear_motion: bool,
 }
 
 impl Default for ClassifyOptions {
@@ -158,6 +167,7 @@ impl Default for ClassifyOptions {
             fill_hidden: true,
             soft_layers_min_blur_px: 2.0,
             continuous_lookup: true,
+            smear_motion: true,
         }
     }
 }
