@@ -122,6 +122,48 @@ fn a_renderer_loads_databases_once_for_a_sequence() {
 }
 
 #[test]
+fn a_moving_frame_loads_the_databases_it_draws_with() {
+    use spreadlet::{Backend, Camera, GBuffer, Renderer, RendererOptions, SynthOptions};
+    let dir = tempfile::tempdir().expect("temp dir");
+    let (input, camera) = scene_input(dir.path());
+    let gbuffer = GBuffer::read_exr(&input, &Default::default()).expect("G-buffer");
+    let camera = Camera::from_json_file(&camera).expect("camera");
+    let mut renderer = Renderer::new(RendererOptions {
+        backend: Backend::Cpu,
+        databases: spreadlet::DbSource::Cache {
+            dir: cache_dir(),
+            profile: precompute::Profile::Quick,
+        },
+        ..Default::default()
+    })
+    .expect("renderer");
+    let models = |frame: &spreadlet::Frame| -> Vec<&str> {
+        frame.databases.iter().map(|d| d.model).collect()
+    };
+    // Moving pixels smear the thin-lens PSF: no lens-motion database.
+    let smeared = renderer
+        .synthesize(&gbuffer, &camera, &SynthOptions::default())
+        .expect("smeared");
+    assert!(smeared.stats.counts.smeared > 0, "nothing smeared");
+    assert_eq!(models(&smeared), ["thin-lens"]);
+    // Asked for the lens-motion database's PSFs, the renderer loads it.
+    let mut cells = SynthOptions::default();
+    cells.classify.smear_motion = false;
+    let from_cells = renderer
+        .synthesize(&gbuffer, &camera, &cells)
+        .expect("lens-motion cells");
+    assert_eq!(from_cells.stats.counts.smeared, 0);
+    assert_eq!(models(&from_cells), ["thin-lens", "lens-motion"]);
+    assert_ne!(smeared.image, from_cells.image);
+    // That set serves the smear too.
+    let again = renderer
+        .synthesize(&gbuffer, &camera, &SynthOptions::default())
+        .expect("smeared again");
+    assert!(again.databases.is_empty(), "reloaded");
+    assert_eq!(again.image, smeared.image);
+}
+
+#[test]
 fn options_out_of_range_are_errors_naming_the_option() {
     use spreadlet::ClassifyOptions;
     let mut options = spreadlet::SynthOptions {

@@ -47,6 +47,8 @@ pub fn cached_dbs_with(
         adjust: Some(build),
         transform: keep_sparse.then_some(&strip as &dyn Fn(_) -> _),
         progress,
+        // The lens-motion database too: studies draw moving pixels either way.
+        smear_motion: false,
     };
     let on_event = |e: dbcache::CacheEvent| {
         // The builder's own bar shows progress.

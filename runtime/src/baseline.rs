@@ -321,6 +321,8 @@ pub fn filter_plan(
         soft_layers: None,
         edge_split: false,
         continuous_lookup: false,
+        // The filter gathers each pixel's PSF from the set's databases: no PSFs of the frame's own.
+        smear_motion: false,
         copy_threshold_px: options.copy_threshold_px,
         ..ClassifyOptions::default()
     };

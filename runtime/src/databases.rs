@@ -130,6 +130,10 @@ pub struct Request<'a> {
     pub transform: Option<&'a dyn Fn(PsfDatabase) -> Result<PsfDatabase, Error>>,
     /// Prints the builder's progress bars (database builds take minutes).
     pub progress: bool,
+    /// Moving pixels are drawn with the thin-lens PSF smeared along their motion
+    /// ([`crate::pipeline::ClassifyOptions::smear_motion`]): a cache load then reads no
+    /// lens-motion database.
+    pub smear_motion: bool,
 }
 
 /// What a load returned.
@@ -149,10 +153,10 @@ pub fn serves(loaded: Option<PsfModel>, needed: Option<PsfModel>) -> bool {
 }
 
 /// The models a cache load reads for `needed`: thin-lens for still pixels, plus lens-motion
-/// when something moves.
-pub fn models_for(needed: PsfModel) -> Vec<PsfModel> {
+/// when something moves and moving pixels are not drawn by smearing the thin-lens PSF.
+pub fn models_for(needed: PsfModel, smear_motion: bool) -> Vec<PsfModel> {
     let mut models = vec![PsfModel::ThinLens];
-    if needed == PsfModel::LensMotion {
+    if needed == PsfModel::LensMotion && !smear_motion {
         models.push(PsfModel::LensMotion);
     }
     models
@@ -217,7 +221,7 @@ pub fn load(
         }
         Source::Cache { dir, profile } => {
             let mut loaded = Vec::new();
-            for model in models_for(needed) {
+            for model in models_for(needed, request.smear_motion) {
                 let mut cfg = dbcache::build_config(model, profile, request.aperture.blades);
                 cfg.blade_rotation_rad = request.aperture.rotation_rad;
                 cfg.aperture_ratio = request.aperture.ratio;

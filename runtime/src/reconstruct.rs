@@ -346,7 +346,7 @@ pub(crate) fn classify_samples(
         crate::gbuffer::Overscan::NONE,
         options,
     );
-    let model = resolve_model(effects, dbs)?;
+    let model = resolve_model(effects, dbs, options.classify.smear_motion)?;
     let (fragments, dropped) = sample_fragments(frames, camera, effects, placement);
     let counts = PathCounts {
         dropped,

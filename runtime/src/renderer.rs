@@ -184,6 +184,8 @@ pub struct Frame {
 /// The databases a renderer holds: what they were loaded for, and the set.
 struct HeldDatabases {
     model: Option<PsfModel>,
+    /// Loaded without the lens-motion database (moving pixels smear the thin-lens PSF).
+    without_motion_database: bool,
     aperture: psf_db::Aperture,
     lens: Option<precompute::LensOptions>,
     set: Arc<DbSet>,
@@ -383,13 +385,21 @@ impl Renderer {
     /// # Ok(()) }
     /// ```
     pub fn render(&mut self, plan: Plan) -> Result<Frame, Error> {
-        let selected = self.databases_for(plan.effects(), plan.camera())?;
+        let smear_motion = plan.options().classify.smear_motion;
+        let selected = self.databases_for(plan.effects(), plan.camera(), smear_motion)?;
         let prepared = plan.prepare(&selected.set)?;
         self.run(prepared, selected)
     }
 
-    /// The databases `effects` need: the held set when it serves them, else loaded now.
-    fn databases_for(&mut self, effects: Effects, camera: &Camera) -> Result<Selected, Error> {
+    /// The databases `effects` need: the held set when it serves them, else loaded now. With
+    /// `smear_motion` moving pixels smear the thin-lens PSF, and no lens-motion database is
+    /// loaded for them.
+    fn databases_for(
+        &mut self,
+        effects: Effects,
+        camera: &Camera,
+        smear_motion: bool,
+    ) -> Result<Selected, Error> {
         let started = Instant::now();
         let needed = effects.cheapest_model();
         // A user-drawn aperture shapes the thin-lens and lens-motion PSFs; read it only when
@@ -406,9 +416,12 @@ impl Renderer {
             None
         };
         if let Some(held) = &self.databases {
+            let needs_motion_database =
+                needed == Some(PsfModel::LensMotion) && !smear_motion && lens.is_none();
             if held.aperture == aperture
                 && held.lens == lens
                 && databases::serves(held.model, needed)
+                && !(needs_motion_database && held.without_motion_database)
             {
                 return Ok(Selected {
                     set: held.set.clone(),
@@ -460,11 +473,13 @@ impl Renderer {
             adjust: (method != Method::Spreadlet && !is_file).then_some(&adjust as &dyn Fn(_) -> _),
             transform: (method == Method::Dense && is_file).then_some(&densify as &dyn Fn(_) -> _),
             progress: self.options.progress,
+            smear_motion,
         };
         let loaded = databases::load(&request, &on_cache)?;
         let set = Arc::new(loaded.set);
         self.databases = Some(HeldDatabases {
             model: needed,
+            without_motion_database: smear_motion,
             aperture,
             lens,
             set: set.clone(),
@@ -600,7 +615,8 @@ impl Renderer {
         // The filter knows no overscan: it sees the frame alone.
         let frame_only = gbuffer.frame_only();
         let effects = Effects::of(camera, &frame_only);
-        let selected = self.databases_for(effects, camera)?;
+        // The filter gathers from the set's lens-motion PSFs.
+        let selected = self.databases_for(effects, camera, false)?;
         let (dbs, databases) = (selected.set, selected.used);
         let kernels = match &dbs.combined {
             Some(db) => baseline::DenseKernels::from_db(db),

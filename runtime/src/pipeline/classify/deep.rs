@@ -170,7 +170,7 @@ pub(crate) fn classify_deep_with(
     options: &ClassifyOptions,
 ) -> Result<Classified, ClassifyError> {
     check_deep_size(deep, camera)?;
-    let model = resolve_model(effects, dbs)?;
+    let model = resolve_model(effects, dbs, options.smear_motion)?;
     let mut fragments = deep_fragments(deep, camera, effects);
     let mut counts = PathCounts {
         dropped: deep.dropped_samples,

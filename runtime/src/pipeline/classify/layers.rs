@@ -80,7 +80,9 @@ pub fn classify_fragments(
         .iter()
         .any(|f| f.motion[0] != 0.0 || f.motion[1] != 0.0);
     let thin_smear = match (model, dbs.thin_lens.as_ref()) {
-        (Some(PsfModel::LensMotion), Some(thin)) if options.smear_motion && any_moving => {
+        (Some(PsfModel::LensMotion | PsfModel::ThinLens), Some(thin))
+            if options.smear_motion && any_moving =>
+        {
             Some(thin)
         }
         _ => None,

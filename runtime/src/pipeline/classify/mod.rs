@@ -248,7 +248,7 @@ pub(crate) fn classify_with(
         return Err(ClassifyError::NoLayers);
     }
     check_passes(gbuffer, camera, None, false)?;
-    let model = resolve_model(effects, dbs)?;
+    let model = resolve_model(effects, dbs, options.smear_motion)?;
     let mut counts = PathCounts {
         dropped: gbuffer.dropped_pixels,
         ..PathCounts::default()
@@ -347,7 +347,7 @@ pub(crate) fn classify_layers_with(
     if options.layers == 0 {
         return Err(ClassifyError::NoLayers);
     }
-    let model = resolve_model(effects, dbs)?;
+    let model = resolve_model(effects, dbs, options.smear_motion)?;
     let mut counts = PathCounts::default();
     let mut fragments = Vec::new();
     for (source, layer) in (0u32..).zip(layers) {
@@ -400,7 +400,11 @@ pub fn layered_effects(layers: &[ViewLayer], camera: &Camera) -> Effects {
 
 /// The model that drives the lookups for `effects`: lens-motion or physical-lens from
 /// `dbs.main`, else thin-lens; `None` when nothing needs simulating.
-pub fn resolve_model(effects: Effects, dbs: &DbSet) -> Result<Option<PsfModel>, ClassifyError> {
+pub fn resolve_model(
+    effects: Effects,
+    dbs: &DbSet,
+    smear_motion: bool,
+) -> Result<Option<PsfModel>, ClassifyError> {
     // The model that drives the lookups: lens-motion or physical-lens from `main`, else
     // thin-lens. Still pixels use the thin-lens database whenever the set has one.
     let thin = dbs.thin_lens.as_ref();
@@ -414,9 +418,12 @@ pub fn resolve_model(effects: Effects, dbs: &DbSet) -> Result<Option<PsfModel>, 
             };
             let ok = match needed {
                 PsfModel::ThinLens => true,
-                // A physical-lens database smears its PSFs along the motion per frame.
+                // A physical-lens database smears its PSFs along the motion per frame, and a
+                // thin-lens one does with `smear_motion`.
                 PsfModel::LensMotion => {
-                    found == PsfModel::LensMotion || found == PsfModel::PhysicalLens
+                    found == PsfModel::LensMotion
+                        || found == PsfModel::PhysicalLens
+                        || (smear_motion && found == PsfModel::ThinLens)
                 }
                 PsfModel::PhysicalLens => found == PsfModel::PhysicalLens,
             };
