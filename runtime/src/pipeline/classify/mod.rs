@@ -149,8 +149,8 @@ pub struct ClassifyOptions {
     /// instead of the lens-motion database's PSF of its cell. A streak then ends where the
     /// motion says (length quantised in 2 % steps, dithered between neighbouring pixels), not
     /// over a cell several pixels wide, and is drawn unrotated in one record rather than
-    /// turned and blended with a neighbouring cell. Needs the thin-lens database beside the
-    /// lens-motion one; off, or without it, the lens-motion cell's PSF is drawn.
+    /// turned and blended with a neighbouring cell. Needs the thin-lens database, which then
+    /// serves moving frames alone; off, or without it, the lens-motion cell's PSF is drawn.
     pub smear_motion: bool,
 }
 
