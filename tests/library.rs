@@ -81,14 +81,20 @@ fn the_embed_example_writes_what_the_cli_writes() {
     }
 }
 
-#[test]
-fn a_renderer_loads_databases_once_for_a_sequence() {
-    use spreadlet::{Backend, Camera, GBuffer, Renderer, RendererOptions, SynthOptions};
+/// The scene input's G-buffer and camera (in a temporary folder, kept alive by the first
+/// value), and a CPU renderer over the quick databases of the cache.
+fn cpu_renderer_on_scene() -> (
+    tempfile::TempDir,
+    spreadlet::GBuffer,
+    spreadlet::Camera,
+    spreadlet::Renderer,
+) {
+    use spreadlet::{Backend, Camera, GBuffer, Renderer, RendererOptions};
     let dir = tempfile::tempdir().expect("temp dir");
     let (input, camera) = scene_input(dir.path());
     let gbuffer = GBuffer::read_exr(&input, &Default::default()).expect("G-buffer");
     let camera = Camera::from_json_file(&camera).expect("camera");
-    let mut renderer = Renderer::new(RendererOptions {
+    let renderer = Renderer::new(RendererOptions {
         backend: Backend::Cpu,
         databases: spreadlet::DbSource::Cache {
             dir: cache_dir(),
@@ -97,6 +103,13 @@ fn a_renderer_loads_databases_once_for_a_sequence() {
         ..Default::default()
     })
     .expect("renderer");
+    (dir, gbuffer, camera, renderer)
+}
+
+#[test]
+fn a_renderer_loads_databases_once_for_a_sequence() {
+    use spreadlet::SynthOptions;
+    let (_dir, gbuffer, camera, mut renderer) = cpu_renderer_on_scene();
     let first = renderer
         .synthesize(&gbuffer, &camera, &SynthOptions::default())
         .expect("frame 1");
@@ -123,20 +136,8 @@ fn a_renderer_loads_databases_once_for_a_sequence() {
 
 #[test]
 fn a_moving_frame_loads_the_databases_it_draws_with() {
-    use spreadlet::{Backend, Camera, GBuffer, Renderer, RendererOptions, SynthOptions};
-    let dir = tempfile::tempdir().expect("temp dir");
-    let (input, camera) = scene_input(dir.path());
-    let gbuffer = GBuffer::read_exr(&input, &Default::default()).expect("G-buffer");
-    let camera = Camera::from_json_file(&camera).expect("camera");
-    let mut renderer = Renderer::new(RendererOptions {
-        backend: Backend::Cpu,
-        databases: spreadlet::DbSource::Cache {
-            dir: cache_dir(),
-            profile: precompute::Profile::Quick,
-        },
-        ..Default::default()
-    })
-    .expect("renderer");
+    use spreadlet::SynthOptions;
+    let (_dir, gbuffer, camera, mut renderer) = cpu_renderer_on_scene();
     let models = |frame: &spreadlet::Frame| -> Vec<&str> {
         frame.databases.iter().map(|d| d.model).collect()
     };

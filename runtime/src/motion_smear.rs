@@ -163,7 +163,7 @@ impl SmearKey {
 
     /// The turn of the lens PSF's +x onto the radial direction, radians in `[0, 2 pi)`.
     pub fn turn_rad(&self) -> f32 {
-        self.turn_step as f32 * std::f32::consts::TAU / self.turn_steps as f32
+        turn_rad(self.turn_step, self.turn_steps)
     }
 }
 
@@ -396,6 +396,11 @@ pub fn smear(psf: &PsfImage, length: f32, angle: f32) -> Result<PsfImage, SmearE
         channels: ch,
         data: out,
     })
+}
+
+/// The turn of quantised step `step` of `steps` over a full turn, radians.
+pub fn turn_rad(step: u32, steps: u32) -> f32 {
+    step as f32 * std::f32::consts::TAU / steps as f32
 }
 
 /// The smeared PSF of `key` from the lens PSFs of `db`, in the image's frame (`None` for an

@@ -347,8 +347,7 @@ impl SmearedPsfs {
         let bases: Vec<Option<PsfImage>> = turned
             .par_iter()
             .map(|&(cell, turn_step, turn_steps)| {
-                // As `SmearKey::turn_rad`.
-                let angle = turn_step as f32 * std::f32::consts::TAU / turn_steps as f32;
+                let angle = crate::motion_smear::turn_rad(turn_step, turn_steps);
                 crate::motion_smear::psf_image(all, cell as usize)
                     .map(|psf| crate::motion_smear::turn(&psf, angle))
             })
