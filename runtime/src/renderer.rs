@@ -387,6 +387,9 @@ impl Renderer {
     pub fn render(&mut self, plan: Plan) -> Result<Frame, Error> {
         let smear_motion = plan.options().classify.smear_motion;
         let selected = self.databases_for(plan.effects(), plan.camera(), smear_motion)?;
+        // The device is picked once per renderer (probing for a GPU takes tens of ms), before
+        // the frame's clock starts: the frame's times are its own.
+        self.device()?;
         let prepared = plan.prepare(&selected.set)?;
         self.run(prepared, selected)
     }

@@ -10,7 +10,7 @@ use crate::camera::Camera;
 use crate::dbset::DbSet;
 use crate::gbuffer::GBuffer;
 use crate::pipeline::{
-    integrate, splat, ClassifyOptions, CompositeOptions, Integrator, PathCounts, SplatOptions,
+    integrate_owned, splat, ClassifyOptions, CompositeOptions, Integrator, PathCounts, SplatOptions,
 };
 use crate::prepare::{Content, Input, Plan, PreparedFrame};
 use formats::RgbaImage;
@@ -204,9 +204,8 @@ fn render_classified(
     stats.times.splat_ms = ms_since(t);
 
     let t = Instant::now();
-    let layers = integrate(&stack, options.integrator);
+    let layers = integrate_owned(stack, options.integrator);
     stats.times.integrate_ms = ms_since(t);
-    drop(stack);
 
     let t = Instant::now();
     let sharpness = if options.composite.restore_occluded {

@@ -574,6 +574,7 @@ fn layers_of(pixels: &[Option<[f32; 4]>]) -> IntegratedLayers {
             db_channels: 1,
         },
         planes,
+        rows: Vec::new(),
     }
 }
 

@@ -44,6 +44,9 @@
 //!
 //! Negative values (approximation ringing) are clamped to zero in the output.
 
+use poisson::Plane;
+use rayon::prelude::*;
+
 use super::integrate::IntegratedLayers;
 use super::types::{psf_reach, Classified, SplatPath};
 use formats::RgbaImage;
@@ -139,69 +142,93 @@ pub fn composite_with_sharpness(
     let (w, h) = (f.width as usize, f.height as usize);
     let (pw, pad) = (f.padded_width as usize, f.pad as usize);
     let mut out = RgbaImage::new(w, h);
-    // The layers' plain sum, colour and coverage (`S`).
-    let mut total = vec![[0.0f32; 4]; w * h];
-    // Coverage-weighted sharpness: of what "over" shows, summed over the layers, and of what
-    // hid something.
-    let mut sharp = vec![[0.0f32; 3]; w * h];
-    for l in 0..f.layers as usize {
-        let planes = &layers.planes[l * 4..l * 4 + 4];
-        if planes.iter().any(|p| p.is_empty()) {
-            continue;
-        }
-        let s = sharpness.get(l).copied().unwrap_or(1.0);
-        for y in 0..h {
+    // Each drawn layer: its planes, sharpness and the padded rows it may be non-zero in. A
+    // zero pixel leaves every sum as it was, so the rows outside are skipped, unread.
+    let drawn: Vec<(&[Plane], f32, [usize; 2])> = (0..f.layers as usize)
+        .filter_map(|l| {
+            let planes = &layers.planes[l * 4..l * 4 + 4];
+            let rows = layers.rows.get(l).copied().unwrap_or([0, usize::MAX]);
+            (!planes.iter().any(|p| p.is_empty()))
+                .then(|| (planes, sharpness.get(l).copied().unwrap_or(1.0), rows))
+        })
+        .collect();
+    // Row by row on every thread, the sums in the row's own buffers (the image is written
+    // once, not read first): a pixel sees the layers in the same order whatever the thread
+    // count, so the bytes do not depend on it.
+    out.pixels
+        .par_chunks_mut(w.max(1))
+        .enumerate()
+        .for_each(|(y, out_row)| {
+            // "Over" so far.
+            let mut over = vec![[0.0f32; 4]; w];
+            // The layers' plain sum, colour and coverage (`S`).
+            let mut total = vec![[0.0f32; 4]; w];
+            // Coverage-weighted sharpness: of what "over" shows, summed over the layers, and
+            // of what hid something.
+            let mut sharp = vec![[0.0f32; 3]; w];
             let row = (y + pad) * pw + pad;
-            for x in 0..w {
-                let k = row + x;
-                let mut c = [
-                    planes[0].data[k],
-                    planes[1].data[k],
-                    planes[2].data[k],
-                    planes[3].data[k].max(0.0),
-                ];
-                if c[3] > 1.0 {
-                    let inv = 1.0 / c[3];
-                    c = c.map(|v| v * inv);
+            for &(planes, s, [first, end]) in &drawn {
+                if y + pad < first || y + pad >= end {
+                    continue;
                 }
-                let i = y * w + x;
-                for ch in 0..4 {
-                    total[i][ch] += c[ch];
-                }
-                let t = 1.0 - c[3];
-                let acc = &mut out.pixels[i];
-                let [shown, summed, hiding] = sharp[i];
-                sharp[i] = [
-                    s * c[3] + t * shown,
-                    summed + s * c[3],
-                    hiding + s * c[3] * acc[3],
-                ];
-                for ch in 0..4 {
-                    acc[ch] = c[ch] + t * acc[ch];
-                }
-            }
-        }
-    }
-    for ((px, sum), sharp) in out.pixels.iter_mut().zip(&total).zip(&sharp) {
-        if options.renormalize_coverage && options.restore_occluded {
-            let hidden = sum[3] - px[3];
-            if hidden > FILL_MIN_HIDDEN && px[3] < 1.0 {
-                let share = hidden_fill_share(sharp[2] / hidden, (sharp[1] - sharp[0]) / hidden);
-                let f = share * (1.0 - px[3]) / hidden;
-                let over = *px;
-                for ch in 0..4 {
-                    px[ch] += f * (sum[ch] - over[ch]);
+                for x in 0..w {
+                    let k = row + x;
+                    let mut c = [
+                        planes[0].data[k],
+                        planes[1].data[k],
+                        planes[2].data[k],
+                        planes[3].data[k].max(0.0),
+                    ];
+                    if c[3] > 1.0 {
+                        let inv = 1.0 / c[3];
+                        c = c.map(|v| v * inv);
+                    }
+                    for ch in 0..4 {
+                        total[x][ch] += c[ch];
+                    }
+                    let t = 1.0 - c[3];
+                    let acc = &mut over[x];
+                    let [shown, summed, hiding] = sharp[x];
+                    sharp[x] = [
+                        s * c[3] + t * shown,
+                        summed + s * c[3],
+                        hiding + s * c[3] * acc[3],
+                    ];
+                    for ch in 0..4 {
+                        acc[ch] = c[ch] + t * acc[ch];
+                    }
                 }
             }
-        } else if options.renormalize_coverage {
-            let target = sum[3].min(1.0);
-            if px[3] > 1e-6 && target > px[3] {
-                let s = target / px[3];
-                *px = px.map(|v| v * s);
-                px[3] = target;
+            for (((dst, mut px), sum), sharp) in out_row.iter_mut().zip(over).zip(&total).zip(&sharp)
+            {
+                finish_pixel(&mut px, sum, sharp, options);
+                *dst = px;
             }
-        }
-        *px = px.map(|v| v.max(0.0));
-    }
+        });
     out
+}
+
+/// A pixel's "over" `px` made up to the layers' joint coverage (`sum`, the plain sum of the
+/// layers; `sharp`, the coverage-weighted sharpness sums) as `options` ask, then clamped at 0.
+#[inline]
+fn finish_pixel(px: &mut [f32; 4], sum: &[f32; 4], sharp: &[f32; 3], options: &CompositeOptions) {
+    if options.renormalize_coverage && options.restore_occluded {
+        let hidden = sum[3] - px[3];
+        if hidden > FILL_MIN_HIDDEN && px[3] < 1.0 {
+            let share = hidden_fill_share(sharp[2] / hidden, (sharp[1] - sharp[0]) / hidden);
+            let f = share * (1.0 - px[3]) / hidden;
+            let over = *px;
+            for ch in 0..4 {
+                px[ch] += f * (sum[ch] - over[ch]);
+            }
+        }
+    } else if options.renormalize_coverage {
+        let target = sum[3].min(1.0);
+        if px[3] > 1e-6 && target > px[3] {
+            let s = target / px[3];
+            *px = px.map(|v| v * s);
+            px[3] = target;
+        }
+    }
+    *px = px.map(|v| v.max(0.0));
 }

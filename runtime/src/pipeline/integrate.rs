@@ -29,15 +29,68 @@ pub struct IntegratedLayers {
     /// Index `layer * 4 + channel`, `padded_width x padded_height`, or empty (0x0) for an
     /// empty layer.
     pub planes: Vec<Plane>,
+    /// Per layer, the padded rows `[first, end)` outside which its planes are zero, which
+    /// compositing skips; empty when every layer may cover every row.
+    pub rows: Vec<[usize; 2]>,
 }
 
 /// Integrates every non-empty Laplacian plane with `integrator` and adds the direct planes.
 pub fn integrate(stack: &LayerStack, integrator: Integrator) -> IntegratedLayers {
+    let mut layers = integrate_laplacians(stack, integrator);
+    add_direct(&mut layers.planes, stack.direct.iter().map(std::borrow::Cow::Borrowed));
+    layers.rows = rows_of(stack);
+    layers
+}
+
+/// [`integrate`], taking the stack: a layer's direct plane becomes its primal plane where the
+/// layer has no Laplacian one, moved rather than copied (a frame drawn all dense, as a
+/// defocused surface with small CoCs is, copies nothing).
+pub fn integrate_owned(stack: LayerStack, integrator: Integrator) -> IntegratedLayers {
+    let mut layers = integrate_laplacians(&stack, integrator);
+    layers.rows = rows_of(&stack);
+    add_direct(&mut layers.planes, stack.direct.into_iter().map(std::borrow::Cow::Owned));
+    layers
+}
+
+/// Per layer, the rows its primal planes may be non-zero in: every row where it has a
+/// Laplacian plane (integration spreads it over the frame), else its direct planes' rows.
+fn rows_of(stack: &LayerStack) -> Vec<[usize; 2]> {
+    let height = stack.frame.padded_height as usize;
+    (0..stack.frame.layers as usize)
+        .map(|l| {
+            let has_laplacian = stack.laplacian.get(l * 4).is_some_and(|p| !p.is_empty());
+            match stack.direct_rows.get(l) {
+                Some(&rows) if !has_laplacian => rows,
+                _ => [0, height],
+            }
+        })
+        .collect()
+}
+
+/// Adds each direct plane onto its primal plane, or makes it the primal plane where that is
+/// empty.
+fn add_direct<'a>(planes: &mut [Plane], direct: impl Iterator<Item = std::borrow::Cow<'a, Plane>>) {
+    for (primal, direct) in planes.iter_mut().zip(direct) {
+        if direct.is_empty() {
+            continue;
+        }
+        if primal.is_empty() {
+            *primal = direct.into_owned();
+        } else {
+            for (a, b) in primal.data.iter_mut().zip(&direct.data) {
+                *a += b;
+            }
+        }
+    }
+}
+
+/// The primal planes of the stack's Laplacian planes (empty where a layer has none).
+fn integrate_laplacians(stack: &LayerStack, integrator: Integrator) -> IntegratedLayers {
     let frame = stack.frame;
     let (pw, ph) = (frame.padded_width as usize, frame.padded_height as usize);
     let exact = (integrator == Integrator::Exact && stack.laplacian.iter().any(|p| !p.is_empty()))
         .then(|| ExactIntegrator::new(pw, ph));
-    let mut planes: Vec<Plane> = stack
+    let planes: Vec<Plane> = stack
         .laplacian
         .par_iter()
         .map_init(
@@ -55,17 +108,9 @@ pub fn integrate(stack: &LayerStack, integrator: Integrator) -> IntegratedLayers
             },
         )
         .collect();
-    for (primal, direct) in planes.iter_mut().zip(&stack.direct) {
-        if direct.is_empty() {
-            continue;
-        }
-        if primal.is_empty() {
-            *primal = direct.clone();
-        } else {
-            for (a, b) in primal.data.iter_mut().zip(&direct.data) {
-                *a += b;
-            }
-        }
+    IntegratedLayers {
+        frame,
+        planes,
+        rows: Vec::new(),
     }
-    IntegratedLayers { frame, planes }
 }

@@ -16,6 +16,6 @@ pub mod types;
 
 pub use classify::{classify, ClassifyOptions, DataWindow, Effects, FrameEdges};
 pub use composite::{composite, CompositeOptions};
-pub use integrate::{integrate, IntegratedLayers, Integrator};
+pub use integrate::{integrate, integrate_owned, IntegratedLayers, Integrator};
 pub use splat::{splat, LayerStack, RotationSampling, SplatOptions};
 pub use types::{Classified, FrameParams, LayerInfo, PathCounts, SplatPath, SplatRecord};
