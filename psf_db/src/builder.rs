@@ -36,6 +36,15 @@ impl DatabaseBuilder {
         &mut self.db.header
     }
 
+    /// Makes room for `psfs` more PSFs holding `dense_values` more dense values in all (a
+    /// builder fed many large dense images then grows its arrays once).
+    pub fn reserve(&mut self, psfs: usize, dense_values: usize) {
+        self.db.dense_slot.reserve(psfs);
+        self.db.cumulative.reserve(psfs);
+        self.db.dense.reserve(psfs);
+        self.db.dense_data.reserve(dense_values);
+    }
+
     /// Number of PSFs pushed so far (= index of the next one).
     pub fn pushed(&self) -> usize {
         self.db.dense_slot.len()

@@ -164,20 +164,15 @@ type DenseImage = ([i16; 2], u16, u16, Vec<f32>);
 /// whose spreadlets are in row order; the images' indices follow `db`'s PSFs in order.
 pub fn extend_with_dense(
     db: &PsfDatabase,
-    extra: &[crate::motion_smear::PsfImage],
+    extra: Vec<crate::motion_smear::PsfImage>,
 ) -> Result<PsfDatabase, DbError> {
     let mut images = Vec::with_capacity(extra.len());
     for img in extra {
-        let dense = (img.channels == db.channels())
-            .then(|| dense_image(img))
-            .flatten();
+        let (width, height, channels, origin) = (img.width, img.height, img.channels, img.origin);
+        let dense = (channels == db.channels()).then(|| into_dense_image(img)).flatten();
         let Some(dense) = dense else {
             return Err(DbError::Invalid(format!(
-                "a {} x {} PSF image of {} channels at {:?} does not fit a database of {} channels",
-                img.width,
-                img.height,
-                img.channels,
-                img.origin,
+                "a {width} x {height} PSF image of {channels} channels at {origin:?} does not fit a database of {} channels",
                 db.channels()
             )));
         };
@@ -188,12 +183,12 @@ pub fn extend_with_dense(
 
 /// `img` in the database's dense form, or `None` where its size or origin does not fit the
 /// format's fields (u16 sizes, i16 origin).
-fn dense_image(img: &crate::motion_smear::PsfImage) -> Option<DenseImage> {
+fn into_dense_image(img: crate::motion_smear::PsfImage) -> Option<DenseImage> {
     Some((
         [i16::try_from(img.origin[0]).ok()?, i16::try_from(img.origin[1]).ok()?],
         u16::try_from(img.width).ok()?,
         u16::try_from(img.height).ok()?,
-        img.data.clone(),
+        img.data,
     ))
 }
 
@@ -291,7 +286,7 @@ fn physical_twins(db: &PsfDatabase) -> Vec<Option<(TwinCell, Vec<DenseImage>)>> 
             if db.dense(i).is_some() {
                 return None;
             }
-            let image = dense_image(&crate::motion_smear::psf_image(db, i)?)?;
+            let image = into_dense_image(crate::motion_smear::psf_image(db, i)?)?;
             let cell = TwinCell {
                 min: [0.0; 2],
                 max: [0.0; 2],
@@ -368,6 +363,11 @@ fn concatenate(dbs: &[&PsfDatabase], extra: &[DenseImage]) -> Result<PsfDatabase
     });
     header.stats.resize(capacity as usize, filler);
     let mut builder = DatabaseBuilder::new(header);
+    builder.reserve(
+        capacity as usize,
+        dbs.iter().map(|d| d.dense_data().len()).sum::<usize>()
+            + extra.iter().map(|e| e.3.len() * channels).sum::<usize>(),
+    );
     for db in dbs {
         for i in 0..db.psf_count() {
             builder.push_copy(db, i)?;
@@ -534,7 +534,7 @@ mod tests {
             channels: db.channels(),
             data: vec![1.0 / (w * h) as f32; w * h * db.channels()],
         };
-        let extended = extend_with_dense(&db, &[streak]).expect("extended");
+        let extended = extend_with_dense(&db, vec![streak]).expect("extended");
         let i = db.psf_count();
         let d = extended.dense(i).expect("the streak is dense");
         assert_eq!((d.width, d.height), (w, h));

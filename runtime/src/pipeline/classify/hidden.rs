@@ -3,6 +3,7 @@
 
 use super::Fragment;
 use crate::gbuffer::GBuffer;
+use rayon::prelude::*;
 
 /// The background hidden behind the silhouette of a nearer occluder that is sharper or
 /// blurrier than it, continued from the visible background next to it.
@@ -29,78 +30,85 @@ use crate::gbuffer::GBuffer;
 pub(super) fn hidden_background(
     g: &GBuffer,
     was_split: &[bool],
-    signed_coc: &dyn Fn(f32) -> f32,
-    depth_at: &dyn Fn(usize) -> f32,
-    blur_along: &dyn Fn(usize, (i32, i32)) -> f32,
+    signed_coc: &(dyn Fn(f32) -> f32 + Sync),
+    depth_at: &(dyn Fn(usize) -> f32 + Sync),
+    blur_along: &(dyn Fn(usize, (i32, i32)) -> f32 + Sync),
     hdr_threshold: f32,
     own: &dyn Fn(usize) -> Fragment,
 ) -> Vec<Fragment> {
     let (w, h) = (g.width as i32, g.height as i32);
     const DIRECTIONS: [(i32, i32); 4] = [(1, 0), (-1, 0), (0, 1), (0, -1)];
-    // The walks: (background pixel, direction, steps), and how many walks reach each pixel.
-    let mut walks: Vec<(usize, (i32, i32), i32)> = Vec::new();
+    // The walks: (background pixel, direction, first hidden step, last step), found row by
+    // row on every thread and joined in row order; then how many walks reach each pixel.
+    let walks: Vec<(usize, (i32, i32), i32, i32)> = (0..h)
+        .into_par_iter()
+        .map(|y| {
+            let mut walks = Vec::new();
+            for x in 0..w {
+                let b = (y * w + x) as usize;
+                if was_split[b] || g.color[b] == [0.0; 4] {
+                    continue;
+                }
+                let (db, coc_b) = (depth_at(b), signed_coc(depth_at(b)));
+                let bright = g.color[b][..3].iter().any(|&c| c > hdr_threshold);
+                for d in DIRECTIONS {
+                    let blur_b = blur_along(b, d);
+                    // Hidden: nearer than the background, and sharper by more than a pixel or
+                    // blurred by more than a pixel along `d` than it. The first step may be
+                    // the silhouette's anti-aliased pixel, which carries the background's
+                    // depth.
+                    let occluder = |k: i32| -> Option<usize> {
+                        let (qx, qy) = (x + d.0 * k, y + d.1 * k);
+                        if qx < 0 || qy < 0 || qx >= w || qy >= h {
+                            return None;
+                        }
+                        let q = (qy * w + qx) as usize;
+                        let dq = depth_at(q);
+                        // A blurrier occluder hides the background only where it is opaque
+                        // (an emitter of no coverage hides nothing, and copies under it would
+                        // add light).
+                        let opaque = g.color[q][3] >= 0.5;
+                        (dq < db
+                            && (signed_coc(dq).abs() + 1.0 < coc_b.abs()
+                                || (!bright && opaque && blur_along(q, d) > blur_b + 1.0)))
+                            .then_some(q)
+                    };
+                    let hidden = |k: i32| occluder(k).is_some();
+                    let first = if hidden(1) {
+                        1
+                    } else if was_split
+                        [((y + d.1).clamp(0, h - 1) * w + (x + d.0).clamp(0, w - 1)) as usize]
+                        && hidden(2)
+                    {
+                        2
+                    } else {
+                        continue;
+                    };
+                    let silhouette_blur = occluder(first).map_or(0.0, |q| blur_along(q, d));
+                    let reach = coc_b.abs().max(silhouette_blur).ceil() as i32;
+                    if reach < 2 {
+                        continue;
+                    }
+                    let steps = (first..=reach).take_while(|&k| hidden(k)).last();
+                    if let Some(steps) = steps {
+                        walks.push((b, d, first, steps));
+                    }
+                }
+            }
+            walks
+        })
+        .flatten_iter()
+        .collect();
     let mut fills = vec![0u16; (w * h) as usize];
-    for y in 0..h {
-        for x in 0..w {
-            let b = (y * w + x) as usize;
-            if was_split[b] || g.color[b] == [0.0; 4] {
-                continue;
-            }
-            let (db, coc_b) = (depth_at(b), signed_coc(depth_at(b)));
-            let bright = g.color[b][..3].iter().any(|&c| c > hdr_threshold);
-            for d in DIRECTIONS {
-                let blur_b = blur_along(b, d);
-                // Hidden: nearer than the background, and sharper by more than a pixel or
-                // blurred by more than a pixel along `d` than it. The first step may be the
-                // silhouette's anti-aliased pixel, which carries the background's depth.
-                let occluder = |k: i32| -> Option<usize> {
-                    let (qx, qy) = (x + d.0 * k, y + d.1 * k);
-                    if qx < 0 || qy < 0 || qx >= w || qy >= h {
-                        return None;
-                    }
-                    let q = (qy * w + qx) as usize;
-                    let dq = depth_at(q);
-                    // A blurrier occluder hides the background only where it is opaque (an
-                    // emitter of no coverage hides nothing, and copies under it would add light).
-                    let opaque = g.color[q][3] >= 0.5;
-                    (dq < db
-                        && (signed_coc(dq).abs() + 1.0 < coc_b.abs()
-                            || (!bright && opaque && blur_along(q, d) > blur_b + 1.0)))
-                        .then_some(q)
-                };
-                let hidden = |k: i32| occluder(k).is_some();
-                let first = if hidden(1) {
-                    1
-                } else if was_split
-                    [((y + d.1).clamp(0, h - 1) * w + (x + d.0).clamp(0, w - 1)) as usize]
-                    && hidden(2)
-                {
-                    2
-                } else {
-                    continue;
-                };
-                let silhouette_blur = occluder(first).map_or(0.0, |q| blur_along(q, d));
-                let reach = coc_b.abs().max(silhouette_blur).ceil() as i32;
-                if reach < 2 {
-                    continue;
-                }
-                let mut steps = 0;
-                for k in first..=reach {
-                    if !hidden(k) {
-                        break;
-                    }
-                    let q = ((y + d.1 * k) * w + x + d.0 * k) as usize;
-                    fills[q] = fills[q].saturating_add(1);
-                    steps = k;
-                }
-                if steps >= first {
-                    walks.push((b, d, steps));
-                }
-            }
+    for &(b, d, first, steps) in &walks {
+        let (bx, by) = ((b as i32) % w, (b as i32) / w);
+        for k in first..=steps {
+            let q = ((by + d.1 * k) * w + bx + d.0 * k) as usize;
+            fills[q] = fills[q].saturating_add(1);
         }
     }
     let mut out = Vec::new();
-    for (b, d, steps) in walks {
+    for (b, d, _, steps) in walks {
         let base = own(b);
         let (bx, by) = ((b as i32) % w, (b as i32) / w);
         for k in 1..=steps {

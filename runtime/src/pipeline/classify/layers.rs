@@ -261,16 +261,25 @@ pub fn classify_fragments(
             (per_layer, counted)
         })
         .collect();
-    let mut per_layer: Vec<Vec<SplatRecord>> = vec![Vec::new(); n_layers];
-    for (layers, counted) in chunks {
-        for (all, part) in per_layer.iter_mut().zip(layers) {
-            all.extend(part);
-        }
+    for (_, counted) in &chunks {
         counts.clamped += counted.clamped;
         counts.hdr_dense += counted.hdr_dense;
         counts.soft_split += counted.soft_split;
         counts.smeared += counted.smeared;
     }
+    // Each layer gathers its chunks' records in chunk order, sized once, every layer on its
+    // own thread.
+    let per_layer: Vec<Vec<SplatRecord>> = (0..n_layers)
+        .into_par_iter()
+        .map(|l| {
+            let mut all = Vec::with_capacity(chunks.iter().map(|(layers, _)| layers[l].len()).sum());
+            for (layers, _) in &chunks {
+                all.extend_from_slice(&layers[l]);
+            }
+            all
+        })
+        .collect();
+    drop(chunks);
 
     let mut classified = assemble_layers(
         per_layer,
@@ -376,7 +385,7 @@ impl SmearedPsfs {
             });
             indexed.push((key, index));
         }
-        let database = crate::dbset::extend_with_dense(all, &extra)
+        let database = crate::dbset::extend_with_dense(all, extra)
             .map_err(|e| ClassifyError::PhysicalLens(e.to_string()))?;
         Ok(Self {
             database: Some(std::sync::Arc::new(database)),
@@ -418,21 +427,28 @@ pub(super) fn assemble_layers(
         }
     };
     let frame = DataWindow::frame(w, h);
-    for recs in &mut per_layer {
-        // Overscan pixels whose PSF cannot reach the frame add nothing to the output.
-        recs.retain(|r| distance_to(frame, r.center_x, r.center_y) <= reach_of(r) as f32);
-        if options.frame_edges == FrameEdges::Extend {
-            let extended = extend_beyond(recs, data, frame, &reach_of);
-            counts.edge_extended += extended.len();
-            recs.extend(extended);
-        }
-        // Row order within the layer (the splat visits bands of rows; the extension and the
-        // hidden background come after the pixels); stable, so the pixels' records keep their
-        // order.
-        if !recs.is_sorted_by_key(|r| (r.center_y, r.center_x)) {
-            recs.sort_by_key(|r| (r.center_y, r.center_x));
-        }
-    }
+    // Every layer on its own thread.
+    let extended: usize = per_layer
+        .par_iter_mut()
+        .map(|recs| {
+            // Overscan pixels whose PSF cannot reach the frame add nothing to the output.
+            recs.retain(|r| distance_to(frame, r.center_x, r.center_y) <= reach_of(r) as f32);
+            let mut added = 0;
+            if options.frame_edges == FrameEdges::Extend {
+                let extended = extend_beyond(recs, data, frame, &reach_of);
+                added = extended.len();
+                recs.extend(extended);
+            }
+            // Row order within the layer (the splat visits bands of rows; the extension and
+            // the hidden background come after the pixels); stable, so the pixels' records
+            // keep their order.
+            if !recs.is_sorted_by_key(|r| (r.center_y, r.center_x)) {
+                recs.sort_by_key(|r| (r.center_y, r.center_x));
+            }
+            added
+        })
+        .sum();
+    counts.edge_extended += extended;
     // Padding: every PSF, wherever its centre lies, must fit inside the padded layer.
     let beyond = per_layer
         .iter()
@@ -450,26 +466,41 @@ pub(super) fn assemble_layers(
         + options.pad_margin;
     let padded_width = w as u32 + 2 * pad;
     let padded_height = h as u32 + 2 * pad;
-    for r in per_layer.iter_mut().flatten() {
-        r.center_x += pad as i32;
-        r.center_y += pad as i32;
-    }
-
-    let mut records = Vec::with_capacity(per_layer.iter().map(Vec::len).sum());
     let mut layers = Vec::with_capacity(n_layers);
-    for (l, recs) in per_layer.into_iter().enumerate() {
+    let mut first_record = 0;
+    for (l, recs) in per_layer.iter().enumerate() {
         let mut info = LayerInfo {
             parallax_min: pmin + span * l as f32 / n_layers as f32,
             parallax_max: pmin + span * (l + 1) as f32 / n_layers as f32,
-            first_record: records.len(),
+            first_record,
             record_count: recs.len(),
             ..LayerInfo::default()
         };
-        info.count_paths(&recs);
+        info.count_paths(recs);
         counts.add_layer(&info);
         layers.push(info);
-        records.extend(recs);
+        first_record += recs.len();
     }
+    // The layers' records one after another, shifted by the padding, each layer copied on
+    // its own thread into its own part of the frame's list.
+    let mut records: Vec<SplatRecord> = bytemuck::zeroed_vec(first_record);
+    let mut parts = Vec::with_capacity(n_layers);
+    let mut rest = records.as_mut_slice();
+    for recs in &per_layer {
+        let (part, tail) = rest.split_at_mut(recs.len());
+        parts.push((part, recs));
+        rest = tail;
+    }
+    parts.into_par_iter().for_each(|(part, recs)| {
+        for (dst, r) in part.iter_mut().zip(recs) {
+            *dst = SplatRecord {
+                center_x: r.center_x + pad as i32,
+                center_y: r.center_y + pad as i32,
+                ..*r
+            };
+        }
+    });
+    drop(per_layer);
     let frame = FrameParams {
         width: w as u32,
         height: h as u32,
