@@ -107,21 +107,19 @@ pub fn denoise_samples(
     let inv_two_var = 1.0 / (2.0 * sigma * sigma);
     let inv_albedo_var = 1.0 / (ALBEDO_SIGMA * ALBEDO_SIGMA);
     let max_d2 = (CUTOFF_SIGMAS * sigma).powi(2);
-    // The cross-bilateral mean illumination round sample `i`, each neighbour's luminance
-    // capped at `ceiling`, or without the brightest neighbour when `ceiling` is infinite (a
-    // level that one outlier does not move); `None` for a sample left as it is.
-    let mean_illumination = |i: usize, ceiling: f32| -> Option<[f32; 3]> {
-        let mi = moved.get(i).copied().flatten()?;
+    // The cross-bilateral weights round sample `i`: every neighbour's (weight, luminance,
+    // illumination), in neighbourhood order, into `out`; `false` for a sample left as it is.
+    let neighbours = |i: usize, out: &mut Vec<(f32, f32, [f32; 3])>| -> bool {
+        out.clear();
+        let Some(mi) = moved.get(i).copied().flatten() else {
+            return false;
+        };
         if !hit(i) {
-            return None;
+            return false;
         }
         let (gi, zi) = (guides[i], frames.samples[i].depth);
         let inv_depth = 1.0 / (DEPTH_TOLERANCE * zi);
         let (cx, cy) = (mi.q[0].floor() as i64, mi.q[1].floor() as i64);
-        let mut sum = [0.0f32; 3];
-        let mut total = 0.0f32;
-        // The brightest neighbour: luminance, weight and illumination.
-        let mut brightest = (f32::NEG_INFINITY, 0.0f32, [0.0f32; 3]);
         for y in (cy - reach).max(0)..=(cy + reach).min(h as i64 - 1) {
             let (x0, x1) = ((cx - reach).max(0), (cx + reach).min(w as i64 - 1));
             if x1 < x0 {
@@ -157,16 +155,28 @@ pub fn denoise_samples(
                     continue;
                 }
                 let e = mj.illumination;
-                let lum = luminance(e);
-                if lum > brightest.0 {
-                    brightest = (lum, weight, e);
-                }
-                let cap = if lum > ceiling { ceiling / lum } else { 1.0 };
-                for (acc, e) in sum.iter_mut().zip(e) {
-                    *acc += weight * cap * e;
-                }
-                total += weight;
+                out.push((weight, luminance(e), e));
             }
+        }
+        true
+    };
+    // The weighted mean illumination of `neighbours`, each neighbour's luminance capped at
+    // `ceiling`, or without the brightest neighbour when `ceiling` is infinite (a level that
+    // one outlier does not move).
+    let mean_illumination = |neighbours: &[(f32, f32, [f32; 3])], ceiling: f32| {
+        let mut sum = [0.0f32; 3];
+        let mut total = 0.0f32;
+        // The brightest neighbour: luminance, weight and illumination.
+        let mut brightest = (f32::NEG_INFINITY, 0.0f32, [0.0f32; 3]);
+        for &(weight, lum, e) in neighbours {
+            if lum > brightest.0 {
+                brightest = (lum, weight, e);
+            }
+            let cap = if lum > ceiling { ceiling / lum } else { 1.0 };
+            for (acc, e) in sum.iter_mut().zip(e) {
+                *acc += weight * cap * e;
+            }
+            total += weight;
         }
         if ceiling.is_infinite() && total - brightest.1 > 0.0 {
             let (_, w, e) = brightest;
@@ -177,23 +187,22 @@ pub fn denoise_samples(
         }
         (total > 0.0 && total.is_finite()).then(|| sum.map(|v| v / total))
     };
-    // First the means without each neighbourhood's brightest sample; then the means with every
+    // First the mean without the neighbourhood's brightest sample; then the mean with every
     // neighbour's luminance capped at FIREFLY_FACTOR times that level, so that one rare bright
     // sample (a bounce that found a small emitter) is not spread into a blob over its
-    // neighbours, nor kept as a speck.
-    let first: Vec<Option<[f32; 3]>> = (0..frames.samples.len())
-        .into_par_iter()
-        .map(|i| mean_illumination(i, f32::INFINITY))
-        .collect();
+    // neighbours, nor kept as a speck. Both from one pass over the neighbourhood's weights.
     (0..frames.samples.len())
         .into_par_iter()
-        .map(|i| {
+        .map_init(Vec::new, |found, i| {
             let original = frames.samples[i].color;
-            let Some(mean) = first[i] else {
+            if !neighbours(i, found) {
+                return original;
+            }
+            let Some(level) = mean_illumination(found, f32::INFINITY) else {
                 return original;
             };
-            let ceiling = FIREFLY_FACTOR * luminance(mean).max(0.0);
-            let Some(mean) = mean_illumination(i, ceiling) else {
+            let ceiling = FIREFLY_FACTOR * luminance(level).max(0.0);
+            let Some(mean) = mean_illumination(found, ceiling) else {
                 return original;
             };
             let a = guides[i].albedo;

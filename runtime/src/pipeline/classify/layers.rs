@@ -267,22 +267,11 @@ pub fn classify_fragments(
         counts.soft_split += counted.soft_split;
         counts.smeared += counted.smeared;
     }
-    // Each layer gathers its chunks' records in chunk order, sized once, every layer on its
-    // own thread.
-    let per_layer: Vec<Vec<SplatRecord>> = (0..n_layers)
-        .into_par_iter()
-        .map(|l| {
-            let mut all = Vec::with_capacity(chunks.iter().map(|(layers, _)| layers[l].len()).sum());
-            for (layers, _) in &chunks {
-                all.extend_from_slice(&layers[l]);
-            }
-            all
-        })
-        .collect();
-    drop(chunks);
+    let chunks: Vec<Vec<Vec<SplatRecord>>> = chunks.into_iter().map(|(layers, _)| layers).collect();
 
     let mut classified = assemble_layers(
-        per_layer,
+        &chunks,
+        n_layers,
         w,
         h,
         data,
@@ -400,13 +389,21 @@ impl SmearedPsfs {
     }
 }
 
-/// The frame's records from its layers' (frame coordinates): overscan records that cannot
-/// reach the frame dropped, the data's border extended outwards as
-/// [`ClassifyOptions::frame_edges`] says, row order within each layer, the padding every PSF
-/// needs, and the layers' summaries. `parallax` is the far edge and the span of the layers.
+/// The frame's records from its chunks' (`chunks[c][layer]`, frame coordinates, each layer's
+/// in fragment order): overscan records that cannot reach the frame dropped, the data's border
+/// extended outwards as [`ClassifyOptions::frame_edges`] says, row order within each layer
+/// (stable: what a stable sort of the layer's records by row, then column, gives), the padding
+/// every PSF needs, and the layers' summaries. `parallax` is the far edge and the span of the
+/// layers.
+///
+/// Each layer is written once, into its place in the frame's list: copied where its records
+/// are in row order already (a flat frame's pixels, row by row), else counted into its rows
+/// and each row put in column order (stochastic samples, placed on four pixels each), with no
+/// list of the layer's own in between: a stochastic frame's records run to hundreds of MB.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn assemble_layers(
-    mut per_layer: Vec<Vec<SplatRecord>>,
+    chunks: &[Vec<Vec<SplatRecord>>],
+    n_layers: usize,
     w: usize,
     h: usize,
     data: DataWindow,
@@ -416,7 +413,6 @@ pub(super) fn assemble_layers(
     parallax: (f32, f32),
 ) -> Classified {
     let (pmin, span) = parallax;
-    let n_layers = per_layer.len();
     // Beyond the data: records of the outermost pixels, repeated outwards (or nothing).
     let reach: Vec<i32> = combined.map_or_else(Vec::new, psf_reach);
     let reach_of = |r: &SplatRecord| -> i32 {
@@ -427,39 +423,68 @@ pub(super) fn assemble_layers(
         }
     };
     let frame = DataWindow::frame(w, h);
-    // Every layer on its own thread.
-    let extended: usize = per_layer
-        .par_iter_mut()
-        .map(|recs| {
-            // Overscan pixels whose PSF cannot reach the frame add nothing to the output.
-            recs.retain(|r| distance_to(frame, r.center_x, r.center_y) <= reach_of(r) as f32);
-            let mut added = 0;
-            if options.frame_edges == FrameEdges::Extend {
-                let extended = extend_beyond(recs, data, frame, &reach_of);
-                added = extended.len();
-                recs.extend(extended);
+    // Overscan pixels whose PSF cannot reach the frame add nothing to the output.
+    let kept = |r: &&SplatRecord| distance_to(frame, r.center_x, r.center_y) <= reach_of(r) as f32;
+    let layer_pieces = |l: usize| chunks.iter().map(move |layers| layers[l].as_slice());
+    let row_order = |r: &SplatRecord| (r.center_y, r.center_x);
+
+    // Per layer, on every thread: its extension, and what placing it needs.
+    struct LayerPlan {
+        extension: Vec<SplatRecord>,
+        info: LayerInfo,
+        in_row_order: bool,
+        rows: (i32, i32),
+        beyond: i32,
+    }
+    let plans: Vec<LayerPlan> = (0..n_layers)
+        .into_par_iter()
+        .map(|l| {
+            let on_border = |r: &SplatRecord| {
+                r.center_x == data.x0
+                    || r.center_x == data.x1
+                    || r.center_y == data.y0
+                    || r.center_y == data.y1
+            };
+            let border: Vec<SplatRecord> = layer_pieces(l)
+                .flatten()
+                .filter(kept)
+                .filter(|r| on_border(r))
+                .copied()
+                .collect();
+            let extension = if options.frame_edges == FrameEdges::Extend {
+                extend_beyond(&border, data, frame, &reach_of)
+            } else {
+                Vec::new()
+            };
+            let mut info = LayerInfo::default();
+            let mut in_row_order = true;
+            let mut last = (i32::MIN, i32::MIN);
+            let mut rows = (i32::MAX, i32::MIN);
+            let mut beyond = 0;
+            let all = layer_pieces(l).flatten().filter(kept).copied();
+            for r in all.chain(extension.iter().copied()) {
+                info.record_count += 1;
+                info.count_paths(std::slice::from_ref(&r));
+                let key = row_order(&r);
+                in_row_order &= key >= last;
+                last = key;
+                rows = (rows.0.min(r.center_y), rows.1.max(r.center_y));
+                let ox = (-r.center_x).max(r.center_x - (w as i32 - 1)).max(0);
+                let oy = (-r.center_y).max(r.center_y - (h as i32 - 1)).max(0);
+                beyond = beyond.max(ox.max(oy) + reach_of(&r));
             }
-            // Row order within the layer (the splat visits bands of rows; the extension and
-            // the hidden background come after the pixels); stable, so the pixels' records
-            // keep their order.
-            if !recs.is_sorted_by_key(|r| (r.center_y, r.center_x)) {
-                recs.sort_by_key(|r| (r.center_y, r.center_x));
+            LayerPlan {
+                extension,
+                info,
+                in_row_order,
+                rows,
+                beyond,
             }
-            added
         })
-        .sum();
-    counts.edge_extended += extended;
+        .collect();
+    counts.edge_extended += plans.iter().map(|p| p.extension.len()).sum::<usize>();
     // Padding: every PSF, wherever its centre lies, must fit inside the padded layer.
-    let beyond = per_layer
-        .iter()
-        .flatten()
-        .map(|r| {
-            let ox = (-r.center_x).max(r.center_x - (w as i32 - 1)).max(0);
-            let oy = (-r.center_y).max(r.center_y - (h as i32 - 1)).max(0);
-            ox.max(oy) + reach_of(r)
-        })
-        .max()
-        .unwrap_or(0);
+    let beyond = plans.iter().map(|p| p.beyond).max().unwrap_or(0);
     let pad = combined
         .map_or(0, |d| d.max_extent_px())
         .max(beyond.max(0) as u32)
@@ -468,39 +493,65 @@ pub(super) fn assemble_layers(
     let padded_height = h as u32 + 2 * pad;
     let mut layers = Vec::with_capacity(n_layers);
     let mut first_record = 0;
-    for (l, recs) in per_layer.iter().enumerate() {
-        let mut info = LayerInfo {
+    for (l, plan) in plans.iter().enumerate() {
+        let info = LayerInfo {
             parallax_min: pmin + span * l as f32 / n_layers as f32,
             parallax_max: pmin + span * (l + 1) as f32 / n_layers as f32,
             first_record,
-            record_count: recs.len(),
-            ..LayerInfo::default()
+            ..plan.info
         };
-        info.count_paths(recs);
         counts.add_layer(&info);
         layers.push(info);
-        first_record += recs.len();
+        first_record += info.record_count;
     }
-    // The layers' records one after another, shifted by the padding, each layer copied on
+    // The layers' records one after another, shifted by the padding, each layer written on
     // its own thread into its own part of the frame's list.
     let mut records: Vec<SplatRecord> = bytemuck::zeroed_vec(first_record);
     let mut parts = Vec::with_capacity(n_layers);
     let mut rest = records.as_mut_slice();
-    for recs in &per_layer {
-        let (part, tail) = rest.split_at_mut(recs.len());
-        parts.push((part, recs));
+    for (l, plan) in plans.iter().enumerate() {
+        let (part, tail) = rest.split_at_mut(plan.info.record_count);
+        parts.push((l, part, plan));
         rest = tail;
     }
-    parts.into_par_iter().for_each(|(part, recs)| {
-        for (dst, r) in part.iter_mut().zip(recs) {
-            *dst = SplatRecord {
-                center_x: r.center_x + pad as i32,
-                center_y: r.center_y + pad as i32,
-                ..*r
-            };
+    let shifted = |r: &SplatRecord| SplatRecord {
+        center_x: r.center_x + pad as i32,
+        center_y: r.center_y + pad as i32,
+        ..*r
+    };
+    parts.into_par_iter().for_each(|(l, part, plan)| {
+        let layer = || {
+            let extension = plan.extension.iter().copied();
+            layer_pieces(l).flatten().filter(kept).copied().chain(extension)
+        };
+        if plan.in_row_order {
+            for (dst, r) in part.iter_mut().zip(layer()) {
+                *dst = shifted(&r);
+            }
+            return;
+        }
+        // Counted into rows, in the layer's order (stable), then each row by column.
+        let (y0, y1) = plan.rows;
+        let mut starts = vec![0usize; (y1 - y0) as usize + 2];
+        for r in layer() {
+            starts[(r.center_y - y0) as usize + 1] += 1;
+        }
+        for i in 1..starts.len() {
+            starts[i] += starts[i - 1];
+        }
+        let mut next = starts.clone();
+        for r in layer() {
+            let slot = &mut next[(r.center_y - y0) as usize];
+            part[*slot] = shifted(&r);
+            *slot += 1;
+        }
+        for row in starts.windows(2) {
+            let row = &mut part[row[0]..row[1]];
+            if !row.is_sorted_by_key(|r| r.center_x) {
+                row.sort_by_key(|r| r.center_x);
+            }
         }
     });
-    drop(per_layer);
     let frame = FrameParams {
         width: w as u32,
         height: h as u32,
