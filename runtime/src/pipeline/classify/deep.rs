@@ -123,6 +123,7 @@ fn hidden_behind_deep(deep: &DeepImage, camera: &Camera, fragments: &[Fragment])
         farthest[i] = Some(k);
     }
     let depth_at = |i: usize| depth[i];
+    let coc_at = |i: usize| signed_coc(depth[i]);
     // Walks start only at pixels with colour, which have a fragment; a pixel without one
     // would give a fragment of no weight.
     let own = |i: usize| match farthest[i] {
@@ -142,7 +143,7 @@ fn hidden_behind_deep(deep: &DeepImage, camera: &Camera, fragments: &[Fragment])
     super::hidden::hidden_background(
         &proxy,
         &several,
-        &signed_coc,
+        &coc_at,
         &depth_at,
         &no_blur,
         f32::INFINITY,

@@ -26,12 +26,13 @@ pub(super) struct EdgeSplit {
 /// two add up to `c` and none of the foreground's light is blurred as background (a bright
 /// emitter's anti-aliased rim would otherwise glow with the background's blur). Neighbours two
 /// pixels away count too when they are brighter than `hdr_threshold`: a renderer's pixel
-/// filter spreads an HDR highlight's light that far.
+/// filter spreads an HDR highlight's light that far. `coc_at(i)` is pixel `i`'s signed CoC
+/// (pixels) and `depth_at(i)` its depth.
 pub(super) fn edge_split(
     g: &GBuffer,
     x: usize,
     y: usize,
-    signed_coc: &dyn Fn(f32) -> f32,
+    coc_at: &dyn Fn(usize) -> f32,
     depth_at: &dyn Fn(usize) -> f32,
     hdr_threshold: f32,
 ) -> Option<EdgeSplit> {
@@ -64,10 +65,11 @@ pub(super) fn edge_split(
         }
     }
     let (j, dx, dy, dj) = best?;
-    let coc_gap = (signed_coc(dj) - signed_coc(d)).abs();
+    let (coc_j, coc_i) = (coc_at(j), coc_at(i));
+    let coc_gap = (coc_j - coc_i).abs();
     // Only where the depth step is visible as a difference in blur (or, for a pinhole with
     // motion, a large relative depth step).
-    if coc_gap < 1.0 && !(signed_coc(d) == 0.0 && dj < 0.8 * d) {
+    if coc_gap < 1.0 && !(coc_i == 0.0 && dj < 0.8 * d) {
         return None;
     }
     // Background: on the far side of the pixel from the foreground, one or two pixels away,
@@ -82,7 +84,7 @@ pub(super) fn edge_split(
         let Some(o) = index(xi - sx * step, yi - sy * step) else {
             break;
         };
-        if (signed_coc(depth_at(o)) - signed_coc(d)).abs() > 0.5 * coc_gap.max(1.0) {
+        if (coc_at(o) - coc_i).abs() > 0.5 * coc_gap.max(1.0) {
             break;
         }
         if background

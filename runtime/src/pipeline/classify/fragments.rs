@@ -160,6 +160,13 @@ pub(super) fn pixel_fragments(
         }
     };
     let signed_coc = |d: f32| -> f32 { lens.map_or(0.0, |l| l.signed_coc_px(f64::from(d)) as f32) };
+    // Every pixel's signed CoC, once: the edge split and the hidden background ask for a
+    // pixel's and its neighbours' a dozen times per pixel.
+    let cocs: Vec<f32> = (0..w * h)
+        .into_par_iter()
+        .map(|i| signed_coc(depth_at(i)))
+        .collect();
+    let coc_at = |i: usize| cocs[i];
 
     // Fragments per pixel (up to two: edge split), a row per task, the rows joined in order:
     // the same fragments in the same order as one pass.
@@ -190,7 +197,7 @@ pub(super) fn pixel_fragments(
                         gbuffer,
                         x,
                         y,
-                        &signed_coc,
+                        &coc_at,
                         &depth_at,
                         options.hdr_dense_threshold,
                     )
@@ -242,12 +249,12 @@ pub(super) fn pixel_fragments(
         // projected on it (the streak is centred on the pixel).
         let blur_along = |i: usize, d: (i32, i32)| -> f32 {
             let m = motion_at(i);
-            signed_coc(depth_at(i)).abs() + 0.5 * (m[0] * d.0 as f32 + m[1] * d.1 as f32).abs()
+            coc_at(i).abs() + 0.5 * (m[0] * d.0 as f32 + m[1] * d.1 as f32).abs()
         };
         let filled = hidden_background(
             gbuffer,
             &was_split,
-            &signed_coc,
+            &coc_at,
             &depth_at,
             &blur_along,
             options.hdr_dense_threshold,

@@ -24,13 +24,14 @@ use rayon::prelude::*;
 /// `hdr_threshold` is not continued behind a blurrier occluder: a small emitter does not go on
 /// behind what passes in front of it, and its copies, half hidden by the smear, would add
 /// light (29 % more on the comets example); nor behind an occluder of less than half
-/// coverage, which hides little. `blur_along(i, d)` is pixel
-/// `i`'s blur reach along axis direction `d` (pixels: its CoC radius plus half its motion
-/// over the shutter projected on `d`); `own(i)` is pixel `i`'s own fragment.
+/// coverage, which hides little. `coc_at(i)` is pixel `i`'s signed CoC (pixels),
+/// `depth_at(i)` its depth, `blur_along(i, d)` its blur reach along axis direction `d`
+/// (pixels: its CoC radius plus half its motion over the shutter projected on `d`) and
+/// `own(i)` its own fragment.
 pub(super) fn hidden_background(
     g: &GBuffer,
     was_split: &[bool],
-    signed_coc: &(dyn Fn(f32) -> f32 + Sync),
+    coc_at: &(dyn Fn(usize) -> f32 + Sync),
     depth_at: &(dyn Fn(usize) -> f32 + Sync),
     blur_along: &(dyn Fn(usize, (i32, i32)) -> f32 + Sync),
     hdr_threshold: f32,
@@ -49,7 +50,7 @@ pub(super) fn hidden_background(
                 if was_split[b] || g.color[b] == [0.0; 4] {
                     continue;
                 }
-                let (db, coc_b) = (depth_at(b), signed_coc(depth_at(b)));
+                let (db, coc_b) = (depth_at(b), coc_at(b));
                 let bright = g.color[b][..3].iter().any(|&c| c > hdr_threshold);
                 for d in DIRECTIONS {
                     let blur_b = blur_along(b, d);
@@ -69,7 +70,7 @@ pub(super) fn hidden_background(
                         // add light).
                         let opaque = g.color[q][3] >= 0.5;
                         (dq < db
-                            && (signed_coc(dq).abs() + 1.0 < coc_b.abs()
+                            && (coc_at(q).abs() + 1.0 < coc_b.abs()
                                 || (!bright && opaque && blur_along(q, d) > blur_b + 1.0)))
                             .then_some(q)
                     };
