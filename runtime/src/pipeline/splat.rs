@@ -756,12 +756,58 @@ mod tests {
 
     /// Two dense records at one centre and rotation are drawn as one image: the same planes as
     /// drawing each on its own, to rounding, at every rotation sampling, turned or not.
+    /// One layer of `records` on a `w x h` frame padded by `pad`, each record counted on the
+    /// path it names.
+    fn one_layer(records: &[SplatRecord], w: u32, h: u32, pad: u32) -> Classified {
+        use crate::pipeline::types::{LayerInfo, PathCounts};
+        let mut layer = LayerInfo {
+            first_record: 0,
+            record_count: records.len(),
+            ..LayerInfo::default()
+        };
+        layer.count_paths(records);
+        Classified {
+            frame: FrameParams {
+                width: w,
+                height: h,
+                pad,
+                layers: 1,
+                padded_width: w + 2 * pad,
+                padded_height: h + 2 * pad,
+                record_count: records.len() as u32,
+                db_channels: 1,
+            },
+            layers: vec![layer],
+            records: records.to_vec(),
+            counts: PathCounts::default(),
+            database: None,
+        }
+    }
+
+    /// Asserts that the four planes (R, G, B, A of a layer `width` px wide) hold `expected`
+    /// to 1e-6, and that something was drawn.
+    fn assert_planes_hold(planes: &[Plane], expected: &[[f64; 4]], width: i32) {
+        let mut largest = 0.0f64;
+        for (c, plane) in planes[..4].iter().enumerate() {
+            for (k, &got) in plane.data.iter().enumerate() {
+                let want = expected[k][c];
+                largest = largest.max(want.abs());
+                assert!(
+                    (f64::from(got) - want).abs() <= 1e-6,
+                    "channel {c}, pixel ({}, {}): {got} against {want}",
+                    k as i32 % width,
+                    k as i32 / width
+                );
+            }
+        }
+        assert!(largest > 0.01, "something was drawn");
+    }
+
     /// Unturned sparse records, whole inside the band's columns and cut by the padded frame's
     /// edges, across a band boundary, add each spreadlet times the record's colour at the
     /// record's centre plus the spreadlet's offset: checked against a plain sum.
     #[test]
     fn unturned_sparse_records_land_where_their_spreadlets_say() {
-        use crate::pipeline::types::{Classified, LayerInfo, PathCounts};
         use psf_db::{DatabaseBuilder, DbHeader, ParamSpace, PsfModel};
         let space = ParamSpace::for_model(PsfModel::ThinLens, &[[0.0, 8.0]], 8).expect("space");
         let n = space.psf_count() as usize;
@@ -802,27 +848,7 @@ mod tests {
                 color: [0.9, 0.5, 0.2, 1.0],
             })
             .collect();
-        let classified = Classified {
-            frame: FrameParams {
-                width: w,
-                height: h,
-                pad,
-                layers: 1,
-                padded_width: pw as u32,
-                padded_height: ph as u32,
-                record_count: records.len() as u32,
-                db_channels: 1,
-            },
-            layers: vec![LayerInfo {
-                first_record: 0,
-                record_count: records.len(),
-                sparse: records.len(),
-                ..LayerInfo::default()
-            }],
-            records: records.clone(),
-            counts: PathCounts::default(),
-            database: None,
-        };
+        let classified = one_layer(&records, w, h, pad);
         let stack = splat(&classified, Some(&db), &SplatOptions::default());
         let mut expected = vec![[0.0f64; 4]; (pw * ph) as usize];
         for r in &records {
@@ -837,20 +863,7 @@ mod tests {
                 }
             }
         }
-        let mut largest = 0.0f64;
-        for (c, plane) in stack.laplacian[..4].iter().enumerate() {
-            for (k, &got) in plane.data.iter().enumerate() {
-                let want = expected[k][c];
-                largest = largest.max(want.abs());
-                assert!(
-                    (f64::from(got) - want).abs() <= 1e-6,
-                    "channel {c}, pixel ({}, {}): {got} against {want}",
-                    k as i32 % pw,
-                    k as i32 / pw
-                );
-            }
-        }
-        assert!(largest > 0.01, "something was drawn");
+        assert_planes_hold(&stack.laplacian, &expected, pw);
     }
 
     /// Unturned dense records, alone and in blended pairs whose PSFs differ in size and
@@ -859,7 +872,6 @@ mod tests {
     /// checked against a plain sum over every record's every pixel.
     #[test]
     fn unturned_dense_records_land_where_their_pixels_say() {
-        use crate::pipeline::types::{Classified, LayerInfo, PathCounts};
         use psf_db::{DatabaseBuilder, DbHeader, ParamSpace, PsfModel};
         let space =
             ParamSpace::for_model(PsfModel::ThinLens, &[[0.0, 8.0]], 8).expect("space");
@@ -901,27 +913,7 @@ mod tests {
                 });
             }
         }
-        let classified = Classified {
-            frame: FrameParams {
-                width: w,
-                height: h,
-                pad,
-                layers: 1,
-                padded_width: pw as u32,
-                padded_height: ph as u32,
-                record_count: records.len() as u32,
-                db_channels: 1,
-            },
-            layers: vec![LayerInfo {
-                first_record: 0,
-                record_count: records.len(),
-                dense: records.len(),
-                ..LayerInfo::default()
-            }],
-            records: records.clone(),
-            counts: PathCounts::default(),
-            database: None,
-        };
+        let classified = one_layer(&records, w, h, pad);
         let stack = splat(&classified, Some(&db), &SplatOptions::default());
         let mut expected = vec![[0.0f64; 4]; (pw * ph) as usize];
         for r in &records {
@@ -942,20 +934,7 @@ mod tests {
                 }
             }
         }
-        let mut largest = 0.0f64;
-        for (c, plane) in stack.direct[..4].iter().enumerate() {
-            for (k, &got) in plane.data.iter().enumerate() {
-                let want = expected[k][c];
-                largest = largest.max(want.abs());
-                assert!(
-                    (f64::from(got) - want).abs() <= 1e-6,
-                    "channel {c}, pixel ({}, {}): {got} against {want}",
-                    k as i32 % pw,
-                    k as i32 / pw
-                );
-            }
-        }
-        assert!(largest > 0.01, "something was drawn");
+        assert_planes_hold(&stack.direct, &expected, pw);
         // Rows no record reaches are not drawn, and the stack says which rows hold light.
         let [first, end] = stack.direct_rows[0];
         assert!(first <= 63 - 12 && end >= ph as usize, "rows {first}..{end}");
