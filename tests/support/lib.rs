@@ -18,7 +18,11 @@ fn profile_dir() -> PathBuf {
 /// Path of the workspace binary `name` (`spreadlet`, `precompute`, `spreadlet-scene`), built
 /// once per test process when `cargo test` did not build it already (as with `-p
 /// spreadlet-e2e` alone). `cargo test --workspace` builds each of them for its own package's
-/// `tests/cli.rs`, so they are never older than the library the tests link.
+/// `tests/cli.rs`, so they are never older than the library the tests link. With `-p
+/// spreadlet-e2e` alone, a binary left from an earlier build is used as it is: after changing
+/// the sources, run `cargo build --bins -p spreadlet-cli -p precompute -p scene` first. (Building
+/// here every time would not find the workspace's build up to date: `cargo test --workspace`
+/// resolves features across every package, so it would build the binaries a second time.)
 pub fn binary(name: &str) -> PathBuf {
     static BUILT: OnceLock<()> = OnceLock::new();
     let path = profile_dir().join(format!("{name}{}", std::env::consts::EXE_SUFFIX));
