@@ -36,10 +36,7 @@ pub struct IntegratedLayers {
 
 /// Integrates every non-empty Laplacian plane with `integrator` and adds the direct planes.
 pub fn integrate(stack: &LayerStack, integrator: Integrator) -> IntegratedLayers {
-    let mut layers = integrate_laplacians(stack, integrator);
-    add_direct(&mut layers.planes, stack.direct.iter().map(std::borrow::Cow::Borrowed));
-    layers.rows = rows_of(stack);
-    layers
+    integrate_owned(stack.clone(), integrator)
 }
 
 /// [`integrate`], taking the stack: a layer's direct plane becomes its primal plane where the
@@ -48,7 +45,18 @@ pub fn integrate(stack: &LayerStack, integrator: Integrator) -> IntegratedLayers
 pub fn integrate_owned(stack: LayerStack, integrator: Integrator) -> IntegratedLayers {
     let mut layers = integrate_laplacians(&stack, integrator);
     layers.rows = rows_of(&stack);
-    add_direct(&mut layers.planes, stack.direct.into_iter().map(std::borrow::Cow::Owned));
+    for (primal, direct) in layers.planes.iter_mut().zip(stack.direct) {
+        if direct.is_empty() {
+            continue;
+        }
+        if primal.is_empty() {
+            *primal = direct;
+        } else {
+            for (a, b) in primal.data.iter_mut().zip(&direct.data) {
+                *a += b;
+            }
+        }
+    }
     layers
 }
 
@@ -65,23 +73,6 @@ fn rows_of(stack: &LayerStack) -> Vec<[usize; 2]> {
             }
         })
         .collect()
-}
-
-/// Adds each direct plane onto its primal plane, or makes it the primal plane where that is
-/// empty.
-fn add_direct<'a>(planes: &mut [Plane], direct: impl Iterator<Item = std::borrow::Cow<'a, Plane>>) {
-    for (primal, direct) in planes.iter_mut().zip(direct) {
-        if direct.is_empty() {
-            continue;
-        }
-        if primal.is_empty() {
-            *primal = direct.into_owned();
-        } else {
-            for (a, b) in primal.data.iter_mut().zip(&direct.data) {
-                *a += b;
-            }
-        }
-    }
 }
 
 /// The primal planes of the stack's Laplacian planes (empty where a layer has none).

@@ -176,27 +176,10 @@ pub fn splat(
             // Records are in row order within a layer: the ones that can reach the band.
             let lo = recs.partition_point(|r| r.center_y < y0 - extent);
             let hi = recs.partition_point(|r| r.center_y < y1 + extent);
-            let reaches_band = |r: &SplatRecord| {
-                let drawn_here = match kind {
-                    0 => r.path == SplatPath::Sparse as u32,
-                    _ => r.path == SplatPath::Dense as u32 || r.path == SplatPath::Copy as u32,
-                };
-                drawn_here
-                    && reach.get(r.psf_index as usize).is_none_or(|&k| {
-                        r.center_y + k >= y0 && r.center_y - k < y1
-                    })
-            };
-            // A band no record reaches stays zero: its rows are never allocated or copied (a
-            // depth layer of a slanted surface covers a strip of the frame).
-            if !recs[lo..hi].iter().any(reaches_band) {
-                return None;
-            }
-            let mut band = Band {
-                data: vec![[0.0f32; 4]; (y1 - y0) as usize * pw],
-                width: pw as i32,
-                y0,
-                y1,
-            };
+            // A band no record draws in stays zero: it is allocated at its first record, so
+            // the rows no record reaches are never allocated or copied (a depth layer of a
+            // slanted surface covers a strip of the frame).
+            let mut band: Option<Band> = None;
             let recs = &recs[lo..hi];
             let mut i = 0;
             while i < recs.len() {
@@ -207,11 +190,24 @@ pub fn splat(
                         continue;
                     }
                 }
+                let drawn_here = match kind {
+                    0 => r.path == SplatPath::Sparse as u32,
+                    _ => r.path == SplatPath::Dense as u32 || r.path == SplatPath::Copy as u32,
+                };
+                if !drawn_here {
+                    continue;
+                }
+                let band = band.get_or_insert_with(|| Band {
+                    data: vec![[0.0f32; 4]; (y1 - y0) as usize * pw],
+                    width: pw as i32,
+                    y0,
+                    y1,
+                });
                 match (kind, r.path) {
                     (0, p) if p == SplatPath::Sparse as u32 => {
                         if let Some(db) = db {
                             let reach = reach.get(r.psf_index as usize).copied();
-                            splat_sparse(&mut band, r, db, options.rotation, in_row_order, reach);
+                            splat_sparse(band, r, db, options.rotation, in_row_order, reach);
                         }
                     }
                     (1, p) if p == SplatPath::Dense as u32 => {
@@ -224,14 +220,14 @@ pub fn splat(
                             i += 1;
                         }
                         if is_identity(r) && db.channels() == 1 {
-                            splat_dense_upright(&mut band, r, next, db);
+                            splat_dense_upright(band, r, next, db);
                             continue;
                         }
                         match next {
                             Some(next) => {
-                                splat_dense_pair(&mut band, [r, next], db, options.rotation)
+                                splat_dense_pair(band, [r, next], db, options.rotation)
                             }
-                            None => splat_dense(&mut band, r, db, options.rotation),
+                            None => splat_dense(band, r, db, options.rotation),
                         }
                     }
                     (1, p) if p == SplatPath::Copy as u32 => {
@@ -240,7 +236,7 @@ pub fn splat(
                     _ => {}
                 }
             }
-            Some(((l, b, kind), band.data))
+            band.map(|band| ((l, b, kind), band.data))
         })
         .collect();
 
@@ -530,9 +526,12 @@ fn splat_dense_upright(
         (x0, y0, x0 + v.width as i32, y0 + v.height as i32)
     };
     let sa = span(&a);
-    let sb = b.as_ref().map(|(v, _)| span(v));
-    let (ux0, uy0, ux1, uy1) = match sb {
-        Some(sb) => (sa.0.min(sb.0), sa.1.min(sb.1), sa.2.max(sb.2), sa.3.max(sb.3)),
+    let b = b.map(|(view, color)| {
+        let s = span(&view);
+        (view, color, s)
+    });
+    let (ux0, uy0, ux1, uy1) = match &b {
+        Some((_, _, sb)) => (sa.0.min(sb.0), sa.1.min(sb.1), sa.2.max(sb.2), sa.3.max(sb.3)),
         None => sa,
     };
     let (x_lo, x_hi) = (ux0.max(0), ux1.min(band.width));
@@ -557,8 +556,8 @@ fn splat_dense_upright(
         let start = (y - band.y0) as usize * width;
         let row = &mut band.data[start..start + width];
         let ra = row_of(&a, sa, y);
-        match (&b, sb) {
-            (None, _) | (_, None) => {
+        match &b {
+            None => {
                 let Some((ax0, values)) = ra else { continue };
                 let (lo, hi) = (ax0.max(x_lo), (ax0 + values.len() as i32).min(x_hi));
                 if lo >= hi {
@@ -574,8 +573,8 @@ fn splat_dense_upright(
                     }
                 }
             }
-            (Some((bv, cb)), Some(sb)) => {
-                let rb = row_of(bv, sb, y);
+            Some((bv, cb, sb)) => {
+                let rb = row_of(bv, *sb, y);
                 // A PSF's value at band column x, zero outside its box.
                 let at = |rv: Option<(i32, &[f32])>, x: i32| match rv {
                     Some((x0, values)) if x >= x0 && x < x0 + values.len() as i32 => {
@@ -754,8 +753,6 @@ fn rotated_row_span(
 mod tests {
     use super::*;
 
-    /// Two dense records at one centre and rotation are drawn as one image: the same planes as
-    /// drawing each on its own, to rounding, at every rotation sampling, turned or not.
     /// One layer of `records` on a `w x h` frame padded by `pad`, each record counted on the
     /// path it names.
     fn one_layer(records: &[SplatRecord], w: u32, h: u32, pad: u32) -> Classified {
@@ -953,9 +950,10 @@ mod tests {
         assert_eq!(composite(&owned, &options), composite(&every_row, &options));
     }
 
+    /// Two dense records at one centre and rotation are drawn as one image: the same planes as
+    /// drawing each on its own, to rounding, at every rotation sampling, turned or not.
     #[test]
     fn a_blended_pair_of_dense_records_draws_what_each_draws() {
-        use crate::pipeline::types::{Classified, LayerInfo, PathCounts};
         use psf_db::{DatabaseBuilder, DbHeader, ParamSpace, PsfModel};
         let space = ParamSpace::for_model(PsfModel::LensMotion, &[[0.0, 8.0], [0.0, 16.0]], 4)
             .expect("space");
@@ -972,28 +970,7 @@ mod tests {
         }
         let db = builder.finish().expect("database");
         let (w, h, pad) = (40u32, 70u32, 24u32);
-        let frame = |count: usize| FrameParams {
-            width: w,
-            height: h,
-            pad,
-            layers: 1,
-            padded_width: w + 2 * pad,
-            padded_height: h + 2 * pad,
-            record_count: count as u32,
-            db_channels: 1,
-        };
-        let classified = |records: Vec<SplatRecord>| Classified {
-            frame: frame(records.len()),
-            layers: vec![LayerInfo {
-                first_record: 0,
-                record_count: records.len(),
-                dense: records.len(),
-                ..LayerInfo::default()
-            }],
-            records,
-            counts: PathCounts::default(),
-            database: None,
-        };
+        let classified = |records: Vec<SplatRecord>| one_layer(&records, w, h, pad);
         for angle in [0.0f32, 0.3, 1.9, -2.4] {
             let mut records = Vec::new();
             for k in 0..5 {

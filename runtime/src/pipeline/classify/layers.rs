@@ -429,57 +429,56 @@ pub(super) fn assemble_layers(
     let row_order = |r: &SplatRecord| (r.center_y, r.center_x);
 
     // Per layer, on every thread: its extension, and what placing it needs.
+    #[derive(Default)]
     struct LayerPlan {
         extension: Vec<SplatRecord>,
         info: LayerInfo,
+        /// Whether the kept records, then the extension, come in row order.
         in_row_order: bool,
+        last: (i32, i32),
         rows: (i32, i32),
         beyond: i32,
     }
+    let tally = |plan: &mut LayerPlan, r: &SplatRecord| {
+        plan.info.record_count += 1;
+        plan.info.count_paths(std::slice::from_ref(r));
+        let key = row_order(r);
+        plan.in_row_order &= key >= plan.last;
+        plan.last = key;
+        plan.rows = (plan.rows.0.min(r.center_y), plan.rows.1.max(r.center_y));
+        let ox = (-r.center_x).max(r.center_x - (w as i32 - 1)).max(0);
+        let oy = (-r.center_y).max(r.center_y - (h as i32 - 1)).max(0);
+        plan.beyond = plan.beyond.max(ox.max(oy) + reach_of(r));
+    };
+    let on_border = |r: &SplatRecord| {
+        r.center_x == data.x0 || r.center_x == data.x1 || r.center_y == data.y0 || r.center_y == data.y1
+    };
     let plans: Vec<LayerPlan> = (0..n_layers)
         .into_par_iter()
         .map(|l| {
-            let on_border = |r: &SplatRecord| {
-                r.center_x == data.x0
-                    || r.center_x == data.x1
-                    || r.center_y == data.y0
-                    || r.center_y == data.y1
+            let mut plan = LayerPlan {
+                in_row_order: true,
+                last: (i32::MIN, i32::MIN),
+                rows: (i32::MAX, i32::MIN),
+                ..LayerPlan::default()
             };
-            let border: Vec<SplatRecord> = layer_pieces(l)
-                .flatten()
-                .filter(kept)
-                .filter(|r| on_border(r))
-                .copied()
-                .collect();
+            // One pass over the kept records; the border's are what the extension repeats.
+            let mut border = Vec::new();
+            for r in layer_pieces(l).flatten().filter(kept) {
+                tally(&mut plan, r);
+                if on_border(r) {
+                    border.push(*r);
+                }
+            }
             let extension = if options.frame_edges == FrameEdges::Extend {
                 extend_beyond(&border, data, frame, &reach_of)
             } else {
                 Vec::new()
             };
-            let mut info = LayerInfo::default();
-            let mut in_row_order = true;
-            let mut last = (i32::MIN, i32::MIN);
-            let mut rows = (i32::MAX, i32::MIN);
-            let mut beyond = 0;
-            let all = layer_pieces(l).flatten().filter(kept).copied();
-            for r in all.chain(extension.iter().copied()) {
-                info.record_count += 1;
-                info.count_paths(std::slice::from_ref(&r));
-                let key = row_order(&r);
-                in_row_order &= key >= last;
-                last = key;
-                rows = (rows.0.min(r.center_y), rows.1.max(r.center_y));
-                let ox = (-r.center_x).max(r.center_x - (w as i32 - 1)).max(0);
-                let oy = (-r.center_y).max(r.center_y - (h as i32 - 1)).max(0);
-                beyond = beyond.max(ox.max(oy) + reach_of(&r));
+            for r in &extension {
+                tally(&mut plan, r);
             }
-            LayerPlan {
-                extension,
-                info,
-                in_row_order,
-                rows,
-                beyond,
-            }
+            LayerPlan { extension, ..plan }
         })
         .collect();
     counts.edge_extended += plans.iter().map(|p| p.extension.len()).sum::<usize>();
