@@ -323,6 +323,8 @@ pub fn filter_plan(
         continuous_lookup: false,
         // The filter gathers each pixel's PSF from the set's databases: no PSFs of the frame's own.
         smear_motion: false,
+        // Each pixel gathers its own PSF, at the frame's resolution.
+        reduced_resolution: false,
         copy_threshold_px: options.copy_threshold_px,
         ..ClassifyOptions::default()
     };

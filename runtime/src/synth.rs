@@ -198,14 +198,23 @@ fn render_classified(
     options: &SynthOptions,
     stats: &mut SynthStats,
 ) -> RgbaImage {
-    let t = Instant::now();
     let db = classified.database_or(dbs.combined.as_ref());
-    let stack = splat(classified, db, &options.splat);
-    stats.times.splat_ms = ms_since(t);
-
-    let t = Instant::now();
-    let layers = integrate_owned(stack, options.integrator);
-    stats.times.integrate_ms = ms_since(t);
+    let draw = |frame: &crate::pipeline::Classified, times: &mut crate::synth::StageTimes| {
+        let t = Instant::now();
+        let stack = splat(frame, db, &options.splat);
+        times.splat_ms += ms_since(t);
+        let t = Instant::now();
+        let layers = integrate_owned(stack, options.integrator);
+        times.integrate_ms += ms_since(t);
+        layers
+    };
+    let mut layers = draw(classified, &mut stats.times);
+    for level in &classified.coarse {
+        let coarse = draw(&level.classified, &mut stats.times);
+        let t = Instant::now();
+        crate::pipeline::integrate::add_upsampled(&mut layers, &coarse, level.scale);
+        stats.times.integrate_ms += ms_since(t);
+    }
 
     let t = Instant::now();
     let sharpness = if options.composite.restore_occluded {

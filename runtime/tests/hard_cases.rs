@@ -123,8 +123,10 @@ fn one_layer(integrator: Integrator) -> SynthOptions {
             layers: 1,
             soft_layers: None,
             edge_split: false,
-            // One record per pixel, of the cell holding its parameters.
+            // One record per pixel, of the cell holding its parameters, at the frame's
+            // resolution (beyond the database's range: the lookup's own clamp).
             continuous_lookup: false,
+            reduced_resolution: false,
             ..ClassifyOptions::default()
         },
         integrator,
@@ -388,9 +390,10 @@ fn rel_error(
 }
 
 /// At the database's largest CoC the PSF is reproduced (f64 reference, 1e-4 of its peak) with
-/// nothing clamped; beyond it (1.5x, 10x, +inf-like depths) the lookup clamps to the largest
-/// PSF, counts the clamp in the stats, and the image is bit-identical to the one at the
-/// maximum: a defined result, not garbage.
+/// nothing clamped; beyond it (1.5x, 10x, +inf-like depths), at the frame's resolution (where
+/// the reduced resolution is off or runs out), the lookup clamps to the largest PSF, counts the
+/// clamp in the stats, and the image is bit-identical to the one at the maximum: a defined
+/// result, not garbage.
 #[test]
 fn coc_at_and_beyond_the_database_maximum() {
     let max = 24.0;
@@ -480,6 +483,7 @@ fn stacked(n: usize, path: SplatPath, pad: u32, color: impl Fn(usize) -> f32) ->
         layers: vec![info],
         counts: PathCounts::default(),
         database: None,
+        coarse: Vec::new(),
     }
 }
 

@@ -2,6 +2,8 @@
 //! draws) drawn by the splat, integrate and composite stages on the GPU, with the same
 //! [`SynthStats`].
 
+use std::time::Instant;
+
 use crate::synth::ms_since;
 
 use super::{GpuContext, GpuError, GpuStageTimes, GpuSynthOptions, GpuSynthesizer};
@@ -52,7 +54,11 @@ pub fn render_gpu(
     if options.composite.restore_occluded {
         gpu.layer_sharpness = crate::pipeline::composite::layer_sharpness(&classified, db);
     }
-    let result = gpu.run(&classified.frame, &classified.records, options.integrator);
+    let result = if classified.coarse.is_empty() {
+        gpu.run(&classified.frame, &classified.records, options.integrator)
+    } else {
+        with_coarse_levels(gpu, &classified, &options)
+    };
     gpu.layer_sharpness.clear();
     let (mut image, gpu_times) = result?;
     if normalize_density {
@@ -78,4 +84,40 @@ impl GpuSynthesizer {
             None => Self::without_database(ctx, options),
         }
     }
+}
+
+/// A frame with coarse levels ([`crate::pipeline::types::CoarseLevel`]): every level splatted
+/// and integrated on the device and read back, the coarse ones upsampled into the frame's
+/// layers and composited on the CPU, as the CPU path does.
+fn with_coarse_levels(
+    gpu: &mut GpuSynthesizer,
+    classified: &crate::pipeline::Classified,
+    options: &crate::synth::SynthOptions,
+) -> Result<(RgbaImage, GpuStageTimes), GpuError> {
+    use crate::pipeline::IntegratedLayers;
+    let mut times = GpuStageTimes::default();
+    let t = Instant::now();
+    let mut layers_of = |frame: &crate::pipeline::Classified| -> Result<IntegratedLayers, GpuError> {
+        let planes = gpu.layer_images(&frame.frame, &frame.records, options.integrator)?;
+        Ok(IntegratedLayers {
+            frame: frame.frame,
+            planes,
+            rows: Vec::new(),
+        })
+    };
+    let mut layers = layers_of(classified)?;
+    for level in &classified.coarse {
+        let coarse = layers_of(&level.classified)?;
+        crate::pipeline::integrate::add_upsampled(&mut layers, &coarse, level.scale);
+    }
+    times.integrate_ms = ms_since(t);
+    let t = Instant::now();
+    let image = crate::pipeline::composite::composite_with_sharpness(
+        &layers,
+        &options.composite,
+        &gpu.layer_sharpness,
+    );
+    times.composite_ms = ms_since(t);
+    times.total_ms = times.integrate_ms + times.composite_ms;
+    Ok((image, times))
 }

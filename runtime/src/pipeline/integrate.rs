@@ -105,3 +105,64 @@ fn integrate_laplacians(stack: &LayerStack, integrator: Integrator) -> Integrate
         rows: Vec::new(),
     }
 }
+
+/// Adds the layers of a coarse level ([`super::types::CoarseLevel`], `scale` frame pixels per
+/// coarse pixel along each axis) to `fine`'s frame, upsampled bilinearly: frame pixel `x`
+/// reads the coarse layer at `(x + 0.5) / scale - 0.5`, the centre of its coarse pixel
+/// landing on the centre of the `scale` frame pixels it covers. Values are per pixel, so the
+/// light of a coarse pixel lands on its `scale^2` frame pixels (the level's colours are
+/// divided by `scale^2`). Only the frame is written: compositing reads nothing else.
+pub fn add_upsampled(fine: &mut IntegratedLayers, coarse: &IntegratedLayers, scale: u32) {
+    let f = fine.frame;
+    let c = coarse.frame;
+    let (w, h) = (f.width as usize, f.height as usize);
+    let (fpw, fph) = (f.padded_width as usize, f.padded_height as usize);
+    let (cpw, cph, cpad) = (
+        c.padded_width as usize,
+        c.padded_height as usize,
+        c.pad as f32,
+    );
+    let s = scale as f32;
+    // Per frame column (and row): the first coarse padded column read and its weight.
+    let taps = |n: usize, padded: usize| -> Vec<(usize, f32)> {
+        (0..n)
+            .map(|x| {
+                let u = ((x as f32 + 0.5) / s - 0.5 + cpad).clamp(0.0, (padded - 1) as f32);
+                let i = (u.floor() as usize).min(padded.saturating_sub(2));
+                (i, u - i as f32)
+            })
+            .collect()
+    };
+    let (xs, ys) = (taps(w, cpw), taps(h, cph));
+    for (l, chunk) in coarse.planes.chunks(4).enumerate() {
+        if chunk.iter().all(Plane::is_empty) {
+            continue;
+        }
+        for (ch, src) in chunk.iter().enumerate() {
+            if src.is_empty() {
+                continue;
+            }
+            let dst = &mut fine.planes[l * 4 + ch];
+            if dst.is_empty() {
+                *dst = Plane::new(fpw, fph);
+            }
+            let pad = f.pad as usize;
+            dst.data
+                .par_chunks_mut(fpw)
+                .skip(pad)
+                .take(h)
+                .zip(&ys)
+                .for_each(|(row, &(j, ty))| {
+                    let (r0, r1) = (&src.data[j * cpw..], &src.data[(j + 1) * cpw..]);
+                    for (dst, &(i, tx)) in row[pad..pad + w].iter_mut().zip(&xs) {
+                        let top = r0[i] + tx * (r0[i + 1] - r0[i]);
+                        let bottom = r1[i] + tx * (r1[i + 1] - r1[i]);
+                        *dst += top + ty * (bottom - top);
+                    }
+                });
+        }
+        if let Some(rows) = fine.rows.get_mut(l) {
+            *rows = [0, fph];
+        }
+    }
+}

@@ -778,6 +778,7 @@ mod tests {
             records: records.to_vec(),
             counts: PathCounts::default(),
             database: None,
+            coarse: Vec::new(),
         }
     }
 

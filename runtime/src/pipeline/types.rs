@@ -128,6 +128,9 @@ pub struct PathCounts {
     /// Fragments of background continued behind sharper occluders
     /// ([`super::ClassifyOptions::fill_hidden`]).
     pub hidden_filled: usize,
+    /// Fragments whose blur is beyond the database's range, drawn at a reduced resolution
+    /// ([`Classified::coarse`]; also in the path counts).
+    pub reduced: usize,
 }
 
 impl PathCounts {
@@ -155,6 +158,24 @@ pub struct Classified {
     /// PSFs followed by this frame's own (the physical-lens PSFs of its moving pixels smeared
     /// along their motion, [`crate::motion_smear`]). `None`: the set's combined database.
     pub database: Option<std::sync::Arc<PsfDatabase>>,
+    /// The fragments whose CoC or motion is beyond the database's range, at reduced
+    /// resolutions ([`super::ClassifyOptions::reduced_resolution`]), each level a frame of
+    /// its own in the same depth layers; empty when every fragment is in range.
+    pub coarse: Vec<CoarseLevel>,
+}
+
+/// The records of the fragments drawn `scale` times smaller than the frame: a fragment of
+/// frame pixel `(x, y)` is centred on the coarse pixel `(x div scale, y div scale)`, with its
+/// CoC and motion divided by `scale` and its colour by `scale^2` (a coarse pixel covers
+/// `scale^2` frame pixels), so that the coarse layers, integrated and upsampled bilinearly
+/// ([`super::integrate::add_upsampled`]), add the same light as the frame's own would.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CoarseLevel {
+    /// Frame pixels per coarse pixel along each axis: 2, 4 or 8.
+    pub scale: u32,
+    /// The level's records, `ceil(width / scale) x ceil(height / scale)` pixels, padded as
+    /// its own PSFs need, with the frame's layers.
+    pub classified: Classified,
 }
 
 impl Classified {

@@ -7,7 +7,7 @@ use super::*;
 use crate::camera::Camera;
 use crate::dbset::{DbSet, NO_TWIN};
 use crate::motion_smear::{PsfImage, SmearKey};
-use crate::pipeline::types::{psf_reach, FrameParams, SplatPath, SplatRecord};
+use crate::pipeline::types::{psf_reach, CoarseLevel, FrameParams, SplatPath, SplatRecord};
 use psf_db::{PsfDatabase, PsfModel};
 use rayon::prelude::*;
 
@@ -88,6 +88,48 @@ pub fn classify_fragments(
         _ => None,
     };
     let moving_lens = model == Some(PsfModel::PhysicalLens) && any_moving;
+    // Each fragment's resolution: frame pixels per drawn pixel, 1 unless its blur is beyond
+    // the database's range.
+    let range = options
+        .reduced_resolution
+        .then(|| blur_range(dbs, model, thin_smear.is_some()))
+        .flatten();
+    let scale_of = |frag: &Fragment| -> u32 {
+        let Some([coc_max, len_max]) = range else {
+            return 1;
+        };
+        let coc = signed_coc(frag.depth).abs();
+        let m = frag.motion;
+        let len = (m[0] * m[0] + m[1] * m[1]).sqrt();
+        let mut scale = 1u32;
+        while scale < MAX_SCALE && (coc > coc_max * scale as f32 || len > len_max * scale as f32)
+        {
+            scale *= 2;
+        }
+        scale
+    };
+    let scales: Vec<u8> = if range.is_some() {
+        fragments.par_iter().map(|f| scale_of(f).trailing_zeros() as u8).collect()
+    } else {
+        Vec::new()
+    };
+    // A fragment as its level draws it: centred on its coarse pixel, CoC and motion in coarse
+    // pixels, colour spread over the coarse pixel's frame pixels.
+    let level_of = |index: usize| scales.get(index).copied().unwrap_or(0) as usize;
+    let at_level = |frag: &Fragment, level: usize| -> (Fragment, f32) {
+        if level == 0 {
+            return (*frag, signed_coc(frag.depth));
+        }
+        let s = (1u32 << level) as f32;
+        let coarse = Fragment {
+            x: frag.x.div_euclid(1 << level),
+            y: frag.y.div_euclid(1 << level),
+            color: frag.color.map(|c| c / (s * s)),
+            motion: frag.motion.map(|m| m / s),
+            ..*frag
+        };
+        (coarse, signed_coc(frag.depth) / s)
+    };
     let reach: Vec<i32> = match combined {
         Some(all) if moving_lens || thin_smear.is_some() => psf_reach(all),
         _ => Vec::new(),
@@ -96,7 +138,10 @@ pub fn classify_fragments(
         Some(_) if moving_lens || thin_smear.is_some() => {
             fragments
                 .par_iter()
-                .map(|frag| {
+                .enumerate()
+                .map(|(index, frag)| {
+                    let (frag, signed) = at_level(frag, level_of(index));
+                    let frag = &frag;
                     let m = frag.motion;
                     let motion_len = (m[0] * m[0] + m[1] * m[1]).sqrt();
                     if frag.weight <= 0.0 || motion_len < options.copy_threshold_px {
@@ -105,7 +150,6 @@ pub fn classify_fragments(
                     if let Some(thin) = thin_smear {
                         // The thin-lens database comes first in the combined one. In front
                         // of the focus plane the aperture's image is turned half a turn.
-                        let signed = signed_coc(frag.depth);
                         let (i, clamped) = thin.lookup([signed.abs(), 0.0]);
                         let turned = flip_front && signed < 0.0;
                         let radial = if turned { [-1.0, 0.0] } else { [1.0, 0.0] };
@@ -150,9 +194,12 @@ pub fn classify_fragments(
         if frag.weight <= 0.0 {
             return;
         }
+        // Layers follow the fragment's own blur; all else its level's.
+        let (targets, n_targets) = targets_of(frag);
+        let (frag, signed) = at_level(frag, level_of(index));
+        let frag = &frag;
         let (x, y) = (frag.x, frag.y);
         let color = frag.color;
-        let signed = signed_coc(frag.depth);
         let coc = signed.abs();
         let m = frag.motion;
         let motion_len = (m[0] * m[0] + m[1] * m[1]).sqrt();
@@ -211,7 +258,6 @@ pub fn classify_fragments(
             (path, psf_index)
         };
 
-        let (targets, n_targets) = targets_of(frag);
         if n_targets == 2 {
             counts.soft_split += 1;
         }
@@ -249,16 +295,21 @@ pub fn classify_fragments(
     // Fragments in chunks on every thread, each chunk's records per layer appended in chunk
     // order: the same records in the same order as one pass over them.
     const CHUNK: usize = 4096;
-    let chunks: Vec<(Vec<Vec<SplatRecord>>, PathCounts)> = fragments
+    // `chunks[c][level][layer]`.
+    let n_levels = scales.iter().copied().max().map_or(1, |l| usize::from(l) + 1);
+    let chunks: Vec<(Vec<Vec<Vec<SplatRecord>>>, PathCounts)> = fragments
         .par_chunks(CHUNK)
         .enumerate()
         .map(|(c, chunk)| {
-            let mut per_layer = vec![Vec::new(); n_layers];
+            let mut per_level = vec![vec![Vec::new(); n_layers]; n_levels];
             let mut counted = PathCounts::default();
             for (k, frag) in chunk.iter().enumerate() {
-                emit(c * CHUNK + k, frag, &mut per_layer, &mut counted);
+                let index = c * CHUNK + k;
+                let level = level_of(index);
+                counted.reduced += usize::from(level > 0 && frag.weight > 0.0);
+                emit(index, frag, &mut per_level[level], &mut counted);
             }
-            (per_layer, counted)
+            (per_level, counted)
         })
         .collect();
     for (_, counted) in &chunks {
@@ -266,11 +317,18 @@ pub fn classify_fragments(
         counts.hdr_dense += counted.hdr_dense;
         counts.soft_split += counted.soft_split;
         counts.smeared += counted.smeared;
+        counts.reduced += counted.reduced;
     }
-    let chunks: Vec<Vec<Vec<SplatRecord>>> = chunks.into_iter().map(|(layers, _)| layers).collect();
-
+    let mut levels: Vec<Vec<Vec<Vec<SplatRecord>>>> = vec![Vec::new(); n_levels];
+    for (per_level, _) in chunks {
+        for (level, layers) in per_level.into_iter().enumerate() {
+            levels[level].push(layers);
+        }
+    }
+    let mut levels = levels.into_iter().enumerate();
+    let fine = levels.next().map(|(_, chunks)| chunks).unwrap_or_default();
     let mut classified = assemble_layers(
-        &chunks,
+        &fine,
         n_layers,
         w,
         h,
@@ -280,8 +338,75 @@ pub fn classify_fragments(
         counts,
         (pmin, span),
     );
+    drop(fine);
+    for (level, chunks) in levels {
+        if chunks.iter().all(|layers| layers.iter().all(Vec::is_empty)) {
+            continue;
+        }
+        let scale = 1u32 << level;
+        let coarse_data = DataWindow {
+            x0: data.x0.div_euclid(scale as i32),
+            y0: data.y0.div_euclid(scale as i32),
+            x1: data.x1.div_euclid(scale as i32),
+            y1: data.y1.div_euclid(scale as i32),
+        };
+        let mut coarse = assemble_layers(
+            &chunks,
+            n_layers,
+            w.div_ceil(scale as usize),
+            h.div_ceil(scale as usize),
+            coarse_data,
+            combined,
+            options,
+            PathCounts::default(),
+            (pmin, span),
+        );
+        let c = &mut classified.counts;
+        c.sparse += coarse.counts.sparse;
+        c.dense += coarse.counts.dense;
+        c.copied += coarse.counts.copied;
+        c.edge_extended += coarse.counts.edge_extended;
+        coarse.database = smeared.database.clone();
+        classified.coarse.push(CoarseLevel {
+            scale,
+            classified: coarse,
+        });
+    }
     classified.database = smeared.database;
     Ok(classified)
+}
+
+/// Frame pixels per drawn pixel, at most: a fragment whose blur is beyond the database's
+/// range even this many times smaller is drawn with the largest PSF (and counted clamped).
+const MAX_SCALE: u32 = 8;
+
+/// The largest CoC radius and motion length (px) the lookups of `model` reach without
+/// clamping: the thin-lens database's CoC range, and the lens-motion database's motion range
+/// (or the longest smear, where moving fragments are smeared); `None` for the physical lens,
+/// whose space is over depth and the field, or when nothing is simulated.
+fn blur_range(dbs: &DbSet, model: Option<PsfModel>, smear: bool) -> Option<[f32; 2]> {
+    let max_of = |db: &PsfDatabase, dim: usize| {
+        db.space().dims().get(dim).map(|d| d.max as f32)
+    };
+    let main = dbs.main.as_ref();
+    let thin = dbs.thin_lens.as_ref();
+    match model? {
+        PsfModel::PhysicalLens => None,
+        PsfModel::ThinLens | PsfModel::LensMotion => {
+            let motion_db = main.filter(|m| m.model() == PsfModel::LensMotion);
+            let coc_max = [thin, motion_db]
+                .into_iter()
+                .flatten()
+                .filter_map(|db| max_of(db, 0))
+                .fold(f32::INFINITY, f32::min);
+            let len_max = if smear {
+                crate::motion_smear::MAX_SMEAR_PX
+            } else {
+                motion_db.and_then(|db| max_of(db, 1)).unwrap_or(f32::INFINITY)
+            };
+            coc_max.is_finite().then_some([coc_max, len_max])
+        }
+    }
 }
 
 /// A threshold in `[0, 1)` for pixel `(x, y)`: Roberts' R2 low-discrepancy sequence over the
@@ -567,6 +692,7 @@ pub(super) fn assemble_layers(
         layers,
         counts,
         database: None,
+        coarse: Vec::new(),
     }
 }
 

@@ -152,6 +152,12 @@ pub struct ClassifyOptions {
     /// turned and blended with a neighbouring cell. Needs the thin-lens database, which then
     /// serves moving frames alone; off, or without it, the lens-motion cell's PSF is drawn.
     pub smear_motion: bool,
+    /// Draw a fragment whose CoC or motion is beyond the database's range at a resolution
+    /// 2, 4 or 8 times lower, where it is in range ([`super::types::CoarseLevel`]): a 4K
+    /// frame's background bokeh is then as large as the lens makes it, where the database's
+    /// largest PSF would be drawn instead. Thin lens and lens-motion only; off, such a
+    /// fragment is drawn with the database's largest PSF (and counted as clamped).
+    pub reduced_resolution: bool,
 }
 
 impl Default for ClassifyOptions {
@@ -168,6 +174,7 @@ impl Default for ClassifyOptions {
             soft_layers_min_blur_px: 2.0,
             continuous_lookup: true,
             smear_motion: true,
+            reduced_resolution: true,
         }
     }
 }
