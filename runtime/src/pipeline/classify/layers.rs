@@ -361,6 +361,7 @@ pub fn classify_fragments(
             PathCounts::default(),
             (pmin, span),
         );
+        merge_coincident(&mut coarse);
         let c = &mut classified.counts;
         c.sparse += coarse.counts.sparse;
         c.dense += coarse.counts.dense;
@@ -374,6 +375,66 @@ pub fn classify_fragments(
     }
     classified.database = smeared.database;
     Ok(classified)
+}
+
+/// `classified` with the records of each layer that share their pixel, PSF, rotation and path
+/// merged into one (colours and weights summed, in the records' order; the first keeps its
+/// place): drawing one is drawing both. At a coarse level up to `scale^2` frame pixels of one
+/// surface land on each coarse pixel with the same PSF. Each layer's records must be in row
+/// order, as [`assemble_layers`] leaves them.
+fn merge_coincident(classified: &mut Classified) {
+    let same = |a: &SplatRecord, b: &SplatRecord| {
+        a.psf_index == b.psf_index
+            && a.path == b.path
+            && a.rot_cos.to_bits() == b.rot_cos.to_bits()
+            && a.rot_sin.to_bits() == b.rot_sin.to_bits()
+    };
+    let records = &classified.records;
+    let merged: Vec<Vec<SplatRecord>> = classified
+        .layers
+        .par_iter()
+        .map(|info| {
+            let layer = &records[info.first_record..info.first_record + info.record_count];
+            let mut out: Vec<SplatRecord> = Vec::with_capacity(layer.len() / 2);
+            let mut pixel_start = 0;
+            for r in layer {
+                let new_pixel = out.get(pixel_start).is_none_or(|first| {
+                    (first.center_x, first.center_y) != (r.center_x, r.center_y)
+                });
+                if new_pixel {
+                    pixel_start = out.len();
+                }
+                match out[pixel_start..].iter_mut().find(|m| same(m, r)) {
+                    Some(m) => {
+                        m.weight += r.weight;
+                        for (a, b) in m.color.iter_mut().zip(r.color) {
+                            *a += b;
+                        }
+                    }
+                    None => out.push(*r),
+                }
+            }
+            out
+        })
+        .collect();
+    let mut first_record = 0;
+    let counts = &mut classified.counts;
+    (counts.sparse, counts.dense, counts.copied) = (0, 0, 0);
+    for (info, layer) in classified.layers.iter_mut().zip(&merged) {
+        *info = LayerInfo {
+            first_record,
+            record_count: layer.len(),
+            sparse: 0,
+            dense: 0,
+            copied: 0,
+            ..*info
+        };
+        info.count_paths(layer);
+        counts.add_layer(info);
+        first_record += layer.len();
+    }
+    classified.records = merged.concat();
+    classified.frame.record_count = classified.records.len() as u32;
 }
 
 /// Frame pixels per drawn pixel, at most: a fragment whose blur is beyond the database's
