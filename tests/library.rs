@@ -180,4 +180,12 @@ fn options_out_of_range_are_errors_naming_the_option() {
     options.classify.soft_layers = Some(f32::NAN);
     let e = options.validate().expect_err("NaN soft layers").to_string();
     assert!(e.contains("--soft-layers"), "{e}");
+    options.classify.soft_layers = Some(1.0);
+    for bad in [0.0, 0.5, -3.0, f32::NAN] {
+        options.classify.coarse_above_px = bad;
+        let e = options.validate().expect_err("CoC threshold").to_string();
+        assert!(e.contains("--coarse-above"), "{bad}: {e}");
+    }
+    options.classify.coarse_above_px = 32.0;
+    options.validate().expect("a CoC of 32 px");
 }

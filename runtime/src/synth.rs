@@ -46,6 +46,13 @@ impl SynthOptions {
                 });
             }
         }
+        let coarse = self.classify.coarse_above_px;
+        if coarse.is_nan() || coarse < 1.0 {
+            return Err(crate::Error::InvalidOption {
+                option: "--coarse-above",
+                message: format!("must be a CoC radius of at least 1 px, got {coarse}"),
+            });
+        }
         Ok(())
     }
 }

@@ -139,3 +139,37 @@ fn a_wall_blurred_past_the_database_range_stays_even() {
         );
     }
 }
+
+/// Below the database's largest CoC, `coarse_above_px` draws the larger CoCs at half the
+/// resolution (faster for large blur): a point of CoC 40 px with the threshold at 24 px keeps
+/// its light and its size, where the frame's resolution draws it the same. (The quick
+/// database: the Test profile's cells are too wide for the two to compare.)
+#[test]
+fn a_threshold_below_the_range_draws_large_cocs_coarse() {
+    let dbs = DbSet::new(Some(quick_db(PsfModel::ThinLens)), None).expect("db set");
+    let (w, h) = (128usize, 128usize);
+    let cam = camera(w as u32, h as u32, true, 0.0);
+    let depth = depth_for_coc(&cam, 40.0) as f32;
+    let g = one_pixel(w, h, 64, 64, [1.0, 1.0, 1.0, 1.0], depth, [0.0, 0.0]);
+    let (fine, fine_stats) = synthesize(&g, &cam, &dbs, &options(true)).expect("fine");
+    assert_eq!(fine_stats.counts.reduced, 0, "in range");
+    let mut coarse_options = options(true);
+    coarse_options.classify.coarse_above_px = 24.0;
+    let (coarse, stats) = synthesize(&g, &cam, &dbs, &coarse_options).expect("coarse");
+    assert!(stats.counts.reduced > 0, "above the threshold");
+    let (e_fine, _, rms_fine) = moments(&fine.pixels, w);
+    let (e_coarse, centre, rms_coarse) = moments(&coarse.pixels, w);
+    assert!(
+        (e_coarse / e_fine - 1.0).abs() < 0.01,
+        "light {e_coarse} vs {e_fine}"
+    );
+    assert!(
+        (rms_coarse / rms_fine - 1.0).abs() < 0.03,
+        "RMS radius {rms_coarse:.2} px at half resolution, {rms_fine:.2} px at full"
+    );
+    // The coarse pixel (32, 32) covers frame pixels 64-65: its centre is at 64.5.
+    assert!(
+        (centre[0] - 64.5).hypot(centre[1] - 64.5) < 0.25,
+        "{centre:?}"
+    );
+}

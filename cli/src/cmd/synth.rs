@@ -130,6 +130,12 @@ pub(crate) struct SynthArgs {
     /// Plain layout: the motion's y axis points up.
     #[arg(long)]
     pub(crate) motion_y_up: bool,
+    /// Draw a pixel whose CoC radius (px) is above this at a half, a quarter or an eighth of
+    /// the frame's resolution, where it is this or below, and upsample it: faster for large
+    /// blur, rims about a pixel softer (default: only CoCs beyond the database's range, or
+    /// motion beyond its length, are drawn that way).
+    #[arg(long, value_name = "PX")]
+    pub(crate) coarse_above: Option<f32>,
     /// Use the database's spreadlets as stored (no monopole removal, no energy
     /// normalisation).
     #[arg(long)]
@@ -152,6 +158,7 @@ impl SynthArgs {
                 fill_hidden: !self.no_hidden_fill,
                 continuous_lookup: !self.nearest_cell,
                 smear_motion: !self.motion_database,
+                coarse_above_px: self.coarse_above.unwrap_or(f32::INFINITY),
                 ..ClassifyOptions::default()
             },
             splat: SplatOptions {

@@ -98,6 +98,7 @@ pub fn classify_fragments(
         let Some([coc_max, len_max]) = range else {
             return 1;
         };
+        let coc_max = coc_max.min(options.coarse_above_px);
         let coc = signed_coc(frag.depth).abs();
         let m = frag.motion;
         let len = (m[0] * m[0] + m[1] * m[1]).sqrt();

@@ -158,6 +158,12 @@ pub struct ClassifyOptions {
     /// largest PSF would be drawn instead. Thin lens and lens-motion only; off, such a
     /// fragment is drawn with the database's largest PSF (and counted as clamped).
     pub reduced_resolution: bool,
+    /// With [`Self::reduced_resolution`], a CoC radius (px) above which a fragment is drawn at a
+    /// reduced resolution even inside the database's range (the smallest scale that brings its
+    /// CoC to this or below): a large PSF costs its spreadlets at the frame's resolution, a
+    /// quarter of them or fewer at half of it, for a rim widened by about a pixel.
+    /// `f32::INFINITY`: only beyond the database's range.
+    pub coarse_above_px: f32,
 }
 
 impl Default for ClassifyOptions {
@@ -175,6 +181,7 @@ impl Default for ClassifyOptions {
             continuous_lookup: true,
             smear_motion: true,
             reduced_resolution: true,
+            coarse_above_px: f32::INFINITY,
         }
     }
 }
