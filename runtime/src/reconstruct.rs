@@ -23,7 +23,7 @@ use crate::dbset::DbSet;
 use crate::pipeline::classify::{
     classify_fragments, resolve_model, ClassifyError, DataWindow, Fragment,
 };
-use crate::pipeline::{Classified, Effects, PathCounts};
+use crate::pipeline::{Classified, ClassifyOptions, Effects, PathCounts};
 use crate::prepare::{Input, Plan};
 use crate::synth::{render_cpu, SynthOptions, SynthStats};
 use formats::RgbaImage;
@@ -352,6 +352,11 @@ pub(crate) fn classify_samples(
         dropped,
         ..PathCounts::default()
     };
+    // Samples are not one surface per pixel: nothing to continue across the layers.
+    let classify = ClassifyOptions {
+        continue_layers: false,
+        ..options.classify.clone()
+    };
     let classified = classify_fragments(
         &fragments,
         frames.width,
@@ -360,7 +365,7 @@ pub(crate) fn classify_samples(
         camera,
         dbs,
         model,
-        &options.classify,
+        &classify,
         counts,
     )?;
     Ok((classified, stats))

@@ -114,8 +114,10 @@ proptest! {
             layers,
             soft_layers: soft,
             edge_split: false,
-            // Soft layering of every fragment, however sharp (the binning under test).
+            // Soft layering of every fragment, however sharp or still (the binning under
+            // test).
             soft_layers_min_blur_px: 0.0,
+            continue_layers: false,
             // One PSF per layer target: no blend of neighbouring cells.
             continuous_lookup: false,
             ..ClassifyOptions::default()

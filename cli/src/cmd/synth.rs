@@ -69,7 +69,8 @@ pub(crate) struct SynthArgs {
     #[arg(long, default_value_t = 8)]
     pub(crate) layers: u32,
     /// Soft layering: blend width between neighbouring layers in layer units (0 = hard
-    /// layers; the flag alone = 1).
+    /// layers; the flag alone = 1), for moving pixels: still ones are layered hard and
+    /// continued across the layers, unless --no-layer-continuation.
     #[arg(long, num_args = 0..=1, default_missing_value = "1.0", default_value = "1.0")]
     pub(crate) soft_layers: f32,
     /// Do not split anti-aliased edge pixels into foreground and background parts.
@@ -136,6 +137,11 @@ pub(crate) struct SynthArgs {
     /// motion beyond its length, are drawn that way).
     #[arg(long, value_name = "PX")]
     pub(crate) coarse_above: Option<f32>,
+    /// Layer still pixels softly, as moving ones, instead of hard with each surface continued
+    /// under the nearer part where it crosses into a nearer depth layer (for comparison: a
+    /// surface split between two layers is then seen through by up to a quarter).
+    #[arg(long)]
+    pub(crate) no_layer_continuation: bool,
     /// Use the database's spreadlets as stored (no monopole removal, no energy
     /// normalisation).
     #[arg(long)]
@@ -159,6 +165,7 @@ impl SynthArgs {
                 continuous_lookup: !self.nearest_cell,
                 smear_motion: !self.motion_database,
                 coarse_above_px: self.coarse_above.unwrap_or(f32::INFINITY),
+                continue_layers: !self.no_layer_continuation,
                 ..ClassifyOptions::default()
             },
             splat: SplatOptions {

@@ -56,6 +56,27 @@ pub fn classify_fragments(
         }
     };
 
+    let with_continuations;
+    let first_source = fragments.first().map_or(0, |f| f.source);
+    // Through a real lens a pixel's PSF changes over the field too: not continued.
+    let continue_layers = options.continue_layers
+        && matches!(model, Some(PsfModel::ThinLens | PsfModel::LensMotion))
+        && n_layers > 1
+        && fragments.iter().all(|f| f.source == first_source);
+    let fragments = if continue_layers {
+        let layer_of = |f: &Fragment| {
+            (layer_coord(f.parallax).floor() as usize).min(n_layers - 1)
+        };
+        with_continuations = continue_across_layers(fragments, w, h, &layer_of, &|f: &Fragment| {
+            let coc = signed_coc(f.depth).abs();
+            let m = f.motion;
+            coc + 0.5 * (m[0] * m[0] + m[1] * m[1]).sqrt()
+        });
+        &with_continuations[..]
+    } else {
+        fragments
+    };
+
     // Layer weights: hard, or blended near the boundary between two layer centres. A sharp
     // fragment is not split: its PSF barely differs between the two layers, and a surface
     // split across two layers lets what lies behind it show through (up to a quarter where
@@ -65,7 +86,9 @@ pub fn classify_fragments(
         let m = frag.motion;
         let motion_len = (m[0] * m[0] + m[1] * m[1]).sqrt();
         let sharp = coc.max(motion_len) < options.soft_layers_min_blur_px;
-        let band = options.soft_layers.filter(|_| !sharp);
+        // Continued across the layers instead, a still surface is layered hard.
+        let continued = continue_layers && motion_len < 1.0;
+        let band = options.soft_layers.filter(|_| !sharp && !continued);
         layer_targets(layer_coord(frag.parallax), n_layers, band)
     };
     let transmission = occlusion_within_layers(fragments, n_layers, &targets_of);
@@ -436,6 +459,110 @@ fn merge_coincident(classified: &mut Classified) {
     }
     classified.records = merged.concat();
     classified.frame.record_count = classified.records.len() as u32;
+}
+
+/// `fragments` followed by the continuation of every surface that crosses from a depth layer
+/// into a nearer one: where a pixel's fragment (the pixel's heaviest, opaque) lies in layer
+/// `l` and its neighbour's along an axis direction in a nearer layer, with blurs within a
+/// pixel of each other (one surface, not an occluder's silhouette, which the hidden background
+/// handles), the pixel is repeated into the nearer region along that direction, as far as the
+/// larger of the two blurs reaches and while the pixels there stay nearer, in its own layer.
+/// With hard layers the nearer part's blurred edge would otherwise be composited over the
+/// farther part's blurred edge, and the coverage "over" leaves between them (up to a quarter on
+/// the boundary) would show the layers behind the surface as a line. A pixel continued from
+/// several sides gets the mean. Moving pixels are not continued: a copy put beside a moving
+/// pixel is smeared along the motion from there, and the copies of a boundary across the
+/// motion draw steps. `layer_of` is a fragment's hard layer, `blur_of` its blur
+/// radius (px).
+pub(super) fn continue_across_layers(
+    fragments: &[Fragment],
+    w: usize,
+    h: usize,
+    layer_of: &(dyn Fn(&Fragment) -> usize + Sync),
+    blur_of: &(dyn Fn(&Fragment) -> f32 + Sync),
+) -> Vec<Fragment> {
+    const NONE: u32 = u32::MAX;
+    const DIRECTIONS: [(i32, i32); 4] = [(1, 0), (-1, 0), (0, 1), (0, -1)];
+    // Each frame pixel's heaviest fragment.
+    let mut main = vec![NONE; w * h];
+    for (i, f) in fragments.iter().enumerate() {
+        if f.x < 0 || f.y < 0 || f.x as usize >= w || f.y as usize >= h {
+            continue;
+        }
+        let p = f.y as usize * w + f.x as usize;
+        if main[p] == NONE || fragments[main[p] as usize].weight < f.weight {
+            main[p] = i as u32;
+        }
+    }
+    let layers: Vec<usize> = main
+        .par_iter()
+        .map(|&m| if m == NONE { 0 } else { layer_of(&fragments[m as usize]) })
+        .collect();
+    let (wi, hi) = (w as i32, h as i32);
+    let walks: Vec<(u32, (i32, i32), i32)> = (0..hi)
+        .into_par_iter()
+        .flat_map_iter(|y| {
+            let (main, layers) = (&main, &layers);
+            (0..wi).flat_map(move |x| {
+                let p = (y * wi + x) as usize;
+                let m = main[p];
+                let mut out = Vec::new();
+                if m == NONE {
+                    return out;
+                }
+                let f = &fragments[m as usize];
+                // A moving pixel's copies would be smeared along its own motion from where
+                // they are put, across the motion: steps along the boundary.
+                if f.color[3] * f.weight < 0.5 || f.motion[0].hypot(f.motion[1]) >= 1.0 {
+                    return out;
+                }
+                let (lp, blur_p) = (layers[p], blur_of(f));
+                for d in DIRECTIONS {
+                    let at = |k: i32| -> Option<usize> {
+                        let (qx, qy) = (x + d.0 * k, y + d.1 * k);
+                        (qx >= 0 && qy >= 0 && qx < wi && qy < hi)
+                            .then(|| (qy * wi + qx) as usize)
+                            .filter(|&q| main[q] != NONE && layers[q] > lp)
+                    };
+                    let Some(q) = at(1) else { continue };
+                    let blur_q = blur_of(&fragments[main[q] as usize]);
+                    if (blur_q - blur_p).abs() > 1.0 {
+                        continue;
+                    }
+                    let reach = blur_p.max(blur_q).ceil() as i32;
+                    if reach < 2 {
+                        continue;
+                    }
+                    let steps = (1..=reach).take_while(|&k| at(k).is_some()).count() as i32;
+                    out.push((m, d, steps));
+                }
+                out
+            })
+        })
+        .collect();
+    let mut fills = vec![0u16; w * h];
+    for &(m, d, steps) in &walks {
+        let f = &fragments[m as usize];
+        for k in 1..=steps {
+            let q = ((f.y + d.1 * k) * wi + f.x + d.0 * k) as usize;
+            fills[q] = fills[q].saturating_add(1);
+        }
+    }
+    let mut out = fragments.to_vec();
+    for (m, d, steps) in walks {
+        let f = fragments[m as usize];
+        for k in 1..=steps {
+            let (x, y) = (f.x + d.0 * k, f.y + d.1 * k);
+            let n = fills[(y * wi + x) as usize].max(1);
+            out.push(Fragment {
+                x,
+                y,
+                weight: f.weight / f32::from(n),
+                ..f
+            });
+        }
+    }
+    out
 }
 
 /// Frame pixels per drawn pixel, at most: a fragment whose blur is beyond the database's

@@ -1,0 +1,84 @@
+//! A surface that crosses depth-layer boundaries stays opaque: neither the soft split's
+//! see-through (the surface's two parts composited "over" each other let the layers behind
+//! show) nor the hard boundary's seam shows the background through it.
+
+mod support;
+
+use psf_db::PsfModel;
+use spreadlet::camera::Camera;
+use spreadlet::dbset::DbSet;
+use spreadlet::gbuffer::GBuffer;
+use spreadlet::synth::{synthesize, SynthOptions};
+use support::{camera, depth_for_coc, test_db};
+
+/// A red plane slanting towards the lens (CoC 3 px at its left end to 9 px at its right, in
+/// front of the focus plane) over a blue wall far behind (CoC 10 px): the plane spans several
+/// of the frame's eight depth layers. Inside the plane, farther from its silhouette than any
+/// blur reaches, the output is the plane's red: the wall's blue, continued behind the plane
+/// as the lens sees past its edge, must not show through it.
+fn plane_over_wall(options: &SynthOptions) -> (f32, (usize, usize)) {
+    let db = test_db(PsfModel::ThinLens);
+    let dbs = DbSet::single(db.clone()).expect("set");
+    let (w, h) = (200usize, 96usize);
+    // f/0.5, so that the wall behind the focus plane can blur more than the plane.
+    let cam = Camera {
+        f_stop: Some(0.5),
+        ..camera(w as u32, h as u32, true, 0.0)
+    };
+    let (x0, x1, y0, y1) = (40usize, 160usize, 16usize, 80usize);
+    let inside = |x: usize, y: usize| (x0..x1).contains(&x) && (y0..y1).contains(&y);
+    // Behind the focus plane: signed r = k (1 - s/d) = +10  =>  d = s / (1 - 10/k).
+    let lens = cam.thin_lens().expect("lens");
+    let wall = (lens.focus_distance / (1.0 - 10.0 / lens.coc_scale_px)) as f32;
+    assert!(wall > 0.0);
+    let mut color = Vec::with_capacity(w * h);
+    let mut depth = Vec::with_capacity(w * h);
+    for y in 0..h {
+        for x in 0..w {
+            if inside(x, y) {
+                let t = (x - x0) as f64 / (x1 - x0 - 1) as f64;
+                color.push([0.8, 0.0, 0.0, 1.0]);
+                depth.push(depth_for_coc(&cam, 3.0 + 6.0 * t) as f32);
+            } else {
+                color.push([0.0, 0.0, 0.6, 1.0]);
+                depth.push(wall);
+            }
+        }
+    }
+    let g = GBuffer::from_planes(w, h, color, Some(depth), None).expect("g-buffer");
+    let (image, _) = synthesize(&g, &cam, &dbs, options).expect("synthesize");
+    // Away from the silhouette by more than the largest blur (the wall's 10 px and the
+    // plane's 9 px, plus a margin).
+    let margin = 14;
+    let mut worst = (0.0f32, (0, 0));
+    for y in y0 + margin..y1 - margin {
+        for x in x0 + margin..x1 - margin {
+            let blue = image.pixels[y * w + x][2];
+            if blue > worst.0 {
+                worst = (blue, (x, y));
+            }
+        }
+    }
+    worst
+}
+
+#[test]
+fn a_surface_across_layer_boundaries_hides_what_is_behind_it() {
+    let (blue, at) = plane_over_wall(&SynthOptions::default());
+    assert!(
+        blue < 0.006,
+        "the wall shows through the plane: blue {blue:.4} at {at:?} (1 % of the wall's)"
+    );
+    // Without the continuation the test above fails: the soft split lets the wall through,
+    // hard layers draw it as a seam along each boundary.
+    let mut soft = SynthOptions::default();
+    soft.classify.continue_layers = false;
+    let (blue_soft, _) = plane_over_wall(&soft);
+    let mut hard = soft.clone();
+    hard.classify.soft_layers = None;
+    let (blue_hard, _) = plane_over_wall(&hard);
+    assert!(
+        blue_soft > 0.006 && blue_hard > 0.006,
+        "soft layers {blue_soft:.4}, hard layers {blue_hard:.4}: the case shows nothing"
+    );
+}
