@@ -548,7 +548,9 @@ pub(super) fn continue_across_layers(
             fills[q] = fills[q].saturating_add(1);
         }
     }
-    let mut out = fragments.to_vec();
+    let extra: usize = walks.iter().map(|&(_, _, steps)| steps as usize).sum();
+    let mut out = Vec::with_capacity(fragments.len() + extra);
+    out.extend_from_slice(fragments);
     for (m, d, steps) in walks {
         let f = fragments[m as usize];
         for k in 1..=steps {
