@@ -67,11 +67,18 @@ pub fn classify_fragments(
         let layer_of = |f: &Fragment| {
             (layer_coord(f.parallax).floor() as usize).min(n_layers - 1)
         };
-        with_continuations = continue_across_layers(fragments, w, h, &layer_of, &|f: &Fragment| {
+        let blur_of = |f: &Fragment| {
             let coc = signed_coc(f.depth).abs();
             let m = f.motion;
             coc + 0.5 * (m[0] * m[0] + m[1] * m[1]).sqrt()
-        });
+        };
+        with_continuations = continue_across_layers(
+            fragments,
+            (w, h),
+            &layer_of,
+            &blur_of,
+            options.hdr_dense_threshold,
+        );
         &with_continuations[..]
     } else {
         fragments
@@ -472,14 +479,15 @@ fn merge_coincident(classified: &mut Classified) {
 /// the boundary) would show the layers behind the surface as a line. A pixel continued from
 /// several sides gets the mean. Moving pixels are not continued: a copy put beside a moving
 /// pixel is smeared along the motion from there, and the copies of a boundary across the
-/// motion draw steps. `layer_of` is a fragment's hard layer, `blur_of` its blur
-/// radius (px).
+/// motion draw steps. Nor are pixels brighter than `bright_above` in any of R, G, B: copies of
+/// an emitter, half hidden by the nearer part's edge, would add light. `(w, h)` is the frame,
+/// `layer_of` a fragment's hard layer, `blur_of` its blur radius (px).
 pub(super) fn continue_across_layers(
     fragments: &[Fragment],
-    w: usize,
-    h: usize,
+    (w, h): (usize, usize),
     layer_of: &(dyn Fn(&Fragment) -> usize + Sync),
     blur_of: &(dyn Fn(&Fragment) -> f32 + Sync),
+    bright_above: f32,
 ) -> Vec<Fragment> {
     const NONE: u32 = u32::MAX;
     const DIRECTIONS: [(i32, i32); 4] = [(1, 0), (-1, 0), (0, 1), (0, -1)];
@@ -513,7 +521,9 @@ pub(super) fn continue_across_layers(
                 let f = &fragments[m as usize];
                 // A moving pixel's copies would be smeared along its own motion from where
                 // they are put, across the motion: steps along the boundary.
-                if f.color[3] * f.weight < 0.5 || f.motion[0].hypot(f.motion[1]) >= 1.0 {
+                let bright = f.color[..3].iter().any(|&c| c * f.weight > bright_above);
+                if f.color[3] * f.weight < 0.5 || f.motion[0].hypot(f.motion[1]) >= 1.0 || bright
+                {
                     return out;
                 }
                 let (lp, blur_p) = (layers[p], blur_of(f));
