@@ -8,8 +8,11 @@
 //! database stores that PSF dense (fast track), else splatted sparse.
 //!
 //! Layers are global and binned uniformly in parallax `1/depth` (the signed CoC is affine in
-//! it: constant parallax units), layer 0 the farthest. With soft layering a pixel near a layer
-//! boundary is split into two records whose weights sum to one.
+//! it: constant parallax units), layer 0 the farthest. With soft layering a moving pixel near a
+//! layer boundary is split into two records whose weights sum to one; a still one is layered
+//! hard, and the surface it belongs to is continued under the nearer layer's part
+//! ([`ClassifyOptions::continue_layers`]). A pixel whose blur is beyond the database's range is
+//! drawn at a reduced resolution ([`ClassifyOptions::reduced_resolution`]).
 //!
 //! Anti-aliased edge pixels of a near object carry the depth of the background behind it (the
 //! depth pass is not anti-aliased). With `edge_split`, a pixel that has a markedly nearer
