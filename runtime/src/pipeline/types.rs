@@ -129,7 +129,7 @@ pub struct PathCounts {
     /// ([`super::ClassifyOptions::fill_hidden`]).
     pub hidden_filled: usize,
     /// Fragments whose blur is beyond the database's range, drawn at a reduced resolution
-    /// ([`Classified::coarse`]; also in the path counts).
+    /// (`Classified::coarse`; also in the path counts).
     pub reduced: usize,
 }
 

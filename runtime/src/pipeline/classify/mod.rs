@@ -156,7 +156,7 @@ pub struct ClassifyOptions {
     /// serves moving frames alone; off, or without it, the lens-motion cell's PSF is drawn.
     pub smear_motion: bool,
     /// Draw a fragment whose CoC or motion is beyond the database's range at a resolution
-    /// 2, 4 or 8 times lower, where it is in range ([`super::types::CoarseLevel`]): a 4K
+    /// 2, 4 or 8 times lower, where it is in range (`CoarseLevel`): a 4K
     /// frame's background bokeh is then as large as the lens makes it, where the database's
     /// largest PSF would be drawn instead. Thin lens and lens-motion only; off, such a
     /// fragment is drawn with the database's largest PSF (and counted as clamped).
