@@ -560,6 +560,12 @@ fn synth_frame(args: &SynthArgs, job: &FrameJob, renderer: &mut Renderer) -> Res
                 stats.times.composite_ms,
                 frame.device,
             );
+            if stats.counts.reduced > 0 {
+                eprintln!(
+                    "{} pixel(s) blurred beyond the database's range drawn at a reduced resolution (see --stats: counts.reduced)",
+                    stats.counts.reduced
+                );
+            }
         }
         if let Some(p) = &job.stats {
             #[cfg(feature = "gpu")]
