@@ -562,7 +562,7 @@ fn synth_frame(args: &SynthArgs, job: &FrameJob, renderer: &mut Renderer) -> Res
             );
             if stats.counts.reduced > 0 {
                 eprintln!(
-                    "{} pixel(s) blurred beyond the database's range drawn at a reduced resolution (see --stats: counts.reduced)",
+                    "{} pixel(s) drawn at a reduced resolution, their blur beyond the database's range or above --coarse-above (see --stats: counts.reduced)",
                     stats.counts.reduced
                 );
             }

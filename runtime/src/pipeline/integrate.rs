@@ -134,34 +134,30 @@ pub fn add_upsampled(fine: &mut IntegratedLayers, coarse: &IntegratedLayers, sca
             .collect()
     };
     let (xs, ys) = (taps(w, cpw), taps(h, cph));
-    for (l, chunk) in coarse.planes.chunks(4).enumerate() {
-        if chunk.iter().all(Plane::is_empty) {
+    let pad = f.pad as usize;
+    for (k, src) in coarse.planes.iter().enumerate() {
+        if src.is_empty() {
             continue;
         }
-        for (ch, src) in chunk.iter().enumerate() {
-            if src.is_empty() {
-                continue;
-            }
-            let dst = &mut fine.planes[l * 4 + ch];
-            if dst.is_empty() {
-                *dst = Plane::new(fpw, fph);
-            }
-            let pad = f.pad as usize;
-            dst.data
-                .par_chunks_mut(fpw)
-                .skip(pad)
-                .take(h)
-                .zip(&ys)
-                .for_each(|(row, &(j, ty))| {
-                    let (r0, r1) = (&src.data[j * cpw..], &src.data[(j + 1) * cpw..]);
-                    for (dst, &(i, tx)) in row[pad..pad + w].iter_mut().zip(&xs) {
-                        let top = r0[i] + tx * (r0[i + 1] - r0[i]);
-                        let bottom = r1[i] + tx * (r1[i + 1] - r1[i]);
-                        *dst += top + ty * (bottom - top);
-                    }
-                });
+        let dst = &mut fine.planes[k];
+        if dst.is_empty() {
+            *dst = Plane::new(fpw, fph);
         }
-        if let Some(rows) = fine.rows.get_mut(l) {
+        dst.data
+            .par_chunks_mut(fpw)
+            .skip(pad)
+            .take(h)
+            .zip(&ys)
+            .for_each(|(row, &(j, ty))| {
+                let (r0, r1) = (&src.data[j * cpw..], &src.data[(j + 1) * cpw..]);
+                for (dst, &(i, tx)) in row[pad..pad + w].iter_mut().zip(&xs) {
+                    let top = r0[i] + tx * (r0[i + 1] - r0[i]);
+                    let bottom = r1[i] + tx * (r1[i + 1] - r1[i]);
+                    *dst += top + ty * (bottom - top);
+                }
+            });
+        // Plane `k` is channel `k % 4` of layer `k / 4`.
+        if let Some(rows) = fine.rows.get_mut(k / 4) {
             *rows = [0, fph];
         }
     }

@@ -128,8 +128,8 @@ pub struct PathCounts {
     /// Fragments of background continued behind sharper occluders
     /// ([`super::ClassifyOptions::fill_hidden`]).
     pub hidden_filled: usize,
-    /// Fragments whose blur is beyond the database's range, drawn at a reduced resolution
-    /// (`Classified::coarse`; also in the path counts).
+    /// Fragments drawn at a reduced resolution (`Classified::coarse`): their blur is beyond the
+    /// database's range, or above `ClassifyOptions::coarse_above_px` (also in the path counts).
     pub reduced: usize,
 }
 
