@@ -75,6 +75,7 @@ internal_modules!(
     prepare,
     reconstruct,
     renderer,
+    sample_merge,
     synth,
 );
 

@@ -348,6 +348,13 @@ pub(crate) fn classify_samples(
     );
     let model = resolve_model(effects, dbs, options.classify.smear_motion)?;
     let (fragments, dropped) = sample_fragments(frames, camera, effects, placement);
+    let fragments = crate::sample_merge::merge_alike(
+        &fragments,
+        frames.width,
+        frames.height,
+        camera,
+        options.classify.hdr_dense_threshold,
+    );
     let counts = PathCounts {
         dropped,
         ..PathCounts::default()
@@ -430,6 +437,42 @@ mod tests {
         assert_eq!(fragments.len(), 1);
         assert_eq!((fragments[0].x, fragments[0].y), (5, 7));
         assert_eq!(fragments[0].motion, m); // shutter 1 frame
+    }
+
+    /// A defocused, moving wall at 4 spp: each pixel receives its neighbours' bilinear shares
+    /// (about 16 fragments), and merging leaves one per pixel of the wall and the margin round
+    /// it, with the light kept (the wall is dim enough that no pixel's merged fragment becomes
+    /// bright where the samples pile up).
+    #[test]
+    fn samples_of_one_surface_merge_to_one_fragment_per_pixel() {
+        let cam = camera();
+        let spp = 4;
+        let mut samples = Vec::new();
+        for k in 0..16 * 16 * spp {
+            let j = k as f32;
+            samples.push(Sample {
+                color: [0.2, 0.1, 0.4, 1.0],
+                depth: 1.5,
+                lens: [(j * 0.37).sin() * 0.7, (j * 0.53).cos() * 0.7],
+                time: (j * 0.11).sin() * 0.5,
+                motion: [3.0, 1.0],
+                jitter: [(j * 0.71).sin() * 0.5, (j * 0.29).cos() * 0.5],
+            });
+        }
+        let frames = StochasticFrames::new(16, 16, spp, samples);
+        let effects = effects_of(&cam, &frames);
+        let (fragments, _) = sample_fragments(&frames, &cam, effects, SamplePlacement::Bilinear);
+        assert!(fragments.len() > 3 * 16 * 16 * spp, "{}", fragments.len());
+        let merged = crate::sample_merge::merge_alike(&fragments, 16, 16, &cam, 2.0);
+        let pixels: std::collections::HashSet<(i32, i32)> =
+            fragments.iter().map(|f| (f.x, f.y)).collect();
+        assert_eq!(merged.len(), pixels.len());
+        let light = |fs: &[Fragment]| -> f64 {
+            fs.iter()
+                .map(|f| f64::from(f.color[2] * f.weight))
+                .sum()
+        };
+        assert!((light(&merged) / light(&fragments) - 1.0).abs() < 1e-5);
     }
 
     /// Bilinear placement keeps the sample's weight and its sub-pixel position: the shares sum

@@ -1,0 +1,258 @@
+//! Merging the fragments of stochastic samples that one PSF would draw alike.
+//!
+//! Reconstruction places every sample on the pixels around its lens-centre, shutter-centre
+//! position (four bilinear taps, or up to nine footprint taps), so each pixel receives a dozen
+//! or more fragments, most of them of one surface: the same CoC, motion and depth layer within
+//! a small fraction of a pixel. Splatting is linear in colour, so fragments of one pixel with
+//! the same PSF can be drawn once with their colours summed. Merged before classification, they
+//! are looked up, layered and splatted once: comets at 4 spp goes from 4 M fragments to about
+//! one per pixel and surface.
+//!
+//! Two fragments of a pixel merge when, against the first fragment of the group (its seed),
+//! - their signed CoC differs by at most [`COC_TOLERANCE_PX`] plus [`RELATIVE_TOLERANCE`] of
+//!   the seed's (pixels),
+//! - their motion vectors differ by at most [`MOTION_TOLERANCE_PX`] plus
+//!   [`RELATIVE_TOLERANCE`] of the seed's length (pixels over the shutter),
+//! - their parallax differs by at most [`RELATIVE_TOLERANCE`] of the seed's (the depth
+//!   layers, and the CoC of a pinhole camera, which has none),
+//! - they come from the same source, and the merged fragment is not brighter than
+//!   `bright_above` in any channel (a bright fragment is drawn with a dense twin of its own
+//!   PSF, and stays alone).
+//!
+//! The merged fragment carries the summed weight, the weighted mean colour, parallax and
+//! motion; its depth is the inverse of its mean parallax. Each member's PSF parameters are
+//! within twice the tolerance of the merged ones, a small part of a database cell.
+
+use crate::camera::Camera;
+use crate::pipeline::classify::Fragment;
+
+/// Absolute CoC tolerance for merging, pixels.
+pub const COC_TOLERANCE_PX: f32 = 0.1;
+
+/// Absolute motion tolerance for merging, pixels over the shutter.
+pub const MOTION_TOLERANCE_PX: f32 = 0.1;
+
+/// Tolerance relative to the seed's CoC, motion length and parallax.
+pub const RELATIVE_TOLERANCE: f32 = 0.02;
+
+/// Pixels beyond the frame on every side within which fragments are merged; fragments farther
+/// out (a sample with an extreme label) pass through unmerged, so the pixel index stays bounded
+/// by the frame.
+const MARGIN_PX: i64 = 32;
+
+/// A group of fragments being merged: sums weighted by the fragments' weights.
+#[derive(Clone, Copy)]
+struct Group {
+    seed: Fragment,
+    seed_coc: f32,
+    weight: f32,
+    color: [f32; 4],
+    parallax: f32,
+    motion: [f32; 2],
+}
+
+impl Group {
+    fn new(f: &Fragment, coc: f32) -> Self {
+        Group {
+            seed: *f,
+            seed_coc: coc,
+            weight: f.weight,
+            color: f.color.map(|c| c * f.weight),
+            parallax: f.parallax * f.weight,
+            motion: f.motion.map(|m| m * f.weight),
+        }
+    }
+
+    /// Whether `f` (of signed CoC `coc`) is drawn alike by the seed's PSF.
+    fn accepts(&self, f: &Fragment, coc: f32) -> bool {
+        let s = &self.seed;
+        let seed_len = s.motion[0].hypot(s.motion[1]);
+        let dm = (f.motion[0] - s.motion[0]).hypot(f.motion[1] - s.motion[1]);
+        f.source == s.source
+            && (coc - self.seed_coc).abs() <= COC_TOLERANCE_PX + RELATIVE_TOLERANCE * self.seed_coc.abs()
+            && dm <= MOTION_TOLERANCE_PX + RELATIVE_TOLERANCE * seed_len
+            && (f.parallax - s.parallax).abs() <= RELATIVE_TOLERANCE * s.parallax.abs()
+    }
+
+    fn add(&mut self, f: &Fragment) {
+        self.weight += f.weight;
+        for (a, c) in self.color.iter_mut().zip(f.color) {
+            *a += c * f.weight;
+        }
+        self.parallax += f.parallax * f.weight;
+        for (a, m) in self.motion.iter_mut().zip(f.motion) {
+            *a += m * f.weight;
+        }
+    }
+
+    /// The largest colour channel the merged fragment would draw with `f` added (weighted).
+    fn brightest_with(&self, f: &Fragment) -> f32 {
+        (0..3)
+            .map(|c| self.color[c] + f.color[c] * f.weight)
+            .fold(f32::NEG_INFINITY, f32::max)
+    }
+
+    fn fragment(&self) -> Fragment {
+        let w = self.weight;
+        if w <= 0.0 || !w.is_finite() {
+            return self.seed;
+        }
+        let parallax = self.parallax / w;
+        Fragment {
+            color: self.color.map(|c| c / w),
+            weight: w,
+            parallax,
+            depth: if parallax > 0.0 {
+                1.0 / parallax
+            } else {
+                self.seed.depth
+            },
+            motion: self.motion.map(|m| m / w),
+            ..self.seed
+        }
+    }
+}
+
+/// `fragments` (a `w x h` frame's, from stochastic samples) with those of each pixel that one
+/// PSF draws alike merged (module documentation), in row order of their pixels, then the
+/// fragments outside the frame's margin as they were. Deterministic: each pixel's fragments
+/// are grouped in their input order. `bright_above` is the brightness (a weighted colour
+/// channel) above which a fragment is drawn alone.
+pub fn merge_alike(
+    fragments: &[Fragment],
+    w: usize,
+    h: usize,
+    camera: &Camera,
+    bright_above: f32,
+) -> Vec<Fragment> {
+    let lens = camera.thin_lens();
+    let coc_of = |f: &Fragment| lens.map_or(0.0, |l| l.signed_coc_px(f64::from(f.depth)) as f32);
+    let (bw, bh) = (w as i64 + 2 * MARGIN_PX, h as i64 + 2 * MARGIN_PX);
+    let cell_of = |f: &Fragment| -> Option<usize> {
+        let (x, y) = (i64::from(f.x) + MARGIN_PX, i64::from(f.y) + MARGIN_PX);
+        (x >= 0 && y >= 0 && x < bw && y < bh).then(|| (y * bw + x) as usize)
+    };
+    // Fragments by pixel (a counting sort, stable), and those outside the margin.
+    let cells = (bw * bh) as usize;
+    let mut starts = vec![0u32; cells + 1];
+    let mut outside = Vec::new();
+    for f in fragments {
+        match cell_of(f) {
+            Some(c) => starts[c + 1] += 1,
+            None => outside.push(*f),
+        }
+    }
+    for i in 0..cells {
+        starts[i + 1] += starts[i];
+    }
+    let mut fill = starts.clone();
+    let mut order = vec![0u32; starts[cells] as usize];
+    for (k, f) in fragments.iter().enumerate() {
+        if let Some(c) = cell_of(f) {
+            order[fill[c] as usize] = k as u32;
+            fill[c] += 1;
+        }
+    }
+    drop(fill);
+    let mut merged = Vec::with_capacity(fragments.len() / 4 + outside.len());
+    let mut groups: Vec<(Group, bool)> = Vec::new();
+    for c in 0..cells {
+        let members = &order[starts[c] as usize..starts[c + 1] as usize];
+        if members.is_empty() {
+            continue;
+        }
+        groups.clear();
+        for &k in members {
+            let f = &fragments[k as usize];
+            let coc = coc_of(f);
+            let alone = f.color[..3]
+                .iter()
+                .any(|&v| v * f.weight > bright_above);
+            let into = (!alone)
+                .then(|| {
+                    groups.iter_mut().find(|(g, open)| {
+                        *open && g.accepts(f, coc) && g.brightest_with(f) <= bright_above
+                    })
+                })
+                .flatten();
+            match into {
+                Some((g, _)) => g.add(f),
+                None => groups.push((Group::new(f, coc), !alone)),
+            }
+        }
+        merged.extend(groups.iter().map(|(g, _)| g.fragment()));
+    }
+    merged.extend(outside);
+    merged
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn camera() -> Camera {
+        Camera::from_json_str(
+            r#"{"width":8,"height":8,"focal_length_mm":50,"sensor_width_mm":36,
+            "f_stop":2.0,"focus_distance":1.0,"aperture_blades":0,"shutter_frames":1.0}"#,
+        )
+        .expect("camera")
+    }
+
+    fn fragment(x: i32, y: i32, depth: f32, motion: [f32; 2], color: f32, weight: f32) -> Fragment {
+        Fragment {
+            x,
+            y,
+            color: [color, color, color, 1.0],
+            weight,
+            parallax: 1.0 / depth,
+            depth,
+            motion,
+            source: 0,
+        }
+    }
+
+    /// Fragments of one surface in a pixel become one, with the weighted colour and the light
+    /// (colour times weight) kept; another depth, another motion or another pixel stays apart.
+    #[test]
+    fn merges_one_surface_and_keeps_the_light() {
+        let frags = [
+            fragment(3, 3, 2.0, [4.0, 0.0], 0.2, 0.25),
+            fragment(3, 3, 2.001, [4.01, 0.0], 0.6, 0.5),
+            fragment(3, 3, 5.0, [4.0, 0.0], 0.9, 0.25), // another depth: its own CoC
+            fragment(3, 3, 2.0, [0.0, 4.0], 0.9, 0.25), // another motion
+            fragment(4, 3, 2.0, [4.0, 0.0], 0.9, 0.25), // another pixel
+        ];
+        let merged = merge_alike(&frags, 8, 8, &camera(), 2.0);
+        assert_eq!(merged.len(), 4);
+        let first = merged[0];
+        assert_eq!((first.x, first.y), (3, 3));
+        assert!((first.weight - 0.75).abs() < 1e-6);
+        let light = first.color[0] * first.weight;
+        assert!((light - (0.2 * 0.25 + 0.6 * 0.5)).abs() < 1e-6, "{light}");
+        let total = |fs: &[Fragment]| -> f32 { fs.iter().map(|f| f.color[0] * f.weight).sum() };
+        assert!((total(&merged) - total(&frags)).abs() < 1e-5);
+    }
+
+    /// A bright fragment is never merged, nor does merging make a group bright.
+    #[test]
+    fn bright_fragments_stay_alone() {
+        let frags = [
+            fragment(1, 1, 2.0, [0.0; 2], 12.0, 0.25), // 3.0 weighted: bright
+            fragment(1, 1, 2.0, [0.0; 2], 1.2, 0.25),
+            fragment(1, 1, 2.0, [0.0; 2], 1.2, 0.25),
+            fragment(1, 1, 2.0, [0.0; 2], 6.0, 0.25), // 1.5 alone, 2.1 with the pair: apart
+        ];
+        let merged = merge_alike(&frags, 8, 8, &camera(), 2.0);
+        assert_eq!(merged.len(), 3);
+        assert_eq!(merged[0].color[0], 12.0);
+        assert!((merged[1].weight - 0.5).abs() < 1e-6);
+    }
+
+    /// Fragments far outside the frame are kept as they are, after the others.
+    #[test]
+    fn fragments_beyond_the_margin_pass_through() {
+        let far = fragment(-1_000_000, 5, 2.0, [0.0; 2], 0.5, 1.0);
+        let merged = merge_alike(&[far, far], 8, 8, &camera(), 2.0);
+        assert_eq!(merged, vec![far, far]);
+    }
+}
