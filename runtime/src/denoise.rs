@@ -17,6 +17,11 @@
 //! - albedo: `exp(-|a_i - a_j|^2 / ALBEDO_SIGMA^2)`, relative to the brighter albedo, so that an
 //!   emitter (whose guide albedo holds its emission) never mixes with a lit surface.
 //!
+//! The samples of one pixel that lie on one surface (depth, normal and albedo within a tenth
+//! of those tolerances) share the filtered illumination of their mean position: the filter
+//! runs once per pixel and surface, four times less often at 4 spp, and their fragments are
+//! merged after it anyway ([`crate::sample_merge`]).
+//!
 //! Samples without a hit, and samples whose neighbours all weigh nothing, keep their colour.
 
 use formats::{SampleGuides, StochasticFrames};
@@ -86,6 +91,8 @@ pub fn denoise_samples(
     // The members' data in cell order, so that a neighbourhood is read from contiguous memory.
     let mut fill = starts.clone();
     let mut members = vec![Member::default(); starts[w * h]];
+    // Each sample's place among the members (NOT_A_MEMBER outside the frame or for a miss).
+    let mut member_of = vec![NOT_A_MEMBER; frames.samples.len()];
     for (k, m) in moved.iter().enumerate() {
         if let Some((cell, m)) = m.as_ref().and_then(|m| cell_of(m).map(|c| (c, m))) {
             if !hit(k) {
@@ -101,23 +108,22 @@ pub fn denoise_samples(
                     s.color[c] / (g.albedo[c].max(0.0) + ALBEDO_EPSILON)
                 }),
             };
+            member_of[k] = fill[cell];
             fill[cell] += 1;
         }
     }
     let inv_two_var = 1.0 / (2.0 * sigma * sigma);
     let inv_albedo_var = 1.0 / (ALBEDO_SIGMA * ALBEDO_SIGMA);
     let max_d2 = (CUTOFF_SIGMAS * sigma).powi(2);
-    // The cross-bilateral weights round sample `i`: every neighbour's (weight, luminance,
-    // illumination), in neighbourhood order, into `out`; `false` for a sample left as it is.
-    let neighbours = |i: usize, out: &mut Vec<(f32, f32, [f32; 3])>| -> bool {
+    // The cross-bilateral weights round `target`: every neighbour's (weight, luminance,
+    // illumination), in neighbourhood order, into `out`.
+    let neighbours = |target: &Member, out: &mut Vec<(f32, f32, [f32; 3])>| {
         out.clear();
-        let Some(mi) = moved.get(i).copied().flatten() else {
-            return false;
+        let (mi, zi) = (target, target.depth);
+        let gi = SampleGuides {
+            albedo: target.albedo,
+            normal: target.normal,
         };
-        if !hit(i) {
-            return false;
-        }
-        let (gi, zi) = (guides[i], frames.samples[i].depth);
         let inv_depth = 1.0 / (DEPTH_TOLERANCE * zi);
         let (cx, cy) = (mi.q[0].floor() as i64, mi.q[1].floor() as i64);
         for y in (cy - reach).max(0)..=(cy + reach).min(h as i64 - 1) {
@@ -158,7 +164,6 @@ pub fn denoise_samples(
                 out.push((weight, luminance(e), e));
             }
         }
-        true
     };
     // The weighted mean illumination of `neighbours`, each neighbour's luminance capped at
     // `ceiling`, or without the brightest neighbour when `ceiling` is infinite (a level that
@@ -191,21 +196,79 @@ pub fn denoise_samples(
     // neighbour's luminance capped at FIREFLY_FACTOR times that level, so that one rare bright
     // sample (a bounce that found a small emitter) is not spread into a blob over its
     // neighbours, nor kept as a speck. Both from one pass over the neighbourhood's weights.
+    let filter = |target: &Member, found: &mut Vec<(f32, f32, [f32; 3])>| -> Option<[f32; 3]> {
+        neighbours(target, found);
+        let level = mean_illumination(found, f32::INFINITY)?;
+        let ceiling = FIREFLY_FACTOR * luminance(level).max(0.0);
+        mean_illumination(found, ceiling)
+    };
+    // The members of one pixel that lie on one surface share one filtered illumination, that
+    // of their mean position: the filter runs once per pixel and surface, not once per sample.
+    let per_member: Vec<Option<[f32; 3]>> = (0..h)
+        .into_par_iter()
+        .map_init(
+            || (Vec::new(), Vec::new(), Vec::new()),
+            |(found, groups, group_of), y| {
+                let mut out = Vec::with_capacity(starts[(y + 1) * w] - starts[y * w]);
+                for cell in y * w..(y + 1) * w {
+                    let cell_members = &members[starts[cell]..starts[cell + 1]];
+                    groups.clear();
+                    group_of.clear();
+                    for m in cell_members {
+                        let found_group = groups
+                            .iter_mut()
+                            .position(|(seed, _, _): &mut (Member, [f32; 2], f32)| {
+                                seed.same_surface(m)
+                            });
+                        let g = found_group.unwrap_or_else(|| {
+                            groups.push((*m, [0.0; 2], 0.0));
+                            groups.len() - 1
+                        });
+                        let (_, q, count) = &mut groups[g];
+                        (q[0], q[1], *count) = (q[0] + m.q[0], q[1] + m.q[1], *count + 1.0);
+                        group_of.push(g);
+                    }
+                    let results: Vec<Option<[f32; 3]>> = groups
+                        .iter()
+                        .map(|&(seed, q, count)| {
+                            let target = Member {
+                                q: [q[0] / count, q[1] / count],
+                                ..seed
+                            };
+                            filter(&target, found)
+                        })
+                        .collect();
+                    out.extend(group_of.iter().map(|&g| results[g]));
+                }
+                out
+            },
+        )
+        .collect::<Vec<_>>()
+        .concat();
     (0..frames.samples.len())
         .into_par_iter()
-        .map_init(Vec::new, |found, i| {
-            let original = frames.samples[i].color;
-            if !neighbours(i, found) {
-                return original;
-            }
-            let Some(level) = mean_illumination(found, f32::INFINITY) else {
+        .map_init(Vec::new, |found, k| {
+            let original = frames.samples[k].color;
+            let illumination = match (member_of[k], moved[k]) {
+                (NOT_A_MEMBER, Some(m)) if hit(k) => {
+                    // Outside the frame: on its own, as far as the frame's members reach.
+                    let (s, g) = (&frames.samples[k], &guides[k]);
+                    let target = Member {
+                        q: m.q,
+                        depth: s.depth,
+                        normal: g.normal,
+                        albedo: g.albedo,
+                        illumination: [0.0; 3],
+                    };
+                    filter(&target, found)
+                }
+                (NOT_A_MEMBER, _) => None,
+                (j, _) => per_member[j],
+            };
+            let Some(mean) = illumination else {
                 return original;
             };
-            let ceiling = FIREFLY_FACTOR * luminance(level).max(0.0);
-            let Some(mean) = mean_illumination(found, ceiling) else {
-                return original;
-            };
-            let a = guides[i].albedo;
+            let a = guides[k].albedo;
             let mut out = original;
             for c in 0..3 {
                 out[c] = mean[c] * (a[c].max(0.0) + ALBEDO_EPSILON);
@@ -214,6 +277,18 @@ pub fn denoise_samples(
         })
         .collect()
 }
+
+/// [`denoise_samples`]' mark for a sample that is not among the frame's members.
+const NOT_A_MEMBER: usize = usize::MAX;
+
+/// Of two members of one pixel, the depths differ by at most this fraction of
+/// [`DEPTH_TOLERANCE`], the normals by at most this angle's cosine and the albedos by at most
+/// this fraction of [`ALBEDO_SIGMA`] for them to be filtered as one surface.
+const SAME_SURFACE_FRACTION: f32 = 0.1;
+
+/// The least cosine between the normals of two members filtered as one surface (about 2.6
+/// degrees).
+const SAME_SURFACE_COSINE: f32 = 0.999;
 
 /// Rec. 709 luminance of linear RGB.
 fn luminance(c: [f32; 3]) -> f32 {
@@ -229,6 +304,22 @@ struct Member {
     normal: [f32; 3],
     albedo: [f32; 3],
     illumination: [f32; 3],
+}
+
+impl Member {
+    /// Whether `other` lies on this member's surface: the filter weighs both alike against
+    /// any neighbour (depth, normal and albedo within a tenth of the filter's tolerances).
+    fn same_surface(&self, other: &Member) -> bool {
+        let depth = (other.depth - self.depth).abs()
+            <= SAME_SURFACE_FRACTION * DEPTH_TOLERANCE * self.depth.abs();
+        let cosine: f32 = (0..3).map(|c| self.normal[c] * other.normal[c]).sum();
+        let scale = (0..3).fold(ALBEDO_EPSILON, |s, c| {
+            s.max(self.albedo[c].abs()).max(other.albedo[c].abs())
+        });
+        let albedo = (0..3)
+            .all(|c| (self.albedo[c] - other.albedo[c]).abs() <= SAME_SURFACE_FRACTION * ALBEDO_SIGMA * scale);
+        depth && cosine >= SAME_SURFACE_COSINE && albedo
+    }
 }
 
 #[cfg(test)]
@@ -335,6 +426,88 @@ mod tests {
     fn a_firefly_is_not_spread_over_its_neighbours() {
         let light = |x: usize, y: usize| if (x, y) == (10, 10) { 200.0 } else { 1.0 };
         let (frames, moved) = frame(21, 21, |_, _| 0.5, light, |_, _| 2.0);
+        let guides = frames.guides.clone().expect("guides");
+        let out = denoise_samples(&frames, &guides, &moved);
+        let worst = out.iter().map(|c| c[0]).fold(0.0f32, f32::max);
+        assert!(worst < 2.0 * 0.5, "brightest sample {worst}");
+    }
+
+    /// Four samples per pixel, `surface(x, y, k)` giving each one's (albedo, light, depth), at
+    /// jittered positions inside its pixel, facing the camera.
+    fn frame_4spp(
+        w: usize,
+        h: usize,
+        surface: impl Fn(usize, usize, usize) -> (f32, f32, f32),
+    ) -> (StochasticFrames, Vec<Option<MovedSample>>) {
+        let (mut samples, mut guides, mut moved) = (Vec::new(), Vec::new(), Vec::new());
+        for y in 0..h {
+            for x in 0..w {
+                for k in 0..4 {
+                    let (a, l, z) = surface(x, y, k);
+                    samples.push(Sample {
+                        color: [a * l, a * l, a * l, 1.0],
+                        depth: z,
+                        ..Sample::default()
+                    });
+                    guides.push(SampleGuides {
+                        albedo: [a; 3],
+                        normal: [0.0, 0.0, -1.0],
+                    });
+                    let jitter = [0.2 + 0.5 * (k % 2) as f32, 0.3 + 0.4 * (k / 2) as f32];
+                    moved.push(Some(MovedSample {
+                        q: [x as f32 + jitter[0], y as f32 + jitter[1]],
+                        coc: 0.0,
+                        motion: [0.0; 2],
+                    }));
+                }
+            }
+        }
+        let frames = StochasticFrames::new(w, h, 4, samples)
+            .with_guides(guides)
+            .expect("guides");
+        (frames, moved)
+    }
+
+    /// At 4 spp, two surfaces sharing every pixel (a fine pattern at two depths, or of two
+    /// albedos) are filtered apart: each keeps its own light, although their samples share
+    /// pixels; and one surface's noise is still averaged.
+    #[test]
+    fn surfaces_sharing_a_pixel_are_filtered_apart() {
+        let near = |k: usize| k.is_multiple_of(2);
+        let (frames, moved) = frame_4spp(16, 16, |x, y, k| {
+            let light = 1.0 + 0.5 * noise(x * 4 + k, y);
+            if near(k) {
+                (0.5, 4.0 * light, 0.5)
+            } else {
+                (0.5, light, 3.0)
+            }
+        });
+        let guides = frames.guides.clone().expect("guides");
+        let out = denoise_samples(&frames, &guides, &moved);
+        for (i, c) in out.iter().enumerate() {
+            let want = if near(i % 4) { 2.0 } else { 0.5 };
+            assert!((c[0] / want - 1.0).abs() < 0.15, "{i}: {c:?} vs {want}");
+        }
+        let (frames, moved) = frame_4spp(16, 16, |x, y, k| {
+            let light = 1.0 + 0.5 * noise(x * 4 + k, y);
+            (if near(k) { 0.8 } else { 0.1 }, light, 2.0)
+        });
+        let guides = frames.guides.clone().expect("guides");
+        let out = denoise_samples(&frames, &guides, &moved);
+        for (i, c) in out.iter().enumerate() {
+            let want = if near(i % 4) { 0.8 } else { 0.1 };
+            assert!((c[0] / want - 1.0).abs() < 0.15, "{i}: {c:?} vs {want}");
+        }
+    }
+
+    /// At 4 spp a firefly shares its pixel with three samples of its surface: it is neither
+    /// kept nor spread (every sample within twice the surface's level).
+    #[test]
+    fn a_firefly_among_its_pixels_samples_is_removed() {
+        let (frames, moved) = frame_4spp(15, 15, |x, y, k| {
+            let light = if (x, y, k) == (7, 7, 1) { 200.0 } else { 1.0 };
+            (0.5, light, 2.0)
+        });
         let guides = frames.guides.clone().expect("guides");
         let out = denoise_samples(&frames, &guides, &moved);
         let worst = out.iter().map(|c| c[0]).fold(0.0f32, f32::max);
