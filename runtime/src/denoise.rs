@@ -20,7 +20,9 @@
 //! The samples of one pixel that lie on one surface (depth, normal and albedo within a tenth
 //! of those tolerances) share the filtered illumination of their mean position: the filter
 //! runs once per pixel and surface, four times less often at 4 spp, and their fragments are
-//! merged after it anyway ([`crate::sample_merge`]).
+//! merged after it anyway ([`crate::sample_merge`]). Its neighbours see them there as two
+//! entries, the brightest alone and the mean of the rest weighted by their number, so that the
+//! firefly rules below still see single samples.
 //!
 //! Samples without a hit, and samples whose neighbours all weigh nothing, keep their colour.
 
@@ -112,6 +114,21 @@ pub fn denoise_samples(
             fill[cell] += 1;
         }
     }
+    // Each pixel's members grouped by surface, row by row on every thread: the groups (as
+    // filter targets: mean position, the first member's guides), the neighbour entries they
+    // make, each pixel's entry count, and each member's group in its row.
+    let rows: Vec<RowGroups> = (0..h)
+        .into_par_iter()
+        .map(|y| RowGroups::of(&members[starts[y * w]..starts[(y + 1) * w]], &starts[y * w..=(y + 1) * w]))
+        .collect();
+    let mut entry_starts = Vec::with_capacity(w * h + 1);
+    entry_starts.push(0usize);
+    for row in &rows {
+        for &n in &row.entries_per_cell {
+            entry_starts.push(entry_starts[entry_starts.len() - 1] + n as usize);
+        }
+    }
+    let entries: Vec<Entry> = rows.iter().flat_map(|r| r.entries.iter().copied()).collect();
     let inv_two_var = 1.0 / (2.0 * sigma * sigma);
     let inv_albedo_var = 1.0 / (ALBEDO_SIGMA * ALBEDO_SIGMA);
     let max_d2 = (CUTOFF_SIGMAS * sigma).powi(2);
@@ -133,7 +150,8 @@ pub fn denoise_samples(
             }
             let row = y as usize * w;
             let (first, last) = (row + x0 as usize, row + x1 as usize);
-            for mj in &members[starts[first]..starts[last + 1]] {
+            for entry in &entries[entry_starts[first]..entry_starts[last + 1]] {
+                let mj = &entry.at;
                 let (dx, dy) = (mj.q[0] - mi.q[0], mj.q[1] - mi.q[1]);
                 let d2 = dx * dx + dy * dy;
                 if d2 > max_d2 {
@@ -156,12 +174,11 @@ pub fn denoise_samples(
                 if exponent > 12.0 {
                     continue;
                 }
-                let weight = (-exponent).exp() * cosine.powi(NORMAL_POWER);
+                let weight = (-exponent).exp() * cosine.powi(NORMAL_POWER) * entry.count;
                 if !(weight > 0.0 && weight.is_finite()) {
                     continue;
                 }
-                let e = mj.illumination;
-                out.push((weight, luminance(e), e));
+                out.push((weight, entry.luminance, mj.illumination));
             }
         }
     };
@@ -204,45 +221,13 @@ pub fn denoise_samples(
     };
     // The members of one pixel that lie on one surface share one filtered illumination, that
     // of their mean position: the filter runs once per pixel and surface, not once per sample.
-    let per_member: Vec<Option<[f32; 3]>> = (0..h)
-        .into_par_iter()
-        .map_init(
-            || (Vec::new(), Vec::new(), Vec::new()),
-            |(found, groups, group_of), y| {
-                let mut out = Vec::with_capacity(starts[(y + 1) * w] - starts[y * w]);
-                for cell in y * w..(y + 1) * w {
-                    let cell_members = &members[starts[cell]..starts[cell + 1]];
-                    groups.clear();
-                    group_of.clear();
-                    for m in cell_members {
-                        let found_group = groups
-                            .iter_mut()
-                            .position(|(seed, _, _): &mut (Member, [f32; 2], f32)| {
-                                seed.same_surface(m)
-                            });
-                        let g = found_group.unwrap_or_else(|| {
-                            groups.push((*m, [0.0; 2], 0.0));
-                            groups.len() - 1
-                        });
-                        let (_, q, count) = &mut groups[g];
-                        (q[0], q[1], *count) = (q[0] + m.q[0], q[1] + m.q[1], *count + 1.0);
-                        group_of.push(g);
-                    }
-                    let results: Vec<Option<[f32; 3]>> = groups
-                        .iter()
-                        .map(|&(seed, q, count)| {
-                            let target = Member {
-                                q: [q[0] / count, q[1] / count],
-                                ..seed
-                            };
-                            filter(&target, found)
-                        })
-                        .collect();
-                    out.extend(group_of.iter().map(|&g| results[g]));
-                }
-                out
-            },
-        )
+    let per_member: Vec<Option<[f32; 3]>> = rows
+        .par_iter()
+        .map_init(Vec::new, |found, row| {
+            let results: Vec<Option<[f32; 3]>> =
+                row.targets.iter().map(|t| filter(t, found)).collect();
+            row.group_of.iter().map(|&g| results[g as usize]).collect::<Vec<_>>()
+        })
         .collect::<Vec<_>>()
         .concat();
     (0..frames.samples.len())
@@ -304,6 +289,117 @@ struct Member {
     normal: [f32; 3],
     albedo: [f32; 3],
     illumination: [f32; 3],
+}
+
+/// The members of one pixel on one surface as a neighbour sees them: at their mean position,
+/// with the first member's guides, `count` members of the given mean illumination. A group of
+/// several makes two entries, its brightest member alone and the rest, so that the filter can
+/// still set the brightest sample of a neighbourhood aside and cap each one's luminance.
+#[derive(Clone, Copy, Debug)]
+struct Entry {
+    at: Member,
+    count: f32,
+    luminance: f32,
+}
+
+/// A pixel's members on one surface, while they are gathered.
+#[derive(Clone, Copy)]
+struct Group {
+    /// The first member: its guides stand for the group's.
+    first: Member,
+    position_sum: [f32; 2],
+    count: usize,
+    /// The member of the largest illumination luminance (the first of equals).
+    brightest: Member,
+    illumination_sum: [f32; 3],
+}
+
+/// One row of pixels' members grouped by surface.
+#[derive(Default)]
+struct RowGroups {
+    /// One per group, in pixel order: the mean position and the first member's guides.
+    targets: Vec<Member>,
+    /// The entries of the row's groups, in pixel order.
+    entries: Vec<Entry>,
+    /// How many entries each pixel of the row has.
+    entries_per_cell: Vec<u32>,
+    /// Each member's group (an index into `targets`), in member order.
+    group_of: Vec<u32>,
+}
+
+impl RowGroups {
+    /// The groups of a row whose members are `members`, pixel `i`'s at
+    /// `cell_starts[i] - cell_starts[0]..cell_starts[i + 1] - cell_starts[0]`.
+    fn of(members: &[Member], cell_starts: &[usize]) -> Self {
+        let mut row = RowGroups::default();
+        let base = cell_starts[0];
+        let mut groups: Vec<Group> = Vec::new();
+        for bounds in cell_starts.windows(2) {
+            groups.clear();
+            for m in &members[bounds[0] - base..bounds[1] - base] {
+                let g = match groups.iter().position(|g| g.first.same_surface(m)) {
+                    Some(g) => g,
+                    None => {
+                        groups.push(Group {
+                            first: *m,
+                            position_sum: [0.0; 2],
+                            count: 0,
+                            brightest: *m,
+                            illumination_sum: [0.0; 3],
+                        });
+                        groups.len() - 1
+                    }
+                };
+                let group = &mut groups[g];
+                let q = &mut group.position_sum;
+                (q[0], q[1]) = (q[0] + m.q[0], q[1] + m.q[1]);
+                group.count += 1;
+                if luminance(m.illumination) > luminance(group.brightest.illumination) {
+                    group.brightest = *m;
+                }
+                for (sum, e) in group.illumination_sum.iter_mut().zip(m.illumination) {
+                    *sum += e;
+                }
+                row.group_of.push((row.targets.len() + g) as u32);
+            }
+            let before = row.entries.len();
+            for group in &groups {
+                let Group {
+                    first,
+                    position_sum: q,
+                    count,
+                    brightest,
+                    illumination_sum: sum,
+                } = *group;
+                let at = Member {
+                    q: [q[0] / count as f32, q[1] / count as f32],
+                    ..first
+                };
+                row.targets.push(at);
+                let alone = Member {
+                    illumination: brightest.illumination,
+                    ..at
+                };
+                row.entries.push(Entry {
+                    at: alone,
+                    count: 1.0,
+                    luminance: luminance(brightest.illumination),
+                });
+                if count > 1 {
+                    let rest = (count - 1) as f32;
+                    let illumination =
+                        std::array::from_fn(|c| (sum[c] - brightest.illumination[c]) / rest);
+                    row.entries.push(Entry {
+                        at: Member { illumination, ..at },
+                        count: rest,
+                        luminance: luminance(illumination),
+                    });
+                }
+            }
+            row.entries_per_cell.push((row.entries.len() - before) as u32);
+        }
+        row
+    }
 }
 
 impl Member {

@@ -25,6 +25,7 @@
 
 use crate::camera::Camera;
 use crate::pipeline::classify::Fragment;
+use rayon::prelude::*;
 
 /// Absolute CoC tolerance for merging, pixels.
 pub const COC_TOLERANCE_PX: f32 = 0.1;
@@ -45,6 +46,8 @@ const MARGIN_PX: i64 = 32;
 struct Group {
     seed: Fragment,
     seed_coc: f32,
+    /// The largest motion difference accepted, squared (pixels^2).
+    motion_tolerance_sq: f32,
     weight: f32,
     color: [f32; 4],
     parallax: f32,
@@ -53,9 +56,11 @@ struct Group {
 
 impl Group {
     fn new(f: &Fragment, coc: f32) -> Self {
+        let tolerance = MOTION_TOLERANCE_PX + RELATIVE_TOLERANCE * f.motion[0].hypot(f.motion[1]);
         Group {
             seed: *f,
             seed_coc: coc,
+            motion_tolerance_sq: tolerance * tolerance,
             weight: f.weight,
             color: f.color.map(|c| c * f.weight),
             parallax: f.parallax * f.weight,
@@ -66,11 +71,10 @@ impl Group {
     /// Whether `f` (of signed CoC `coc`) is drawn alike by the seed's PSF.
     fn accepts(&self, f: &Fragment, coc: f32) -> bool {
         let s = &self.seed;
-        let seed_len = s.motion[0].hypot(s.motion[1]);
-        let dm = (f.motion[0] - s.motion[0]).hypot(f.motion[1] - s.motion[1]);
+        let dm = [f.motion[0] - s.motion[0], f.motion[1] - s.motion[1]];
         f.source == s.source
             && (coc - self.seed_coc).abs() <= COC_TOLERANCE_PX + RELATIVE_TOLERANCE * self.seed_coc.abs()
-            && dm <= MOTION_TOLERANCE_PX + RELATIVE_TOLERANCE * seed_len
+            && dm[0] * dm[0] + dm[1] * dm[1] <= self.motion_tolerance_sq
             && (f.parallax - s.parallax).abs() <= RELATIVE_TOLERANCE * s.parallax.abs()
     }
 
@@ -126,7 +130,11 @@ pub fn merge_alike(
     bright_above: f32,
 ) -> Vec<Fragment> {
     let lens = camera.thin_lens();
-    let coc_of = |f: &Fragment| lens.map_or(0.0, |l| l.signed_coc_px(f64::from(f.depth)) as f32);
+    // The signed CoC is affine in the parallax: `coc_scale (1 - focus parallax)`.
+    let (coc_scale, focus) = lens.map_or((0.0, 0.0), |l| {
+        (l.coc_scale_px as f32, l.focus_distance as f32)
+    });
+    let coc_of = |f: &Fragment| coc_scale * (1.0 - focus * f.parallax);
     let (bw, bh) = (w as i64 + 2 * MARGIN_PX, h as i64 + 2 * MARGIN_PX);
     let cell_of = |f: &Fragment| -> Option<usize> {
         let (x, y) = (i64::from(f.x) + MARGIN_PX, i64::from(f.y) + MARGIN_PX);
@@ -154,33 +162,45 @@ pub fn merge_alike(
         }
     }
     drop(fill);
-    let mut merged = Vec::with_capacity(fragments.len() / 4 + outside.len());
-    let mut groups: Vec<(Group, bool)> = Vec::new();
-    for c in 0..cells {
-        let members = &order[starts[c] as usize..starts[c + 1] as usize];
-        if members.is_empty() {
-            continue;
-        }
-        groups.clear();
-        for &k in members {
-            let f = &fragments[k as usize];
-            let coc = coc_of(f);
-            let alone = f.color[..3]
-                .iter()
-                .any(|&v| v * f.weight > bright_above);
-            let into = (!alone)
-                .then(|| {
-                    groups.iter_mut().find(|(g, open)| {
-                        *open && g.accepts(f, coc) && g.brightest_with(f) <= bright_above
-                    })
-                })
-                .flatten();
-            match into {
-                Some((g, _)) => g.add(f),
-                None => groups.push((Group::new(f, coc), !alone)),
+    // Rows of pixels on every thread, each row's groups in pixel order: the same fragments in
+    // the same order as one pass.
+    let bw = bw as usize;
+    let rows: Vec<Vec<Fragment>> = (0..bh as usize)
+        .into_par_iter()
+        .map_init(Vec::new, |groups: &mut Vec<(Group, bool)>, row| {
+            let mut merged = Vec::new();
+            for c in row * bw..(row + 1) * bw {
+                let members = &order[starts[c] as usize..starts[c + 1] as usize];
+                if members.is_empty() {
+                    continue;
+                }
+                groups.clear();
+                for &k in members {
+                    let f = &fragments[k as usize];
+                    let coc = coc_of(f);
+                    let alone = f.color[..3]
+                        .iter()
+                        .any(|&v| v * f.weight > bright_above);
+                    let into = (!alone)
+                        .then(|| {
+                            groups.iter_mut().find(|(g, open)| {
+                                *open && g.accepts(f, coc) && g.brightest_with(f) <= bright_above
+                            })
+                        })
+                        .flatten();
+                    match into {
+                        Some((g, _)) => g.add(f),
+                        None => groups.push((Group::new(f, coc), !alone)),
+                    }
+                }
+                merged.extend(groups.iter().map(|(g, _)| g.fragment()));
             }
-        }
-        merged.extend(groups.iter().map(|(g, _)| g.fragment()));
+            merged
+        })
+        .collect();
+    let mut merged = Vec::with_capacity(rows.iter().map(Vec::len).sum::<usize>() + outside.len());
+    for row in rows {
+        merged.extend(row);
     }
     merged.extend(outside);
     merged
