@@ -146,64 +146,74 @@ pub fn moved_samples(
         .collect()
 }
 
-/// One fragment per finite sample (four with [`SamplePlacement::Bilinear`]), centred where the
-/// lens centre at the shutter centre would have put it. Returns the fragments and the number of
-/// samples dropped (non-finite labels).
-pub fn sample_fragments(
-    frames: &StochasticFrames,
-    camera: &Camera,
-    effects: Effects,
+/// The samples of stochastic frames as reconstruction places them: moved back to the lens and
+/// shutter centre, with the colour they are drawn with (denoised where the frames carry
+/// guides), and the pixels each is put on.
+pub(crate) struct PlacedSamples<'a> {
+    frames: &'a StochasticFrames,
+    moved: Vec<Option<MovedSample>>,
+    denoised: Option<Vec<[f32; 4]>>,
     placement: SamplePlacement,
-) -> (Vec<Fragment>, usize) {
-    let shutter = camera.shutter_frames as f32;
-    let weight = 1.0 / frames.spp.max(1) as f32;
-    let moved = moved_samples(frames, camera, effects);
-    let dropped = moved
-        .iter()
-        .zip(&frames.samples)
-        .filter(|(m, s)| m.is_none() && s.color != [0.0; 4])
-        .count();
-    let denoised = frames
-        .guides
-        .as_ref()
-        .map(|guides| crate::denoise::denoise_samples(frames, guides, &moved));
-    let per_sample = match placement {
-        SamplePlacement::Nearest => 1,
-        SamplePlacement::Bilinear => 4,
-        SamplePlacement::Footprint { .. } => 9,
-    };
-    let mut fragments = Vec::with_capacity(frames.samples.len() * per_sample);
-    for (k, s) in frames.samples.iter().enumerate() {
+    /// Each sample's share of its pixel: 1 / spp.
+    weight: f32,
+    /// The shutter, frames.
+    shutter: f32,
+    /// Samples dropped for non-finite labels.
+    pub dropped: usize,
+}
+
+impl<'a> PlacedSamples<'a> {
+    /// Moves every sample of `frames` back and denoises them where the frames carry guides.
+    pub fn new(
+        frames: &'a StochasticFrames,
+        camera: &Camera,
+        effects: Effects,
+        placement: SamplePlacement,
+    ) -> Self {
+        let moved = moved_samples(frames, camera, effects);
+        let dropped = moved
+            .iter()
+            .zip(&frames.samples)
+            .filter(|(m, s)| m.is_none() && s.color != [0.0; 4])
+            .count();
+        let denoised = frames
+            .guides
+            .as_ref()
+            .map(|guides| crate::denoise::denoise_samples(frames, guides, &moved));
+        PlacedSamples {
+            frames,
+            moved,
+            denoised,
+            placement,
+            weight: 1.0 / frames.spp.max(1) as f32,
+            shutter: camera.shutter_frames as f32,
+            dropped,
+        }
+    }
+
+    /// Number of samples (placed or not).
+    pub fn len(&self) -> usize {
+        self.frames.samples.len()
+    }
+
+    /// Calls `tap(x, y, share)` for each pixel (column, row) sample `k` is put on, with its
+    /// share of the sample; nothing for a sample that carries nothing or was dropped.
+    pub fn for_each_tap(&self, k: usize, mut tap: impl FnMut(i32, i32, f32)) {
         let Some(MovedSample {
-            q: [qx, qy],
-            coc,
-            motion,
-        }) = moved[k]
+            q: [qx, qy], coc, ..
+        }) = self.moved[k]
         else {
-            continue;
+            return;
         };
-        let color = denoised.as_ref().map_or(s.color, |d| d[k]);
-        let fragment = |x: f32, y: f32, share: f32| Fragment {
-            x: x as i32,
-            y: y as i32,
-            color,
-            weight: weight * share,
-            parallax: 1.0 / s.depth,
-            depth: s.depth,
-            motion: [motion[0] * shutter, motion[1] * shutter],
-            source: 0,
-        };
-        let footprint = match placement {
+        let footprint = match self.placement {
             SamplePlacement::Footprint { sigma_px } if coc.abs() < 2.0 * sigma_px => Some(sigma_px),
             _ => None,
         };
-        match (placement, footprint) {
+        match (self.placement, footprint) {
             (_, Some(sigma_px)) => push_footprint(qx, qy, sigma_px, |x, y, share| {
-                fragments.push(fragment(x, y, share))
+                tap(x as i32, y as i32, share)
             }),
-            (SamplePlacement::Nearest, None) => {
-                fragments.push(fragment(qx.floor(), qy.floor(), 1.0))
-            }
+            (SamplePlacement::Nearest, None) => tap(qx.floor() as i32, qy.floor() as i32, 1.0),
             (_, None) => {
                 // Pixel (x, y) has its centre at (x + 0.5, y + 0.5).
                 let (fx, fy) = (qx - 0.5, qy - 0.5);
@@ -217,13 +227,45 @@ pub fn sample_fragments(
                 ] {
                     // Shares this small change nothing visible and cost a whole splat.
                     if share > 1e-4 {
-                        fragments.push(fragment(x0 + dx, y0 + dy, share));
+                        tap((x0 + dx) as i32, (y0 + dy) as i32, share);
                     }
                 }
             }
         }
     }
-    (fragments, dropped)
+
+    /// The fragment of sample `k`'s `share` on pixel `(x, y)`.
+    pub fn fragment(&self, k: usize, x: i32, y: i32, share: f32) -> Fragment {
+        let s = &self.frames.samples[k];
+        let motion = self.moved[k].map_or([0.0; 2], |m| m.motion);
+        Fragment {
+            x,
+            y,
+            color: self.denoised.as_ref().map_or(s.color, |d| d[k]),
+            weight: self.weight * share,
+            parallax: 1.0 / s.depth,
+            depth: s.depth,
+            motion: [motion[0] * self.shutter, motion[1] * self.shutter],
+            source: 0,
+        }
+    }
+}
+
+/// One fragment per finite sample (four with [`SamplePlacement::Bilinear`]), centred where the
+/// lens centre at the shutter centre would have put it. Returns the fragments and the number of
+/// samples dropped (non-finite labels).
+pub fn sample_fragments(
+    frames: &StochasticFrames,
+    camera: &Camera,
+    effects: Effects,
+    placement: SamplePlacement,
+) -> (Vec<Fragment>, usize) {
+    let placed = PlacedSamples::new(frames, camera, effects, placement);
+    let mut fragments = Vec::new();
+    for k in 0..placed.len() {
+        placed.for_each_tap(k, |x, y, share| fragments.push(placed.fragment(k, x, y, share)));
+    }
+    (fragments, placed.dropped)
 }
 
 /// Calls `push(x, y, share)` for each pixel `(x, y)` (column and row, as floats) under a
@@ -347,16 +389,23 @@ pub(crate) fn classify_samples(
         options,
     );
     let model = resolve_model(effects, dbs, options.classify.smear_motion)?;
-    let (fragments, dropped) = sample_fragments(frames, camera, effects, placement);
-    let fragments = crate::sample_merge::merge_alike(
-        &fragments,
+    // Each sample's fragments merged with those of its surface on each pixel as they are
+    // placed: the frame's millions of unmerged fragments are never held at once.
+    let placed = PlacedSamples::new(frames, camera, effects, placement);
+    let fragments = crate::sample_merge::merge_placed(
         frames.width,
         frames.height,
         camera,
         options.classify.hdr_dense_threshold,
+        |emit| {
+            for k in 0..placed.len() {
+                placed.for_each_tap(k, |x, y, share| emit(x, y, k as u32, share));
+            }
+        },
+        |x, y, k, share| placed.fragment(k as usize, x, y, share),
     );
     let counts = PathCounts {
-        dropped,
+        dropped: placed.dropped,
         ..PathCounts::default()
     };
     // Samples are not one surface per pixel: nothing to continue across the layers.

@@ -129,6 +129,32 @@ pub fn merge_alike(
     camera: &Camera,
     bright_above: f32,
 ) -> Vec<Fragment> {
+    merge_placed(
+        w,
+        h,
+        camera,
+        bright_above,
+        |emit| {
+            for (i, f) in fragments.iter().enumerate() {
+                emit(f.x, f.y, i as u32, 1.0);
+            }
+        },
+        |_, _, i, _| fragments[i as usize],
+    )
+}
+
+/// [`merge_alike`] over fragments made on demand: `produce(emit)` calls `emit(x, y, index,
+/// share)` once per fragment, in the same order each time it is called (twice), and
+/// `fragment_of(x, y, index, share)` makes that fragment. A frame's unmerged fragments are
+/// never held at once, only 8 bytes for each.
+pub fn merge_placed(
+    w: usize,
+    h: usize,
+    camera: &Camera,
+    bright_above: f32,
+    produce: impl Fn(&mut dyn FnMut(i32, i32, u32, f32)),
+    fragment_of: impl Fn(i32, i32, u32, f32) -> Fragment + Sync,
+) -> Vec<Fragment> {
     let lens = camera.thin_lens();
     // The signed CoC is affine in the parallax: `coc_scale (1 - focus parallax)`.
     let (coc_scale, focus) = lens.map_or((0.0, 0.0), |l| {
@@ -136,31 +162,29 @@ pub fn merge_alike(
     });
     let coc_of = |f: &Fragment| coc_scale * (1.0 - focus * f.parallax);
     let (bw, bh) = (w as i64 + 2 * MARGIN_PX, h as i64 + 2 * MARGIN_PX);
-    let cell_of = |f: &Fragment| -> Option<usize> {
-        let (x, y) = (i64::from(f.x) + MARGIN_PX, i64::from(f.y) + MARGIN_PX);
+    let cell_of = |x: i32, y: i32| -> Option<usize> {
+        let (x, y) = (i64::from(x) + MARGIN_PX, i64::from(y) + MARGIN_PX);
         (x >= 0 && y >= 0 && x < bw && y < bh).then(|| (y * bw + x) as usize)
     };
     // Fragments by pixel (a counting sort, stable), and those outside the margin.
     let cells = (bw * bh) as usize;
     let mut starts = vec![0u32; cells + 1];
     let mut outside = Vec::new();
-    for f in fragments {
-        match cell_of(f) {
-            Some(c) => starts[c + 1] += 1,
-            None => outside.push(*f),
-        }
-    }
+    produce(&mut |x, y, index, share| match cell_of(x, y) {
+        Some(c) => starts[c + 1] += 1,
+        None => outside.push(fragment_of(x, y, index, share)),
+    });
     for i in 0..cells {
         starts[i + 1] += starts[i];
     }
     let mut fill = starts.clone();
-    let mut order = vec![0u32; starts[cells] as usize];
-    for (k, f) in fragments.iter().enumerate() {
-        if let Some(c) = cell_of(f) {
-            order[fill[c] as usize] = k as u32;
+    let mut sorted = vec![(0u32, 0.0f32); starts[cells] as usize];
+    produce(&mut |x, y, index, share| {
+        if let Some(c) = cell_of(x, y) {
+            sorted[fill[c] as usize] = (index, share);
             fill[c] += 1;
         }
-    }
+    });
     drop(fill);
     // Rows of pixels on every thread, each row's groups in pixel order: the same fragments in
     // the same order as one pass.
@@ -170,13 +194,15 @@ pub fn merge_alike(
         .map_init(Vec::new, |groups: &mut Vec<(Group, bool)>, row| {
             let mut merged = Vec::new();
             for c in row * bw..(row + 1) * bw {
-                let members = &order[starts[c] as usize..starts[c + 1] as usize];
+                let members = &sorted[starts[c] as usize..starts[c + 1] as usize];
                 if members.is_empty() {
                     continue;
                 }
+                let (x, y) = ((c % bw) as i64 - MARGIN_PX, row as i64 - MARGIN_PX);
+                let (x, y) = (x as i32, y as i32);
                 groups.clear();
-                for &k in members {
-                    let f = &fragments[k as usize];
+                for &(index, share) in members {
+                    let f = &fragment_of(x, y, index, share);
                     let coc = coc_of(f);
                     let alone = f.color[..3]
                         .iter()

@@ -1,0 +1,113 @@
+"""Reconstruction's time against Intel Open Image Denoise (OIDN) on the same machine, interleaved.
+
+    python3 bench/reconstruct_vs_oidn.py FRAMES.exr CAMERA.json [--rounds N] [--spreadlet BIN]
+
+For each round, in turn:
+- spreadlet: `spreadlet reconstruct --input FRAMES --camera CAMERA --stats` as a process; its
+  wall time (the whole process: reading, databases from the cache, writing) and the `--stats`
+  total (what a library caller waits for per call, the databases already loaded);
+- OIDN: one `pyoidn.denoise` call (filter RT, hdr, albedo and normal guides, quality high, as
+  `../shared/tools/oidn_peer.py` runs it) on an image of the frames' size, its colour the mean of
+  the frames' samples and its guides their mean albedo and normal, after one warm-up call on a
+  small image. OIDN's time does not depend on the image's content.
+
+Prints each run and the medians, ranges and the ratio spreadlet / OIDN. Needs numpy, OpenEXR
+and pyoidn (`pip install pyoidn`; the wheel ships libOpenImageDenoise).
+"""
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+import OpenEXR
+
+
+def read_frames(path):
+    """Mean colour, albedo and normal per pixel of a stochastic-frames file (docs/STOCHASTIC.md)."""
+    part = OpenEXR.File(path).parts[0]
+    attr = part.header.get("spreadlet", "")
+    fields = dict(f.split("=") for f in str(attr).split()[1:] if "=" in f)
+    w, h, spp = int(fields["width"]), int(fields["height"]), int(fields["spp"])
+    ch = part.channels
+
+    def channel(name):
+        # The OpenEXR module groups R, G, B (A) and albedo.R, .G, .B into one array each.
+        if name in ch:
+            return ch[name].pixels.astype(np.float32)
+        base, _, c = name.rpartition(".")
+        group = ch.get(base or "RGBA")
+        if group is None:
+            sys.exit(f"{path}: no channel {name}")
+        return group.pixels[..., ("RGBA" if not base else "RGB").index(c or name)].astype(np.float32)
+
+    def mean(names):
+        stacked = np.stack([channel(n) for n in names], -1)
+        return stacked.reshape(spp, h, w, len(names)).mean(axis=0)
+
+    if "albedo" not in ch and "albedo.R" not in ch:
+        sys.exit(f"{path}: no denoiser guides (albedo, normal); OIDN would run without them")
+    rgb = mean(["R", "G", "B"])
+    albedo = mean(["albedo.R", "albedo.G", "albedo.B"])
+    normal = mean(["normal.X", "normal.Y", "normal.Z"])
+    return rgb, albedo, normal
+
+
+def oidn_seconds(rgb, albedo, normal):
+    import pyoidn
+
+    rgb = np.ascontiguousarray(np.nan_to_num(np.maximum(rgb, 0)).astype(np.float32))
+    albedo = np.ascontiguousarray(np.clip(albedo, 0, 1).astype(np.float32))
+    normal = np.ascontiguousarray(np.clip(normal, -1, 1).astype(np.float32))
+    start = time.time()
+    pyoidn.denoise(rgb, albedo, normal, hdr=True, clean_aux=False, quality="high")
+    return time.time() - start
+
+
+def spreadlet_seconds(binary, frames, camera, workdir):
+    out, stats = os.path.join(workdir, "out.exr"), os.path.join(workdir, "stats.json")
+    start = time.time()
+    subprocess.run(
+        [binary, "reconstruct", "--input", frames, "--camera", camera, "--out", out, "--stats", stats],
+        check=True,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    wall = time.time() - start
+    total_ms = json.load(open(stats))["reconstruction"]["times"]["total_ms"]
+    return wall, total_ms / 1000.0
+
+
+def summary(values):
+    v = sorted(values)
+    return f"{v[len(v) // 2]:.3f} s ({v[0]:.3f}-{v[-1]:.3f})"
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("frames")
+    ap.add_argument("camera")
+    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--spreadlet", default="target/release/spreadlet")
+    args = ap.parse_args()
+    rgb, albedo, normal = read_frames(args.frames)
+    oidn_seconds(rgb[:64, :64].copy(), albedo[:64, :64].copy(), normal[:64, :64].copy())
+    process, call, oidn = [], [], []
+    with tempfile.TemporaryDirectory() as workdir:
+        for r in range(args.rounds):
+            wall, per_call = spreadlet_seconds(args.spreadlet, args.frames, args.camera, workdir)
+            process.append(wall)
+            call.append(per_call)
+            oidn.append(oidn_seconds(rgb, albedo, normal))
+            print(f"round {r + 1}: spreadlet process {wall:.3f} s, per call {per_call:.3f} s; "
+                  f"OIDN {oidn[-1]:.3f} s", flush=True)
+    med = lambda v: sorted(v)[len(v) // 2]
+    print(f"spreadlet per process {summary(process)}, per call {summary(call)}; OIDN {summary(oidn)}")
+    print(f"ratio to OIDN: per call {med(call) / med(oidn):.2f}, per process {med(process) / med(oidn):.2f}")
+
+
+if __name__ == "__main__":
+    main()
