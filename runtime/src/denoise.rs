@@ -24,6 +24,15 @@
 //! entries, the brightest alone and the mean of the rest weighted by their number, so that the
 //! firefly rules below still see single samples.
 //!
+//! The first filter reaches 2.5 sigma (4 px at 1 spp, 3 px at 4 spp), too little to take the
+//! noise of one or four samples per pixel down to a clean frame. Its result is widened by
+//! three passes over the groups ("a trous": a 3 x 3 tent with its taps 2, 4 and 8 px apart),
+//! each weighing a neighbouring group by the same guides and by how far their illumination
+//! differs in units of the noise the first filter left (the standard deviation of its
+//! weighted mean, the smaller of the two groups'): differences within the noise are averaged,
+//! larger ones (a contact shadow, a shadow's edge) are kept, and a noise-free frame is left
+//! as the first filter made it.
+//!
 //! Samples without a hit, and samples whose neighbours all weigh nothing, keep their colour.
 
 use formats::{SampleGuides, StochasticFrames};
@@ -219,17 +228,60 @@ pub fn denoise_samples(
         let ceiling = FIREFLY_FACTOR * luminance(level).max(0.0);
         mean_illumination(found, ceiling)
     };
+    // The filter's result and the noise it leaves: the standard deviation of the weighted mean
+    // of the neighbourhood's (capped) luminance, `sqrt(variance / effective count)`.
+    let filter_with_noise = |target: &Member, found: &mut Vec<(f32, f32, [f32; 3])>| {
+        let mean = filter(target, found)?;
+        let ceiling = FIREFLY_FACTOR * luminance(mean).max(0.0) * 2.0;
+        let mean_luminance = luminance(mean);
+        let (mut sw, mut sw2, mut swd2) = (0.0f32, 0.0f32, 0.0f32);
+        for &(weight, lum, _) in found.iter() {
+            let d = lum.min(ceiling) - mean_luminance;
+            (sw, sw2, swd2) = (sw + weight, sw2 + weight * weight, swd2 + weight * d * d);
+        }
+        let noise = if sw > 0.0 && sw2 > 0.0 {
+            (swd2 / sw * sw2 / (sw * sw)).sqrt()
+        } else {
+            0.0
+        };
+        Some((mean, noise))
+    };
     // The members of one pixel that lie on one surface share one filtered illumination, that
     // of their mean position: the filter runs once per pixel and surface, not once per sample.
-    let per_member: Vec<Option<[f32; 3]>> = rows
+    let targets: Vec<Member> = rows.iter().flat_map(|r| r.targets.iter().copied()).collect();
+    let filtered: Vec<Option<([f32; 3], f32)>> = targets
         .par_iter()
-        .map_init(Vec::new, |found, row| {
-            let results: Vec<Option<[f32; 3]>> =
-                row.targets.iter().map(|t| filter(t, found)).collect();
-            row.group_of.iter().map(|&g| results[g as usize]).collect::<Vec<_>>()
-        })
-        .collect::<Vec<_>>()
-        .concat();
+        .map_init(Vec::new, |found, t| filter_with_noise(t, found))
+        .collect();
+    let mut illumination: Vec<Option<[f32; 3]>> =
+        filtered.iter().map(|f| f.map(|(e, _)| e)).collect();
+    let noise: Vec<f32> = filtered.iter().map(|f| f.map_or(0.0, |(_, n)| n)).collect();
+    // Then the wider passes over the groups' filtered illumination.
+    let mut target_starts = Vec::with_capacity(w * h + 1);
+    target_starts.push(0usize);
+    for row in &rows {
+        for &n in &row.targets_per_cell {
+            target_starts.push(target_starts[target_starts.len() - 1] + n as usize);
+        }
+    }
+    let counts: Vec<f32> = rows.iter().flat_map(|r| r.target_counts.iter().copied()).collect();
+    for &step in &WIDENING_STEPS_PX {
+        illumination = widen(
+            &targets,
+            &counts,
+            &target_starts,
+            (w, h),
+            step,
+            &noise,
+            &illumination,
+        );
+    }
+    let mut first_target = 0;
+    let mut per_member = Vec::with_capacity(members.len());
+    for row in &rows {
+        per_member.extend(row.group_of.iter().map(|&g| illumination[first_target + g as usize]));
+        first_target += row.targets.len();
+    }
     (0..frames.samples.len())
         .into_par_iter()
         .map_init(Vec::new, |found, k| {
@@ -261,6 +313,115 @@ pub fn denoise_samples(
             out
         })
         .collect()
+}
+
+/// The dilations of the widening passes after the first filter, pixels: each is a 3 x 3
+/// tent kernel with its taps `step` pixels apart ("a trous"), so the filter's reach grows to
+/// about 14 px at the cost of 9 pixels a pass.
+pub const WIDENING_STEPS_PX: [i64; 3] = [2, 4, 8];
+
+/// Illumination difference, in units of the noise the first filter leaves on the two groups
+/// (combined), at which a widening pass's weight falls to `1/e`: differences within the noise
+/// are averaged, larger ones (shading: a contact shadow, a shadow's edge) are kept.
+pub const NOISE_TOLERANCE: f32 = 2.0;
+
+/// The tent kernel of the widening passes.
+const TENT: [f32; 3] = [0.25, 0.5, 0.25];
+
+/// One widening pass: each group's illumination becomes the mean of the groups' at the 3 x 3
+/// taps `step` pixels apart round its pixel, weighted by the tent kernel, the groups' member
+/// counts, the guides (depth, normal, albedo, as the first filter weighs them) and how far
+/// their illuminations' luminances differ in units of the smaller of the two groups' `noise`
+/// ([`NOISE_TOLERANCE`]). A group without noise keeps its illumination; one without
+/// illumination (`None`) stays so and is left out of the others' means.
+fn widen(
+    targets: &[Member],
+    counts: &[f32],
+    target_starts: &[usize],
+    (w, h): (usize, usize),
+    step: i64,
+    noise: &[f32],
+    input: &[Option<[f32; 3]>],
+) -> Vec<Option<[f32; 3]>> {
+    let luminances: Vec<f32> = input.iter().map(|e| e.map_or(0.0, luminance)).collect();
+    (0..targets.len())
+        .into_par_iter()
+        .map(|t| {
+            let own = input[t]?;
+            // Without noise round it the group keeps its light: any other weighs nothing.
+            if noise[t] <= 0.0 {
+                return Some(own);
+            }
+            let me = &targets[t];
+            let own_luminance = luminances[t];
+            let (cx, cy) = (me.q[0].floor() as i64, me.q[1].floor() as i64);
+            let mut sum = [0.0f32; 3];
+            let mut total = 0.0f32;
+            for (j, ky) in TENT.iter().enumerate() {
+                let y = cy + (j as i64 - (TENT.len() / 2) as i64) * step;
+                if y < 0 || y >= h as i64 {
+                    continue;
+                }
+                for (i, kx) in TENT.iter().enumerate() {
+                    let x = cx + (i as i64 - (TENT.len() / 2) as i64) * step;
+                    if x < 0 || x >= w as i64 {
+                        continue;
+                    }
+                    let cell = y as usize * w + x as usize;
+                    for u in target_starts[cell]..target_starts[cell + 1] {
+                        let Some(e) = input[u] else {
+                            continue;
+                        };
+                        let d = luminances[u] - own_luminance;
+                        // The smaller of the two: a group whose first filter straddled a
+                        // shadow's edge reads the edge as noise, its neighbour does not.
+                        let sigma = noise[t].min(noise[u]);
+                        let shading = d * d / (2.0 * (NOISE_TOLERANCE * sigma).powi(2) + 1e-12);
+                        if shading > 12.0 {
+                            continue;
+                        }
+                        let Some((guides, cosine)) = guide_exponent(me, &targets[u]) else {
+                            continue;
+                        };
+                        let exponent = shading + guides;
+                        if exponent > 12.0 {
+                            continue;
+                        }
+                        let weight =
+                            kx * ky * counts[u] * (-exponent).exp() * cosine.powi(NORMAL_POWER);
+                        if !(weight > 0.0 && weight.is_finite()) {
+                            continue;
+                        }
+                        for c in 0..3 {
+                            sum[c] += weight * e[c];
+                        }
+                        total += weight;
+                    }
+                }
+            }
+            Some(if total > 0.0 && total.is_finite() {
+                sum.map(|v| v / total)
+            } else {
+                own
+            })
+        })
+        .collect()
+}
+
+/// The first filter's weight of `b` for `a` without the distance, as the exponent of the
+/// depth and albedo terms and the normals' cosine; `None` for normals apart by a right angle
+/// or more.
+fn guide_exponent(a: &Member, b: &Member) -> Option<(f32, f32)> {
+    let cosine: f32 = (0..3).map(|c| a.normal[c] * b.normal[c]).sum();
+    if cosine <= 0.0 {
+        return None;
+    }
+    let dz = (b.depth - a.depth) / (DEPTH_TOLERANCE * a.depth);
+    let scale = (0..3).fold(ALBEDO_EPSILON, |s, c| {
+        s.max(a.albedo[c].abs()).max(b.albedo[c].abs())
+    });
+    let da2: f32 = (0..3).map(|c| (a.albedo[c] - b.albedo[c]).powi(2)).sum();
+    Some((dz * dz + da2 / (scale * scale) / (ALBEDO_SIGMA * ALBEDO_SIGMA), cosine))
 }
 
 /// [`denoise_samples`]' mark for a sample that is not among the frame's members.
@@ -323,6 +484,10 @@ struct RowGroups {
     entries: Vec<Entry>,
     /// How many entries each pixel of the row has.
     entries_per_cell: Vec<u32>,
+    /// How many groups (targets) each pixel of the row has.
+    targets_per_cell: Vec<u32>,
+    /// How many members each group has.
+    target_counts: Vec<f32>,
     /// Each member's group (an index into `targets`), in member order.
     group_of: Vec<u32>,
 }
@@ -376,6 +541,7 @@ impl RowGroups {
                     ..first
                 };
                 row.targets.push(at);
+                row.target_counts.push(count as f32);
                 let alone = Member {
                     illumination: brightest.illumination,
                     ..at
@@ -397,6 +563,7 @@ impl RowGroups {
                 }
             }
             row.entries_per_cell.push((row.entries.len() - before) as u32);
+            row.targets_per_cell.push(groups.len() as u32);
         }
         row
     }
@@ -491,6 +658,42 @@ mod tests {
         assert!(v1 * 5.0 < v0, "variance {v0} -> {v1}");
         assert!((m1 / m0 - 1.0).abs() < 0.01, "mean {m0} -> {m1}");
         assert!(out.iter().all(|c| c[3] == 1.0));
+    }
+
+    /// The widening passes take the first filter's leftover noise further down on a flat,
+    /// evenly lit surface: at 1 spp its variance falls at least 500-fold (the first filter
+    /// alone: about 115-fold; with the widening about 2,000-fold).
+    #[test]
+    fn widening_averages_the_leftover_noise() {
+        let (frames, moved) = frame(64, 64, |_, _| 0.5, |x, y| 1.0 + noise(x, y), |_, _| 2.0);
+        let guides = frames.guides.clone().expect("guides");
+        let out = denoise_samples(&frames, &guides, &moved);
+        let inner = |k: &usize| {
+            let (x, y) = (k % 64, k / 64);
+            (12..52).contains(&x) && (12..52).contains(&y)
+        };
+        let (m0, v0) = mean_var((0..4096).filter(inner).map(|k| frames.samples[k].color[0]));
+        let (m1, v1) = mean_var((0..4096).filter(inner).map(|k| out[k][0]));
+        assert!(v1 * 500.0 < v0, "variance {v0} -> {v1}");
+        assert!((m1 / m0 - 1.0).abs() < 0.01, "mean {m0} -> {m1}");
+    }
+
+    /// A noise-free hard shadow's edge on one surface is not widened: beyond the first
+    /// filter's reach (4 px at 1 spp) every sample keeps its light, because the widening
+    /// passes weigh a neighbour by how far its light lies outside the noise, and there is none.
+    #[test]
+    fn a_hard_shadow_edge_is_not_widened() {
+        let light = |x: usize, _: usize| if x < 20 { 1.0 } else { 0.3 };
+        let (frames, moved) = frame(40, 24, |_, _| 0.5, light, |_, _| 2.0);
+        let guides = frames.guides.clone().expect("guides");
+        let out = denoise_samples(&frames, &guides, &moved);
+        for (k, c) in out.iter().enumerate() {
+            if (15..25).contains(&(k % 40)) {
+                continue;
+            }
+            let want = frames.samples[k].color[0];
+            assert!((c[0] / want - 1.0).abs() < 0.02, "{k}: {c:?} vs {want}");
+        }
     }
 
     /// Under even light a checkered texture comes back exactly: only lighting is averaged.
