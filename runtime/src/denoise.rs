@@ -20,9 +20,9 @@
 //! The samples of one pixel that lie on one surface (depth, normal and albedo within a tenth
 //! of those tolerances) share the filtered illumination of their mean position: the filter
 //! runs once per pixel and surface, four times less often at 4 spp, and their fragments are
-//! merged after it anyway ([`crate::sample_merge`]). Its neighbours see them there as two
-//! entries, the brightest alone and the mean of the rest weighted by their number, so that the
-//! firefly rules below still see single samples.
+//! merged after it anyway ([`crate::sample_merge`]). Its neighbours see them there as one
+//! entry weighted by their number, or as two where the brightest stands out
+//! ([`OUTLIER_FACTOR`]), so that the firefly rules below still see a firefly alone.
 //!
 //! The first filter reaches 2.5 sigma (4 px at 1 spp, 3 px at 4 spp), too little to take the
 //! noise of one or four samples per pixel down to a clean frame. Its result is widened by
@@ -453,15 +453,20 @@ struct Member {
 }
 
 /// The members of one pixel on one surface as a neighbour sees them: at their mean position,
-/// with the first member's guides, `count` members of the given mean illumination. A group of
-/// several makes two entries, its brightest member alone and the rest, so that the filter can
-/// still set the brightest sample of a neighbourhood aside and cap each one's luminance.
+/// with the first member's guides, `count` members of the given mean illumination. A group
+/// whose brightest member stands out ([`OUTLIER_FACTOR`]) makes two entries, that member alone
+/// and the rest, so that the filter can still set a firefly aside and cap its luminance.
 #[derive(Clone, Copy, Debug)]
 struct Entry {
     at: Member,
     count: f32,
     luminance: f32,
 }
+
+/// A group's brightest member stands alone among the neighbour entries when its luminance is
+/// more than this many times the mean of the rest's (a firefly); otherwise the group is one
+/// entry.
+const OUTLIER_FACTOR: f32 = 2.0;
 
 /// A pixel's members on one surface, while they are gathered.
 #[derive(Clone, Copy)]
@@ -542,24 +547,40 @@ impl RowGroups {
                 };
                 row.targets.push(at);
                 row.target_counts.push(count as f32);
-                let alone = Member {
-                    illumination: brightest.illumination,
-                    ..at
-                };
-                row.entries.push(Entry {
-                    at: alone,
-                    count: 1.0,
-                    luminance: luminance(brightest.illumination),
+                let rest = count.saturating_sub(1) as f32;
+                let rest_illumination: [f32; 3] = std::array::from_fn(|c| {
+                    (sum[c] - brightest.illumination[c]) / rest.max(1.0)
                 });
-                if count > 1 {
-                    let rest = (count - 1) as f32;
-                    let illumination =
-                        std::array::from_fn(|c| (sum[c] - brightest.illumination[c]) / rest);
+                let brightest_luminance = luminance(brightest.illumination);
+                let outlier = brightest_luminance
+                    > OUTLIER_FACTOR * luminance(rest_illumination).max(0.0);
+                if count > 1 && !outlier {
+                    // Nothing stands out: one entry of all the members.
+                    let illumination = sum.map(|v| v / count as f32);
                     row.entries.push(Entry {
                         at: Member { illumination, ..at },
-                        count: rest,
+                        count: count as f32,
                         luminance: luminance(illumination),
                     });
+                } else {
+                    row.entries.push(Entry {
+                        at: Member {
+                            illumination: brightest.illumination,
+                            ..at
+                        },
+                        count: 1.0,
+                        luminance: brightest_luminance,
+                    });
+                    if count > 1 {
+                        row.entries.push(Entry {
+                            at: Member {
+                                illumination: rest_illumination,
+                                ..at
+                            },
+                            count: rest,
+                            luminance: luminance(rest_illumination),
+                        });
+                    }
                 }
             }
             row.entries_per_cell.push((row.entries.len() - before) as u32);
