@@ -18,42 +18,12 @@ import argparse
 import json
 import os
 import subprocess
-import sys
 import tempfile
 import time
 
 import numpy as np
-import OpenEXR
 
-
-def read_frames(path):
-    """Mean colour, albedo and normal per pixel of a stochastic-frames file (docs/STOCHASTIC.md)."""
-    part = OpenEXR.File(path).parts[0]
-    attr = part.header.get("spreadlet", "")
-    fields = dict(f.split("=") for f in str(attr).split()[1:] if "=" in f)
-    w, h, spp = int(fields["width"]), int(fields["height"]), int(fields["spp"])
-    ch = part.channels
-
-    def channel(name):
-        # The OpenEXR module groups R, G, B (A) and albedo.R, .G, .B into one array each.
-        if name in ch:
-            return ch[name].pixels.astype(np.float32)
-        base, _, c = name.rpartition(".")
-        group = ch.get(base or "RGBA")
-        if group is None:
-            sys.exit(f"{path}: no channel {name}")
-        return group.pixels[..., ("RGBA" if not base else "RGB").index(c or name)].astype(np.float32)
-
-    def mean(names):
-        stacked = np.stack([channel(n) for n in names], -1)
-        return stacked.reshape(spp, h, w, len(names)).mean(axis=0)
-
-    if "albedo" not in ch and "albedo.R" not in ch:
-        sys.exit(f"{path}: no denoiser guides (albedo, normal); OIDN would run without them")
-    rgb = mean(["R", "G", "B"])
-    albedo = mean(["albedo.R", "albedo.G", "albedo.B"])
-    normal = mean(["normal.X", "normal.Y", "normal.Z"])
-    return rgb, albedo, normal
+from oidn_quality import read_frames  # the frames' per-pixel means, beside this script
 
 
 def oidn_seconds(rgb, albedo, normal):
@@ -93,7 +63,8 @@ def main():
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--spreadlet", default="target/release/spreadlet")
     args = ap.parse_args()
-    rgb, albedo, normal = read_frames(args.frames)
+    rgba, albedo, normal, _ = read_frames(args.frames)
+    rgb = rgba[..., :3]
     oidn_seconds(rgb[:64, :64].copy(), albedo[:64, :64].copy(), normal[:64, :64].copy())
     process, call, oidn = [], [], []
     with tempfile.TemporaryDirectory() as workdir:
