@@ -222,17 +222,21 @@ pub fn denoise_samples(
     // neighbour's luminance capped at FIREFLY_FACTOR times that level, so that one rare bright
     // sample (a bounce that found a small emitter) is not spread into a blob over its
     // neighbours, nor kept as a speck. Both from one pass over the neighbourhood's weights.
-    let filter = |target: &Member, found: &mut Vec<(f32, f32, [f32; 3])>| -> Option<[f32; 3]> {
+    // The filtered illumination and the luminance ceiling it capped its neighbours at.
+    let filter_capped = |target: &Member, found: &mut Vec<(f32, f32, [f32; 3])>| {
         neighbours(target, found);
         let level = mean_illumination(found, f32::INFINITY)?;
         let ceiling = FIREFLY_FACTOR * luminance(level).max(0.0);
-        mean_illumination(found, ceiling)
+        Some((mean_illumination(found, ceiling)?, ceiling))
+    };
+    let filter = |target: &Member, found: &mut Vec<(f32, f32, [f32; 3])>| {
+        filter_capped(target, found).map(|(mean, _)| mean)
     };
     // The filter's result and the noise it leaves: the standard deviation of the weighted mean
-    // of the neighbourhood's (capped) luminance, `sqrt(variance / effective count)`.
+    // of the neighbourhood's luminance, capped as the filter capped it,
+    // `sqrt(variance / effective count)`.
     let filter_with_noise = |target: &Member, found: &mut Vec<(f32, f32, [f32; 3])>| {
-        let mean = filter(target, found)?;
-        let ceiling = FIREFLY_FACTOR * luminance(mean).max(0.0) * 2.0;
+        let (mean, ceiling) = filter_capped(target, found)?;
         let mean_luminance = luminance(mean);
         let (mut sw, mut sw2, mut swd2) = (0.0f32, 0.0f32, 0.0f32);
         for &(weight, lum, _) in found.iter() {

@@ -168,7 +168,7 @@ pub fn merge_placed(
     };
     // Fragments by pixel (a counting sort, stable), and those outside the margin.
     let cells = (bw * bh) as usize;
-    let mut starts = vec![0u32; cells + 1];
+    let mut starts = vec![0usize; cells + 1];
     let mut outside = Vec::new();
     produce(&mut |x, y, index, share| match cell_of(x, y) {
         Some(c) => starts[c + 1] += 1,
@@ -178,10 +178,10 @@ pub fn merge_placed(
         starts[i + 1] += starts[i];
     }
     let mut fill = starts.clone();
-    let mut sorted = vec![(0u32, 0.0f32); starts[cells] as usize];
+    let mut sorted = vec![(0u32, 0.0f32); starts[cells]];
     produce(&mut |x, y, index, share| {
         if let Some(c) = cell_of(x, y) {
-            sorted[fill[c] as usize] = (index, share);
+            sorted[fill[c]] = (index, share);
             fill[c] += 1;
         }
     });
@@ -194,7 +194,7 @@ pub fn merge_placed(
         .map_init(Vec::new, |groups: &mut Vec<(Group, bool)>, row| {
             let mut merged = Vec::new();
             for c in row * bw..(row + 1) * bw {
-                let members = &sorted[starts[c] as usize..starts[c + 1] as usize];
+                let members = &sorted[starts[c]..starts[c + 1]];
                 if members.is_empty() {
                     continue;
                 }
