@@ -139,18 +139,13 @@ pub fn denoise_samples(
     }
     let entries: Vec<Entry> = rows.iter().flat_map(|r| r.entries.iter().copied()).collect();
     let inv_two_var = 1.0 / (2.0 * sigma * sigma);
-    let inv_albedo_var = 1.0 / (ALBEDO_SIGMA * ALBEDO_SIGMA);
     let max_d2 = (CUTOFF_SIGMAS * sigma).powi(2);
     // The cross-bilateral weights round `target`: every neighbour's (weight, luminance,
     // illumination), in neighbourhood order, into `out`.
     let neighbours = |target: &Member, out: &mut Vec<(f32, f32, [f32; 3])>| {
         out.clear();
-        let (mi, zi) = (target, target.depth);
-        let gi = SampleGuides {
-            albedo: target.albedo,
-            normal: target.normal,
-        };
-        let inv_depth = 1.0 / (DEPTH_TOLERANCE * zi);
+        let mi = target;
+        let inv_depth = 1.0 / (DEPTH_TOLERANCE * target.depth);
         let (cx, cy) = (mi.q[0].floor() as i64, mi.q[1].floor() as i64);
         for y in (cy - reach).max(0)..=(cy + reach).min(h as i64 - 1) {
             let (x0, x1) = ((cx - reach).max(0), (cx + reach).min(w as i64 - 1));
@@ -166,20 +161,10 @@ pub fn denoise_samples(
                 if d2 > max_d2 {
                     continue;
                 }
-                let cosine = gi.normal[0] * mj.normal[0]
-                    + gi.normal[1] * mj.normal[1]
-                    + gi.normal[2] * mj.normal[2];
-                if cosine <= 0.0 {
+                let Some((guides, cosine)) = guide_exponent(mi, mj, inv_depth) else {
                     continue;
-                }
-                let dz = (mj.depth - zi) * inv_depth;
-                let mut scale = ALBEDO_EPSILON;
-                let mut da2 = 0.0;
-                for c in 0..3 {
-                    scale = scale.max(gi.albedo[c].abs().max(mj.albedo[c].abs()));
-                    da2 += (gi.albedo[c] - mj.albedo[c]).powi(2);
-                }
-                let exponent = d2 * inv_two_var + dz * dz + da2 / (scale * scale) * inv_albedo_var;
+                };
+                let exponent = d2 * inv_two_var + guides;
                 if exponent > 12.0 {
                     continue;
                 }
@@ -358,6 +343,7 @@ fn widen(
             }
             let me = &targets[t];
             let own_luminance = luminances[t];
+            let inv_depth = 1.0 / (DEPTH_TOLERANCE * me.depth);
             let (cx, cy) = (me.q[0].floor() as i64, me.q[1].floor() as i64);
             let mut sum = [0.0f32; 3];
             let mut total = 0.0f32;
@@ -384,7 +370,8 @@ fn widen(
                         if shading > 12.0 {
                             continue;
                         }
-                        let Some((guides, cosine)) = guide_exponent(me, &targets[u]) else {
+                        let Some((guides, cosine)) = guide_exponent(me, &targets[u], inv_depth)
+                        else {
                             continue;
                         };
                         let exponent = shading + guides;
@@ -412,20 +399,24 @@ fn widen(
         .collect()
 }
 
-/// The first filter's weight of `b` for `a` without the distance, as the exponent of the
-/// depth and albedo terms and the normals' cosine; `None` for normals apart by a right angle
-/// or more.
-fn guide_exponent(a: &Member, b: &Member) -> Option<(f32, f32)> {
-    let cosine: f32 = (0..3).map(|c| a.normal[c] * b.normal[c]).sum();
+/// The filter's weight of `b` for `a` without the distance (both passes weigh the guides
+/// alike): the exponent of the depth and albedo terms and the normals' cosine (raised to
+/// [`NORMAL_POWER`] by the caller); `None` for normals a right angle or more apart.
+/// `inv_depth` is `1 / (DEPTH_TOLERANCE a.depth)`, computed once per `a`.
+fn guide_exponent(a: &Member, b: &Member, inv_depth: f32) -> Option<(f32, f32)> {
+    let cosine = a.normal[0] * b.normal[0] + a.normal[1] * b.normal[1] + a.normal[2] * b.normal[2];
     if cosine <= 0.0 {
         return None;
     }
-    let dz = (b.depth - a.depth) / (DEPTH_TOLERANCE * a.depth);
-    let scale = (0..3).fold(ALBEDO_EPSILON, |s, c| {
-        s.max(a.albedo[c].abs()).max(b.albedo[c].abs())
-    });
-    let da2: f32 = (0..3).map(|c| (a.albedo[c] - b.albedo[c]).powi(2)).sum();
-    Some((dz * dz + da2 / (scale * scale) / (ALBEDO_SIGMA * ALBEDO_SIGMA), cosine))
+    let dz = (b.depth - a.depth) * inv_depth;
+    let mut scale = ALBEDO_EPSILON;
+    let mut da2 = 0.0;
+    for c in 0..3 {
+        scale = scale.max(a.albedo[c].abs().max(b.albedo[c].abs()));
+        da2 += (a.albedo[c] - b.albedo[c]).powi(2);
+    }
+    let inv_albedo_var = 1.0 / (ALBEDO_SIGMA * ALBEDO_SIGMA);
+    Some((dz * dz + da2 / (scale * scale) * inv_albedo_var, cosine))
 }
 
 /// [`denoise_samples`]' mark for a sample that is not among the frame's members.
