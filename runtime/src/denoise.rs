@@ -86,49 +86,69 @@ pub fn denoise_samples(
         (x >= 0.0 && y >= 0.0 && (x as usize) < w && (y as usize) < h)
             .then(|| y as usize * w + x as usize)
     };
-    if guides.len() != frames.samples.len() {
+    // Members and pixels are numbered in 32 bits (no frame that fits in memory has 4 G
+    // samples); such a frame would keep its colours.
+    let too_large = frames.samples.len() >= NOT_A_MEMBER as usize || w * h >= NOT_A_MEMBER as usize;
+    if guides.len() != frames.samples.len() || too_large {
         return frames.samples.iter().map(|s| s.color).collect();
     }
     let hit = |k: usize| frames.samples[k].color[3] > 0.0;
+    // Each sample's pixel, NOT_A_MEMBER for a miss or outside the frame; then a counting sort
+    // of the sample indices by it, so that only 4 bytes a sample move serially and the
+    // members themselves are built in parallel, in their final place.
+    let cells: Vec<u32> = moved
+        .par_iter()
+        .enumerate()
+        .map(|(k, m)| match m.as_ref().and_then(cell_of) {
+            Some(cell) if hit(k) => cell as u32,
+            _ => NOT_A_MEMBER,
+        })
+        .collect();
     let mut starts = vec![0usize; w * h + 1];
-    for (k, m) in moved.iter().enumerate() {
-        if let Some(cell) = m.as_ref().and_then(cell_of).filter(|_| hit(k)) {
-            starts[cell + 1] += 1;
-        }
+    for &cell in cells.iter().filter(|&&c| c != NOT_A_MEMBER) {
+        starts[cell as usize + 1] += 1;
     }
     for i in 0..w * h {
         starts[i + 1] += starts[i];
     }
-    // The members' data in cell order, so that a neighbourhood is read from contiguous memory.
     let mut fill = starts.clone();
-    let mut members = vec![Member::default(); starts[w * h]];
+    let mut order = vec![0u32; starts[w * h]];
     // Each sample's place among the members (NOT_A_MEMBER outside the frame or for a miss).
     let mut member_of = vec![NOT_A_MEMBER; frames.samples.len()];
-    for (k, m) in moved.iter().enumerate() {
-        if let Some((cell, m)) = m.as_ref().and_then(|m| cell_of(m).map(|c| (c, m))) {
-            if !hit(k) {
-                continue;
-            }
+    for (k, &cell) in cells.iter().enumerate() {
+        if cell != NOT_A_MEMBER {
+            let place = &mut fill[cell as usize];
+            order[*place] = k as u32;
+            member_of[k] = *place as u32;
+            *place += 1;
+        }
+    }
+    drop(cells);
+    // Every sample as the filter reads it, built in the samples' order (read sequentially,
+    // in parallel) and gathered in pixel order where it is grouped: one cache line a member
+    // instead of the three the sample, its guides and its moved position take.
+    let by_sample: Vec<Member> = (0..frames.samples.len())
+        .into_par_iter()
+        .map(|k| {
             let (s, g) = (&frames.samples[k], &guides[k]);
-            members[fill[cell]] = Member {
-                q: m.q,
+            Member {
+                q: moved[k].map_or([0.0; 2], |m| m.q),
                 depth: s.depth,
                 normal: g.normal,
                 albedo: g.albedo,
                 illumination: std::array::from_fn(|c| {
                     s.color[c] / (g.albedo[c].max(0.0) + ALBEDO_EPSILON)
                 }),
-            };
-            member_of[k] = fill[cell];
-            fill[cell] += 1;
-        }
-    }
+            }
+        })
+        .collect();
+    let member = |k: usize| by_sample[k];
     // Each pixel's members grouped by surface, row by row on every thread: the groups (as
     // filter targets: mean position, the first member's guides), the neighbour entries they
     // make, each pixel's entry count, and each member's group in its row.
     let rows: Vec<RowGroups> = (0..h)
         .into_par_iter()
-        .map(|y| RowGroups::of(&members[starts[y * w]..starts[(y + 1) * w]], &starts[y * w..=(y + 1) * w]))
+        .map(|y| RowGroups::of(&order[starts[y * w]..starts[(y + 1) * w]], &starts[y * w..=(y + 1) * w], member))
         .collect();
     let mut entry_starts = Vec::with_capacity(w * h + 1);
     entry_starts.push(0usize);
@@ -242,9 +262,6 @@ pub fn denoise_samples(
         .par_iter()
         .map_init(Vec::new, |found, t| filter_with_noise(t, found))
         .collect();
-    let mut illumination: Vec<Option<[f32; 3]>> =
-        filtered.iter().map(|f| f.map(|(e, _)| e)).collect();
-    let noise: Vec<f32> = filtered.iter().map(|f| f.map_or(0.0, |(_, n)| n)).collect();
     // Then the wider passes over the groups' filtered illumination.
     let mut target_starts = Vec::with_capacity(w * h + 1);
     target_starts.push(0usize);
@@ -253,20 +270,35 @@ pub fn denoise_samples(
             target_starts.push(target_starts[target_starts.len() - 1] + n as usize);
         }
     }
-    let counts: Vec<f32> = rows.iter().flat_map(|r| r.target_counts.iter().copied()).collect();
+    let counts = rows.iter().flat_map(|r| r.target_counts.iter().copied());
+    let mut nodes: Vec<WideningNode> = targets
+        .iter()
+        .zip(counts)
+        .zip(&filtered)
+        .map(|((&at, count), filtered)| {
+            let (light, noise) = filtered.unwrap_or(([0.0; 3], 0.0));
+            WideningNode {
+                at: Member {
+                    illumination: light,
+                    ..at
+                },
+                count,
+                noise,
+                luminance: luminance(light),
+                lit: filtered.is_some(),
+            }
+        })
+        .collect();
+    drop(filtered);
     for &step in &WIDENING_STEPS_PX {
-        illumination = widen(
-            &targets,
-            &counts,
-            &target_starts,
-            (w, h),
-            step,
-            &noise,
-            &illumination,
-        );
+        nodes = widen(&nodes, &target_starts, (w, h), step);
     }
+    let illumination: Vec<Option<[f32; 3]>> = nodes
+        .iter()
+        .map(|n| n.lit.then_some(n.at.illumination))
+        .collect();
     let mut first_target = 0;
-    let mut per_member = Vec::with_capacity(members.len());
+    let mut per_member = Vec::with_capacity(order.len());
     for row in &rows {
         per_member.extend(row.group_of.iter().map(|&g| illumination[first_target + g as usize]));
         first_target += row.targets.len();
@@ -289,7 +321,7 @@ pub fn denoise_samples(
                     filter(&target, found)
                 }
                 (NOT_A_MEMBER, _) => None,
-                (j, _) => per_member[j],
+                (j, _) => per_member[j as usize],
             };
             let Some(mean) = illumination else {
                 return original;
@@ -317,34 +349,41 @@ pub const NOISE_TOLERANCE: f32 = 2.0;
 /// The tent kernel of the widening passes.
 const TENT: [f32; 3] = [0.25, 0.5, 0.25];
 
+/// A group as the widening passes read it, one cache line: its mean position, guides and
+/// current illumination (`at`), member count, the noise its first filter left, the
+/// illumination's luminance, and whether it has any illumination.
+#[derive(Clone, Copy, Debug)]
+#[repr(align(64))]
+struct WideningNode {
+    at: Member,
+    count: f32,
+    noise: f32,
+    luminance: f32,
+    lit: bool,
+}
+
 /// One widening pass: each group's illumination becomes the mean of the groups' at the 3 x 3
-/// taps `step` pixels apart round its pixel, weighted by the tent kernel, the groups' member
-/// counts, the guides (depth, normal, albedo, as the first filter weighs them) and how far
-/// their illuminations' luminances differ in units of the smaller of the two groups' `noise`
-/// ([`NOISE_TOLERANCE`]). A group without noise keeps its illumination; one without
-/// illumination (`None`) stays so and is left out of the others' means.
+/// taps `step` pixels apart round its pixel (pixel `i`'s groups at
+/// `target_starts[i]..target_starts[i + 1]` of `nodes`), weighted by the tent kernel, the
+/// groups' member counts, the guides (depth, normal, albedo, as the first filter weighs them)
+/// and how far their illuminations' luminances differ in units of the smaller of the two
+/// groups' noise ([`NOISE_TOLERANCE`]). A group without noise keeps its illumination; one
+/// without illumination stays so and is left out of the others' means.
 fn widen(
-    targets: &[Member],
-    counts: &[f32],
+    nodes: &[WideningNode],
     target_starts: &[usize],
     (w, h): (usize, usize),
     step: i64,
-    noise: &[f32],
-    input: &[Option<[f32; 3]>],
-) -> Vec<Option<[f32; 3]>> {
-    let luminances: Vec<f32> = input.iter().map(|e| e.map_or(0.0, luminance)).collect();
-    (0..targets.len())
-        .into_par_iter()
-        .map(|t| {
-            let own = input[t]?;
+) -> Vec<WideningNode> {
+    nodes
+        .par_iter()
+        .map(|me| {
             // Without noise round it the group keeps its light: any other weighs nothing.
-            if noise[t] <= 0.0 {
-                return Some(own);
+            if !me.lit || me.noise <= 0.0 {
+                return *me;
             }
-            let me = &targets[t];
-            let own_luminance = luminances[t];
-            let inv_depth = 1.0 / (DEPTH_TOLERANCE * me.depth);
-            let (cx, cy) = (me.q[0].floor() as i64, me.q[1].floor() as i64);
+            let inv_depth = 1.0 / (DEPTH_TOLERANCE * me.at.depth);
+            let (cx, cy) = (me.at.q[0].floor() as i64, me.at.q[1].floor() as i64);
             let mut sum = [0.0f32; 3];
             let mut total = 0.0f32;
             for (j, ky) in TENT.iter().enumerate() {
@@ -358,19 +397,19 @@ fn widen(
                         continue;
                     }
                     let cell = y as usize * w + x as usize;
-                    for u in target_starts[cell]..target_starts[cell + 1] {
-                        let Some(e) = input[u] else {
+                    for other in &nodes[target_starts[cell]..target_starts[cell + 1]] {
+                        if !other.lit {
                             continue;
-                        };
-                        let d = luminances[u] - own_luminance;
+                        }
+                        let d = other.luminance - me.luminance;
                         // The smaller of the two: a group whose first filter straddled a
                         // shadow's edge reads the edge as noise, its neighbour does not.
-                        let sigma = noise[t].min(noise[u]);
+                        let sigma = me.noise.min(other.noise);
                         let shading = d * d / (2.0 * (NOISE_TOLERANCE * sigma).powi(2) + 1e-12);
                         if shading > 12.0 {
                             continue;
                         }
-                        let Some((guides, cosine)) = guide_exponent(me, &targets[u], inv_depth)
+                        let Some((guides, cosine)) = guide_exponent(&me.at, &other.at, inv_depth)
                         else {
                             continue;
                         };
@@ -379,22 +418,29 @@ fn widen(
                             continue;
                         }
                         let weight =
-                            kx * ky * counts[u] * (-exponent).exp() * cosine.powi(NORMAL_POWER);
+                            kx * ky * other.count * (-exponent).exp() * cosine.powi(NORMAL_POWER);
                         if !(weight > 0.0 && weight.is_finite()) {
                             continue;
                         }
-                        for c in 0..3 {
-                            sum[c] += weight * e[c];
+                        for (acc, e) in sum.iter_mut().zip(other.at.illumination) {
+                            *acc += weight * e;
                         }
                         total += weight;
                     }
                 }
             }
-            Some(if total > 0.0 && total.is_finite() {
-                sum.map(|v| v / total)
-            } else {
-                own
-            })
+            if !(total > 0.0 && total.is_finite()) {
+                return *me;
+            }
+            let light = sum.map(|v| v / total);
+            WideningNode {
+                at: Member {
+                    illumination: light,
+                    ..me.at
+                },
+                luminance: luminance(light),
+                ..*me
+            }
         })
         .collect()
 }
@@ -420,7 +466,7 @@ fn guide_exponent(a: &Member, b: &Member, inv_depth: f32) -> Option<(f32, f32)> 
 }
 
 /// [`denoise_samples`]' mark for a sample that is not among the frame's members.
-const NOT_A_MEMBER: usize = usize::MAX;
+const NOT_A_MEMBER: u32 = u32::MAX;
 
 /// Of two members of one pixel, the depths differ by at most this fraction of
 /// [`DEPTH_TOLERANCE`], the normals by at most this angle's cosine and the albedos by at most
@@ -493,15 +539,17 @@ struct RowGroups {
 }
 
 impl RowGroups {
-    /// The groups of a row whose members are `members`, pixel `i`'s at
-    /// `cell_starts[i] - cell_starts[0]..cell_starts[i + 1] - cell_starts[0]`.
-    fn of(members: &[Member], cell_starts: &[usize]) -> Self {
+    /// The groups of a row whose members are `member(k)` for the sample indices `k` of
+    /// `order`, pixel `i`'s at `cell_starts[i] - cell_starts[0]..cell_starts[i + 1] -
+    /// cell_starts[0]`.
+    fn of(order: &[u32], cell_starts: &[usize], member: impl Fn(usize) -> Member) -> Self {
         let mut row = RowGroups::default();
         let base = cell_starts[0];
         let mut groups: Vec<Group> = Vec::new();
         for bounds in cell_starts.windows(2) {
             groups.clear();
-            for m in &members[bounds[0] - base..bounds[1] - base] {
+            for &k in &order[bounds[0] - base..bounds[1] - base] {
+                let m = &member(k as usize);
                 let g = match groups.iter().position(|g| g.first.same_surface(m)) {
                     Some(g) => g,
                     None => {

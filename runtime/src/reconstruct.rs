@@ -16,6 +16,7 @@
 //! samples overlap), always with its own PSF. Layering, splatting, integration and compositing
 //! are the synthesis stages, unchanged; [`normalize_density`] then divides by the coverage.
 
+use rayon::prelude::*;
 use formats::StochasticFrames;
 
 use crate::camera::Camera;
@@ -113,7 +114,7 @@ pub fn moved_samples(
     let lens = camera.thin_lens();
     frames
         .samples
-        .iter()
+        .par_iter()
         .enumerate()
         .map(|(k, s)| {
             let pixel = k / frames.spp.max(1);
@@ -172,7 +173,7 @@ impl<'a> PlacedSamples<'a> {
     ) -> Self {
         let moved = moved_samples(frames, camera, effects);
         let dropped = moved
-            .iter()
+            .par_iter()
             .zip(&frames.samples)
             .filter(|(m, s)| m.is_none() && s.color != [0.0; 4])
             .count();
@@ -397,8 +398,9 @@ pub(crate) fn classify_samples(
         frames.height,
         camera,
         options.classify.hdr_dense_threshold,
-        |emit| {
-            for k in 0..placed.len() {
+        placed.len(),
+        |samples, emit| {
+            for k in samples {
                 placed.for_each_tap(k, |x, y, share| emit(x, y, k as u32, share));
             }
         },

@@ -134,25 +134,29 @@ pub fn merge_alike(
         h,
         camera,
         bright_above,
-        |emit| {
-            for (i, f) in fragments.iter().enumerate() {
-                emit(f.x, f.y, i as u32, 1.0);
+        fragments.len(),
+        |items, emit| {
+            for i in items {
+                emit(fragments[i].x, fragments[i].y, i as u32, 1.0);
             }
         },
         |_, _, i, _| fragments[i as usize],
     )
 }
 
-/// [`merge_alike`] over fragments made on demand: `produce(emit)` calls `emit(x, y, index,
-/// share)` once per fragment, in the same order each time it is called (twice), and
-/// `fragment_of(x, y, index, share)` makes that fragment. A frame's unmerged fragments are
-/// never held at once, only 8 bytes for each.
+/// [`merge_alike`] over fragments made on demand from `items` producers (samples):
+/// `produce(range, emit)` calls `emit(x, y, index, share)` once per fragment of the items in
+/// `range`, in the same order each time it is called, and `fragment_of(x, y, index, share)`
+/// makes that fragment. A frame's unmerged fragments are never held at once, only 8 bytes for
+/// each. The items are sorted in a fixed number of consecutive runs on every thread, and each
+/// pixel reads its fragments run by run: the order of one pass, whatever the thread count.
 pub fn merge_placed(
     w: usize,
     h: usize,
     camera: &Camera,
     bright_above: f32,
-    produce: impl Fn(&mut dyn FnMut(i32, i32, u32, f32)),
+    items: usize,
+    produce: impl Fn(std::ops::Range<usize>, &mut dyn FnMut(i32, i32, u32, f32)) + Sync,
     fragment_of: impl Fn(i32, i32, u32, f32) -> Fragment + Sync,
 ) -> Vec<Fragment> {
     let lens = camera.thin_lens();
@@ -166,26 +170,37 @@ pub fn merge_placed(
         let (x, y) = (i64::from(x) + MARGIN_PX, i64::from(y) + MARGIN_PX);
         (x >= 0 && y >= 0 && x < bw && y < bh).then(|| (y * bw + x) as usize)
     };
-    // Fragments by pixel (a counting sort, stable), and those outside the margin.
     let cells = (bw * bh) as usize;
-    let mut starts = vec![0usize; cells + 1];
-    let mut outside = Vec::new();
-    produce(&mut |x, y, index, share| match cell_of(x, y) {
-        Some(c) => starts[c + 1] += 1,
-        None => outside.push(fragment_of(x, y, index, share)),
-    });
-    for i in 0..cells {
-        starts[i + 1] += starts[i];
-    }
-    let mut fill = starts.clone();
-    let mut sorted = vec![(0u32, 0.0f32); starts[cells]];
-    produce(&mut |x, y, index, share| {
-        if let Some(c) = cell_of(x, y) {
-            sorted[fill[c]] = (index, share);
-            fill[c] += 1;
-        }
-    });
-    drop(fill);
+    // Each run's fragments by pixel (a counting sort, stable), and those outside the margin.
+    let run_len = items.div_ceil(SORT_RUNS).max(1);
+    let runs: Vec<SortedRun> = (0..SORT_RUNS)
+        .into_par_iter()
+        .map(|r| {
+            let range = (r * run_len).min(items)..((r + 1) * run_len).min(items);
+            let mut starts = vec![0usize; cells + 1];
+            let mut outside = Vec::new();
+            produce(range.clone(), &mut |x, y, index, share| match cell_of(x, y) {
+                Some(c) => starts[c + 1] += 1,
+                None => outside.push(fragment_of(x, y, index, share)),
+            });
+            for i in 0..cells {
+                starts[i + 1] += starts[i];
+            }
+            let mut fill = starts.clone();
+            let mut sorted = vec![(0u32, 0.0f32); starts[cells]];
+            produce(range, &mut |x, y, index, share| {
+                if let Some(c) = cell_of(x, y) {
+                    sorted[fill[c]] = (index, share);
+                    fill[c] += 1;
+                }
+            });
+            SortedRun {
+                starts,
+                sorted,
+                outside,
+            }
+        })
+        .collect();
     // Rows of pixels on every thread, each row's groups in pixel order: the same fragments in
     // the same order as one pass.
     let bw = bw as usize;
@@ -194,8 +209,11 @@ pub fn merge_placed(
         .map_init(Vec::new, |groups: &mut Vec<(Group, bool)>, row| {
             let mut merged = Vec::new();
             for c in row * bw..(row + 1) * bw {
-                let members = &sorted[starts[c]..starts[c + 1]];
-                if members.is_empty() {
+                let mut members = runs
+                    .iter()
+                    .flat_map(|run| &run.sorted[run.starts[c]..run.starts[c + 1]])
+                    .peekable();
+                if members.peek().is_none() {
                     continue;
                 }
                 let (x, y) = ((c % bw) as i64 - MARGIN_PX, row as i64 - MARGIN_PX);
@@ -224,12 +242,28 @@ pub fn merge_placed(
             merged
         })
         .collect();
-    let mut merged = Vec::with_capacity(rows.iter().map(Vec::len).sum::<usize>() + outside.len());
+    let outside: usize = runs.iter().map(|run| run.outside.len()).sum();
+    let mut merged = Vec::with_capacity(rows.iter().map(Vec::len).sum::<usize>() + outside);
     for row in rows {
         merged.extend(row);
     }
-    merged.extend(outside);
+    for run in runs {
+        merged.extend(run.outside);
+    }
     merged
+}
+
+/// How many consecutive runs of items [`merge_placed`] sorts apart (in parallel): fixed, so
+/// that the merge's order does not depend on the number of threads.
+const SORT_RUNS: usize = 4;
+
+/// The fragments of one run of items sorted by pixel: pixel `c`'s are
+/// `sorted[starts[c]..starts[c + 1]]` as (index, share); those outside the frame's margin
+/// are made at once.
+struct SortedRun {
+    starts: Vec<usize>,
+    sorted: Vec<(u32, f32)>,
+    outside: Vec<Fragment>,
 }
 
 #[cfg(test)]
