@@ -82,7 +82,6 @@ pub(crate) struct ReconstructArgs {
 
 /// Runs `spreadlet reconstruct`: every frame of the run through one renderer.
 pub(crate) fn run(args: ReconstructArgs) -> Result<()> {
-    keep_freed_memory();
     let options = SynthOptions {
         classify: ClassifyOptions {
             layers: args.layers,
@@ -112,6 +111,7 @@ pub(crate) fn run(args: ReconstructArgs) -> Result<()> {
     )?)?;
     for job in &jobs {
         let camera = load_camera(job.camera.as_deref(), &args.camera_flags)?;
+        super::keep_freed_memory_below(camera.width, camera.height);
         let mut frames = StochasticFrames::read_exr(&job.input)
             .with_context(|| format!("reading stochastic frames {}", job.input.display()))?;
         if args.no_denoise {
@@ -195,20 +195,4 @@ fn reconstruct_frame_peer(
         write_json(p, &json)?;
     }
     Ok(())
-}
-
-/// Keeps the memory a stage of reconstruction frees for the next stage instead of handing it
-/// back to the kernel. glibc maps each buffer over 32 MiB (per-sample arrays of a million
-/// samples, the merge's taps, the layers) on its own and unmaps it when it is freed, so the
-/// next stage's buffer was faulted in again 4 KiB at a time: a quarter of reconstruction's CPU
-/// time went to 150,000 page faults in the kernel. The command runs once and exits, so its
-/// peak is all it ever holds. (Synthesis gains nothing measurable from it and its 4K frames
-/// would hold 13 % more at their peak, so it is left to reconstruction.)
-fn keep_freed_memory() {
-    #[cfg(all(target_os = "linux", target_env = "gnu"))]
-    // SAFETY: mallopt only sets two of glibc's allocator parameters, under its own lock.
-    unsafe {
-        libc::mallopt(libc::M_MMAP_MAX, 0);
-        libc::mallopt(libc::M_TRIM_THRESHOLD, i32::MAX);
-    }
 }
