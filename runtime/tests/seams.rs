@@ -124,6 +124,34 @@ fn a_defocus_ramp_blurs_smoothly() {
     assert!(step < 0.01, "a step or dip of {:.2} %", 100.0 * step);
 }
 
+/// Where both PSFs of a blend are dense (CoC up to about 8 px), the blend is drawn premixed,
+/// one record a pixel instead of two, and stays smooth.
+#[test]
+fn a_dense_defocus_ramp_blurs_smoothly_one_record_a_pixel() {
+    let camera = camera(W as u32, H as u32, true, 0.0);
+    let dbs = DbSet::new(Some(quick_db(PsfModel::ThinLens)), None).expect("db set");
+    let g = grey_gbuffer(
+        |x| depth_for_coc(&camera, f64::from(ramp(x, 0.7, 6.0))) as f32,
+        |_| [0.0, 0.0],
+    );
+    let (_, step) = largest_step(&synth_profile(&g, &camera, &dbs, "CoC 0.7-6 px"), 4);
+    assert!(step < 0.01, "a step or dip of {:.2} %", 100.0 * step);
+    // As many records inside the frame as the lookup of each pixel's one nearest cell makes
+    // (the records repeated beyond the frame's edges follow each PSF's reach).
+    let records = |continuous_lookup: bool| {
+        let mut options = SynthOptions::default();
+        options.classify.continuous_lookup = continuous_lookup;
+        let (_, stats) = synthesize(&g, &camera, &dbs, &options).expect("synth");
+        assert_eq!(stats.counts.sparse, 0, "all dense");
+        stats.counts.dense - stats.counts.edge_extended
+    };
+    let (blended, nearest) = (records(true), records(false));
+    assert_eq!(
+        blended, nearest,
+        "records: {blended} blended, {nearest} nearest"
+    );
+}
+
 #[test]
 fn a_motion_ramp_along_the_motion_blurs_smoothly() {
     let camera = camera(W as u32, H as u32, false, 1.0);

@@ -294,10 +294,20 @@ pub fn classify_fragments(
         }
         // The fragment's PSF, or its cell's and its neighbour's with their shares.
         // A twin is already the PSF of the fragment's own sub-cell.
+        // Two dense neighbours are drawn premixed ([`DbSet::dense_blend_for`]), as one record.
         let mut parts = [(path, psf_index, 1.0f32), (path, psf_index, 0.0)];
         if let Some(b) = blend.filter(|b| !to_twin && b.psf_index != psf_index) {
-            parts[0].2 = 1.0 - b.share;
-            parts[1] = (b.path, b.psf_index, b.share);
+            let both_dense = path == SplatPath::Dense && b.path == SplatPath::Dense;
+            let premixed = both_dense
+                .then(|| dbs.dense_blend_for(psf_index, b.psf_index, b.share))
+                .flatten();
+            match premixed {
+                Some(mixed) => parts[0].1 = mixed,
+                None => {
+                    parts[0].2 = 1.0 - b.share;
+                    parts[1] = (b.path, b.psf_index, b.share);
+                }
+            }
         }
         let n_parts = if parts[1].2 > 0.0 { 2 } else { 1 };
         for (t, &(layer, lw)) in targets[..n_targets].iter().enumerate() {
