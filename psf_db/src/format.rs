@@ -226,6 +226,17 @@ impl PsfDatabase {
         self.header.space.neighbour_blend(s, dim)
     }
 
+    /// [`PsfDatabase::lookup`] of `[s, 0]` and, with `blend`, its neighbour blend along the
+    /// first dimension, through `memo`; see [`crate::ParamSpace::lookup_blended_1d`].
+    pub fn lookup_blended_1d(
+        &self,
+        s: f32,
+        blend: bool,
+        memo: &mut crate::CellMemo,
+    ) -> (u32, bool, Option<(u32, f32)>) {
+        self.header.space.lookup_blended_1d(s, blend, memo)
+    }
+
     /// Ceiling of the largest Euclidean distance (px) of any spreadlet or dense pixel from its
     /// PSF centre: the padding a layer needs, valid under any rotation of the PSF.
     pub fn max_extent_px(&self) -> u32 {

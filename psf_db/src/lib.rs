@@ -34,4 +34,4 @@ pub use format::{
 pub use grid::{CellBox, Grid, GridSpec, NestedGrid, RegularGrid};
 pub use model::{ParseModelError, PsfModel};
 pub use shard::{merge_shards, ShardRange};
-pub use space::{Dimension, ParamSpace, ParamSpaceSpec};
+pub use space::{CellMemo, Dimension, ParamSpace, ParamSpaceSpec};

@@ -257,6 +257,93 @@ impl ParamSpace {
         Some((neighbour_index, share as f32))
     }
 
+    /// [`ParamSpace::lookup`] of `[s, 0]` and, with `blend`, [`ParamSpace::neighbour_blend`]
+    /// along the first dimension: the same results, found through `memo` in a
+    /// one-dimensional nested space, where the next lookup in the same cell (a row of pixels
+    /// whose blur changes slowly) skips the walk into the grid. One memo serves one space.
+    pub fn lookup_blended_1d(
+        &self,
+        s: f32,
+        blend: bool,
+        memo: &mut CellMemo,
+    ) -> (u32, bool, Option<(u32, f32)>) {
+        if self.dims.len() != 1 || !matches!(self.grid, Grid::Nested(_)) {
+            let (index, clamped) = self.lookup([s, 0.0]);
+            let blend = blend.then(|| self.neighbour_blend([s, 0.0], 0)).flatten();
+            return (index, clamped, blend);
+        }
+        let d = &self.dims[0];
+        let v = f64::from(s);
+        // `!(a && b)` so that NaN counts as clamped.
+        let clamped = !(v >= d.min && v <= d.max);
+        let u = self.to_grid([v, 0.0]);
+        // Strictly inside the remembered cell, the grid's walk finds that cell.
+        let cell = match memo.cell.filter(|c| c.lo < u[0] && u[0] < c.hi) {
+            Some(cell) => cell,
+            None => {
+                let cell = self.memo_cell(u);
+                memo.cell = Some(cell);
+                cell
+            }
+        };
+        let blend = (blend && s.is_finite())
+            .then(|| self.blend_in(u[0], &cell))
+            .flatten();
+        (cell.index, clamped, blend)
+    }
+
+    /// The cell holding grid coordinates `u` of a one-dimensional space, with the neighbours
+    /// [`ParamSpace::neighbour_blend`] would find on either side.
+    fn memo_cell(&self, u: [f64; 2]) -> MemoCell {
+        let n = self.grid.n() as f64;
+        let index = self.grid.index_of(u);
+        let (lo, hi) = self
+            .grid
+            .cell_box(index)
+            .map_or((0.0, 0.0), |b| (b.min[0], b.max[0]));
+        let edge = hi - lo;
+        let neighbour = |probe: f64| {
+            let j = self.grid.index_of([probe, u[1]]);
+            let b = self.grid.cell_box(j)?;
+            Some((j, 0.5 * (b.min[0] + b.max[0])))
+        };
+        let valid = edge > 0.0;
+        MemoCell {
+            index,
+            lo,
+            hi,
+            lower: (valid && lo > 0.0)
+                .then(|| neighbour(lo - 1e-6 * edge))
+                .flatten(),
+            upper: (valid && hi < n)
+                .then(|| neighbour(hi + 1e-6 * edge))
+                .flatten(),
+        }
+    }
+
+    /// [`ParamSpace::neighbour_blend`]'s share for grid coordinate `u` in the one-dimensional `cell`.
+    fn blend_in(&self, u: f64, cell: &MemoCell) -> Option<(u32, f32)> {
+        let n = self.grid.n() as f64;
+        let (lo, hi) = (cell.lo, cell.hi);
+        if hi - lo <= 0.0 {
+            return None;
+        }
+        let centre = 0.5 * (lo + hi);
+        let offset = u - centre;
+        let (neighbour_index, neighbour_centre) = if offset > 0.0 && hi < n {
+            cell.upper?
+        } else if offset < 0.0 && lo > 0.0 {
+            cell.lower?
+        } else {
+            return None;
+        };
+        let share = (offset.abs() / (neighbour_centre - centre).abs()).min(0.5);
+        if share <= 0.0 {
+            return None;
+        }
+        Some((neighbour_index, share as f32))
+    }
+
     /// The box of PSF `i` in physical units (the region its PSF is pre-filtered over);
     /// `None` when `i >= psf_count()`.
     pub fn cell_box(&self, i: u32) -> Option<CellBox> {
@@ -278,6 +365,23 @@ impl ParamSpace {
         }
         Some(c)
     }
+}
+
+/// The last cell a one-dimensional lookup found ([`ParamSpace::lookup_blended_1d`]).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct CellMemo {
+    cell: Option<MemoCell>,
+}
+
+/// A one-dimensional cell: its index, its box along the dimension (grid units), and its
+/// lower and upper neighbours' indices and centres (grid units), where it has them.
+#[derive(Clone, Copy, Debug)]
+struct MemoCell {
+    index: u32,
+    lo: f64,
+    hi: f64,
+    lower: Option<(u32, f64)>,
+    upper: Option<(u32, f64)>,
 }
 
 #[cfg(test)]
@@ -408,6 +512,34 @@ mod tests {
         assert_eq!(i, s.psf_count() - 1);
         assert!(s.lookup([f32::NAN, 0.0]).1);
         assert!(!s.lookup([64.0, 192.0]).1);
+    }
+
+    /// The memoised one-dimensional lookup finds what the plain lookup and neighbour blend
+    /// find, whatever order the values come in: rising, falling, scattered, out of range, NaN.
+    #[test]
+    fn the_memoised_1d_lookup_equals_the_plain_one() {
+        let space = ParamSpace::for_model(PsfModel::ThinLens, &[[0.0, 48.0]], 30).unwrap();
+        let rising: Vec<f32> = (-20..=5200).map(|k| k as f32 * 0.01).collect();
+        let falling: Vec<f32> = rising.iter().rev().copied().collect();
+        // A fixed scatter (a multiplicative hash of the index) over and past the range.
+        let scattered: Vec<f32> = (0u32..4000)
+            .map(|k| (k.wrapping_mul(2_654_435_761) >> 8) as f32 / (1u32 << 24) as f32 * 60.0 - 6.0)
+            .chain([f32::NAN, f32::INFINITY, -f32::INFINITY, 0.0, 48.0])
+            .collect();
+        for values in [rising, falling, scattered] {
+            let mut memo = CellMemo::default();
+            for s in values {
+                for blend in [true, false] {
+                    let (index, clamped) = space.lookup([s, 0.0]);
+                    let expected = blend.then(|| space.neighbour_blend([s, 0.0], 0)).flatten();
+                    assert_eq!(
+                        space.lookup_blended_1d(s, blend, &mut memo),
+                        (index, clamped, expected),
+                        "s {s}, blend {blend}"
+                    );
+                }
+            }
+        }
     }
 
     #[test]

@@ -199,6 +199,7 @@ pub fn classify_fragments(
                         model,
                         options,
                         false,
+                        &mut psf_db::CellMemo::default(),
                     );
                     if found.path == SplatPath::Copy {
                         return None;
@@ -221,7 +222,8 @@ pub fn classify_fragments(
     let emit = |index: usize,
                 frag: &Fragment,
                 per_layer: &mut [Vec<SplatRecord>],
-                counts: &mut PathCounts| {
+                counts: &mut PathCounts,
+                memo: &mut psf_db::CellMemo| {
         if frag.weight <= 0.0 {
             return;
         }
@@ -257,6 +259,7 @@ pub fn classify_fragments(
             model,
             options,
             continuous,
+            memo,
         );
         // In front of the focus plane the lens images its aperture turned half a turn: the
         // databases hold the PSF behind it (see `front_turns_the_aperture`).
@@ -344,11 +347,12 @@ pub fn classify_fragments(
         .map(|(c, chunk)| {
             let mut per_level = vec![vec![Vec::new(); n_layers]; n_levels];
             let mut counted = PathCounts::default();
+            let mut memo = psf_db::CellMemo::default();
             for (k, frag) in chunk.iter().enumerate() {
                 let index = c * CHUNK + k;
                 let level = level_of(index);
                 counted.reduced += usize::from(level > 0 && frag.weight > 0.0);
-                emit(index, frag, &mut per_level[level], &mut counted);
+                emit(index, frag, &mut per_level[level], &mut counted, &mut memo);
             }
             (per_level, counted)
         })

@@ -5,7 +5,7 @@
 use super::*;
 use crate::dbset::DbSet;
 use crate::pipeline::types::SplatPath;
-use psf_db::{PsfDatabase, PsfModel};
+use psf_db::{CellMemo, PsfDatabase, PsfModel};
 
 /// A fragment's PSF: its drawing path, index in the combined database, whether its
 /// parameters were clamped to the database's range, and the rotation of the PSF's reference
@@ -33,7 +33,8 @@ pub(super) struct Blend {
 /// grid: still pixels from the thin-lens database, moving ones from the lens-motion one,
 /// everything from a physical-lens one (whose moving fragments the caller then smears along
 /// their motion, [`crate::motion_smear`]); copied when both are under
-/// [`ClassifyOptions::copy_threshold_px`]. `centre` is the frame's centre, pixels.
+/// [`ClassifyOptions::copy_threshold_px`]. `centre` is the frame's centre, pixels. `memo`
+/// remembers the thin-lens cell last found, for the next fragment's lookup.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn lookup_psf(
     frag: &Fragment,
@@ -45,6 +46,7 @@ pub(super) fn lookup_psf(
     model: Option<PsfModel>,
     options: &ClassifyOptions,
     continuous: bool,
+    memo: &mut CellMemo,
 ) -> Lookup {
     let (thin, main, combined) = (
         dbs.thin_lens.as_ref(),
@@ -87,8 +89,13 @@ pub(super) fn lookup_psf(
         {
             let still = motion_len < options.copy_threshold_px;
             let mut thin_lookup = |t: &PsfDatabase| {
-                blend = neighbour(t, [coc, 0.0], 0, 0);
-                t.lookup([coc, 0.0])
+                let (i, clamped, neighbour) = t.lookup_blended_1d(coc, continuous, memo);
+                blend = neighbour.map(|(j, share)| Blend {
+                    path: combined.map_or(SplatPath::Copy, |all| path_of(all, j)),
+                    psf_index: j,
+                    share,
+                });
+                (i, clamped)
             };
             let (idx, cl) = match (thin, main) {
                 (Some(t), _) if still => thin_lookup(t),
