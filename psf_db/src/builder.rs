@@ -27,6 +27,8 @@ impl DatabaseBuilder {
                 dense: Vec::new(),
                 dense_data: Vec::new(),
                 max_extent_px: 0,
+                dense_row_start: Vec::new(),
+                dense_row_spans: Vec::new(),
             },
         }
     }
@@ -146,5 +148,44 @@ impl DatabaseBuilder {
         let mut db = self.db;
         db.validate()?;
         Ok(db)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{ParamSpace, PsfModel};
+
+    /// Each dense row's span runs from its first to past its last pixel that is non-zero in
+    /// any channel, after building and after a round trip through the file's bytes.
+    #[test]
+    fn dense_rows_know_where_their_light_is() {
+        let space =
+            ParamSpace::for_model(PsfModel::PhysicalLens, &[[0.1, 3.0], [0.0, 20.0]], 4).unwrap();
+        let n = space.psf_count();
+        let mut header = DbHeader::new(PsfModel::PhysicalLens, space, 16);
+        header.channels = 3;
+        let mut b = DatabaseBuilder::new(header);
+        // 4 x 3 px, three channels: a row lit in its middle (only blue at column 2), a zero row
+        // (with a negative zero), a row lit at both ends.
+        #[rustfmt::skip]
+        let image = [
+            0.0, 0.0, 0.0,  0.5, 0.0, 0.0,   0.0, 0.0, 0.25,  0.0, 0.0, 0.0,
+            0.0, 0.0, 0.0,  -0.0, 0.0, 0.0,  0.0, 0.0, 0.0,   0.0, 0.0, 0.0,
+            1.0, 0.0, 0.0,  0.0, 0.0, 0.0,   0.0, 0.0, 0.0,   0.0, -2.0, 0.0,
+        ];
+        b.push_dense([-2, -1], 4, 3, &image).unwrap();
+        b.push_sparse(&[[0, 0]], &[1.0, 1.0, 1.0]).unwrap();
+        for _ in 2..n {
+            b.push_dense([0, 0], 1, 1, &[0.0; 3]).unwrap();
+        }
+        let db = b.finish().unwrap();
+        let again = PsfDatabase::from_bytes(&db.to_bytes().unwrap()).unwrap();
+        for db in [&db, &again] {
+            let view = db.dense(0).expect("dense");
+            assert_eq!(view.row_spans, &[[1, 3], [0, 0], [0, 4]]);
+            assert!(db.dense(1).is_none());
+            assert_eq!(db.dense(2).expect("dense").row_spans, &[[0, 0]]);
+        }
     }
 }

@@ -75,6 +75,10 @@ pub struct DenseView<'a> {
     pub channels: usize,
     /// `width * height * channels` values, row-major, channel-interleaved (primal PSF values).
     pub data: &'a [f32],
+    /// Per row, the columns `[first, end)` outside which the row is zero in every channel
+    /// (`[0, 0]` for a zero row): a splat need not visit the rest (a streak's box is mostly
+    /// zeros).
+    pub row_spans: &'a [[u16; 2]],
 }
 
 impl DenseView<'_> {
@@ -96,6 +100,12 @@ pub struct PsfDatabase {
     pub(crate) dense: Vec<DenseEntry>,
     pub(crate) dense_data: Vec<f32>,
     pub(crate) max_extent_px: u32,
+    /// Per dense entry, the index of its first row in `dense_row_spans`; computed on
+    /// validation, not stored in the file.
+    pub(crate) dense_row_start: Vec<u32>,
+    /// Per row of every dense image, the columns `[first, end)` outside which the row is zero
+    /// in every channel (`[0, 0]` for a zero row); computed on validation.
+    pub(crate) dense_row_spans: Vec<[u16; 2]>,
 }
 
 impl PsfDatabase {
@@ -205,12 +215,14 @@ impl PsfDatabase {
         let c = self.channels();
         let len = e.width as usize * e.height as usize * c;
         let off = e.offset as usize;
+        let rows = self.dense_row_start[slot as usize] as usize;
         Some(DenseView {
             width: e.width as usize,
             height: e.height as usize,
             origin: [e.origin_x as i32, e.origin_y as i32],
             channels: c,
             data: &self.dense_data[off..off + len],
+            row_spans: &self.dense_row_spans[rows..rows + e.height as usize],
         })
     }
 
@@ -546,6 +558,8 @@ impl PsfDatabase {
             dense,
             dense_data,
             max_extent_px: 0,
+            dense_row_start: Vec::new(),
+            dense_row_spans: Vec::new(),
         };
         db.validate()?;
         Ok(db)
@@ -663,7 +677,41 @@ impl PsfDatabase {
             return oob(format!("dense entry {k} belongs to no PSF"));
         }
         self.max_extent_px = (max_sq as f64).sqrt().ceil() as u32;
+        self.find_dense_row_spans();
         Ok(())
+    }
+
+    /// Fills `dense_row_start` and `dense_row_spans` from the dense images (whose bounds
+    /// `validate` has checked).
+    fn find_dense_row_spans(&mut self) {
+        let ch = self.channels();
+        let rows: usize = self.dense.iter().map(|e| e.height as usize).sum();
+        let mut starts = Vec::with_capacity(self.dense.len());
+        let mut spans = Vec::with_capacity(rows);
+        for e in &self.dense {
+            starts.push(spans.len() as u32);
+            let width = e.width as usize;
+            let len = width * e.height as usize * ch;
+            let image = &self.dense_data[e.offset as usize..e.offset as usize + len];
+            if width == 0 {
+                spans.resize(spans.len() + e.height as usize, [0, 0]);
+                continue;
+            }
+            for row in image.chunks_exact(width * ch) {
+                let lit = |px: &[f32]| px.iter().any(|&v| v != 0.0);
+                let span = match row.chunks_exact(ch).position(lit) {
+                    None => [0, 0],
+                    Some(first) => {
+                        let end = width - row.chunks_exact(ch).rev().position(lit).unwrap_or(0);
+                        // Widths are u16 in the format.
+                        [first as u16, end as u16]
+                    }
+                };
+                spans.push(span);
+            }
+        }
+        self.dense_row_start = starts;
+        self.dense_row_spans = spans;
     }
 }
 

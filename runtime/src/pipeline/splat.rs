@@ -539,7 +539,8 @@ fn splat_dense_upright(
         return;
     }
     let width = band.width as usize;
-    // The row of a PSF at band row y, as (first column in band coordinates, values).
+    // The non-zero part of a PSF's row at band row y, as (first column in band coordinates,
+    // values): the zeros around it add nothing, and a streak's box is mostly zeros.
     fn row_of<'v>(
         v: &psf_db::DenseView<'v>,
         s: (i32, i32, i32, i32),
@@ -548,8 +549,13 @@ fn splat_dense_upright(
         if y < s.1 || y >= s.3 {
             return None;
         }
-        let at = (y - s.1) as usize * v.width;
-        Some((s.0, &v.data[at..at + v.width]))
+        let row = (y - s.1) as usize;
+        let [first, end] = v.row_spans[row].map(usize::from);
+        if first >= end {
+            return None;
+        }
+        let at = row * v.width;
+        Some((s.0 + first as i32, &v.data[at + first..at + end]))
     }
     let ca = r.color;
     for y in uy0.max(band.y0)..uy1.min(band.y1) {
@@ -575,6 +581,16 @@ fn splat_dense_upright(
             }
             Some((bv, cb, sb)) => {
                 let rb = row_of(bv, *sb, y);
+                // Only the columns where either row is non-zero.
+                let (x_lo, x_hi) = match (ra, rb) {
+                    (None, None) => continue,
+                    (Some((x0, v)), None) | (None, Some((x0, v))) => (x0, x0 + v.len() as i32),
+                    (Some((a0, va)), Some((b0, vb))) => (
+                        a0.min(b0),
+                        (a0 + va.len() as i32).max(b0 + vb.len() as i32),
+                    ),
+                };
+                let (x_lo, x_hi) = (x_lo.max(0), x_hi.min(band.width));
                 // A PSF's value at band column x, zero outside its box.
                 let at = |rv: Option<(i32, &[f32])>, x: i32| match rv {
                     Some((x0, values)) if x >= x0 && x < x0 + values.len() as i32 => {
