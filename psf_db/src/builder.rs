@@ -188,4 +188,28 @@ mod tests {
             assert_eq!(db.dense(2).expect("dense").row_spans, &[[0, 0]]);
         }
     }
+
+    /// Dense images that share their values are refused: a small file could otherwise ask
+    /// for rows without end.
+    #[test]
+    fn dense_images_that_share_values_are_refused() {
+        let space = ParamSpace::for_model(PsfModel::ThinLens, &[[0.0, 8.0]], 4).unwrap();
+        let n = space.psf_count();
+        let mut b = DatabaseBuilder::new(DbHeader::new(PsfModel::ThinLens, space, 16));
+        for _ in 0..n {
+            b.push_dense([0, 0], 2, 2, &[1.0; 4]).unwrap();
+        }
+        let db = b.finish().unwrap();
+        let mut shared = db.clone();
+        // The first image grows over the second's values, and the second reads the first's.
+        shared.dense[0].height = 4;
+        shared.dense[1].offset = 0;
+        let err = shared.validate().unwrap_err();
+        assert!(err.to_string().contains("share values"), "{err}");
+        let mut moved = db.clone();
+        moved.dense[1].offset = 0;
+        moved
+            .validate()
+            .expect("the same number of values, one image read twice");
+    }
 }

@@ -77,7 +77,7 @@ pub struct DenseView<'a> {
     pub data: &'a [f32],
     /// Per row, the columns `[first, end)` outside which the row is zero in every channel
     /// (`[0, 0]` for a zero row): a splat need not visit the rest (a streak's box is mostly
-    /// zeros).
+    /// zeros). Empty for an image without pixels.
     pub row_spans: &'a [[u16; 2]],
 }
 
@@ -216,13 +216,14 @@ impl PsfDatabase {
         let len = e.width as usize * e.height as usize * c;
         let off = e.offset as usize;
         let rows = self.dense_row_start[slot as usize] as usize;
+        let row_count = if len == 0 { 0 } else { e.height as usize };
         Some(DenseView {
             width: e.width as usize,
             height: e.height as usize,
             origin: [e.origin_x as i32, e.origin_y as i32],
             channels: c,
             data: &self.dense_data[off..off + len],
-            row_spans: &self.dense_row_spans[rows..rows + e.height as usize],
+            row_spans: &self.dense_row_spans[rows..rows + row_count],
         })
     }
 
@@ -677,6 +678,18 @@ impl PsfDatabase {
             return oob(format!("dense entry {k} belongs to no PSF"));
         }
         self.max_extent_px = (max_sq as f64).sqrt().ceil() as u32;
+        // Images that share values would let a small file ask for rows without end below.
+        let held: u64 = self
+            .dense
+            .iter()
+            .map(|e| e.width as u64 * e.height as u64 * ch as u64)
+            .sum();
+        if held > self.dense_data.len() as u64 {
+            return oob(format!(
+                "dense images hold {held} values, {} are stored: images share values",
+                self.dense_data.len()
+            ));
+        }
         self.find_dense_row_spans();
         Ok(())
     }
@@ -692,11 +705,10 @@ impl PsfDatabase {
             starts.push(spans.len() as u32);
             let width = e.width as usize;
             let len = width * e.height as usize * ch;
-            let image = &self.dense_data[e.offset as usize..e.offset as usize + len];
-            if width == 0 {
-                spans.resize(spans.len() + e.height as usize, [0, 0]);
+            if len == 0 {
                 continue;
             }
+            let image = &self.dense_data[e.offset as usize..e.offset as usize + len];
             for row in image.chunks_exact(width * ch) {
                 let lit = |px: &[f32]| px.iter().any(|&v| v != 0.0);
                 let span = match row.chunks_exact(ch).position(lit) {

@@ -550,7 +550,7 @@ fn splat_dense_upright(
             return None;
         }
         let row = (y - s.1) as usize;
-        let [first, end] = v.row_spans[row].map(usize::from);
+        let [first, end] = v.row_spans.get(row).map_or([0, 0], |s| s.map(usize::from));
         if first >= end {
             return None;
         }
