@@ -27,7 +27,7 @@ pub(super) struct EdgeSplit {
 /// emitter's anti-aliased rim would otherwise glow with the background's blur). Neighbours two
 /// pixels away count too when they are brighter than `hdr_threshold`: a renderer's pixel
 /// filter spreads an HDR highlight's light that far. `coc_at(i)` is pixel `i`'s signed CoC
-/// (pixels) and `depth_at(i)` its depth.
+/// (pixels) and `depth_at(i)` its depth; `bright_near` is [`bright_near`] of the frame.
 pub(super) fn edge_split(
     g: &GBuffer,
     x: usize,
@@ -35,6 +35,7 @@ pub(super) fn edge_split(
     coc_at: &dyn Fn(usize) -> f32,
     depth_at: &dyn Fn(usize) -> f32,
     hdr_threshold: f32,
+    bright_near: &[bool],
 ) -> Option<EdgeSplit> {
     let (w, h) = (g.width as i32, g.height as i32);
     let (xi, yi) = (x as i32, y as i32);
@@ -46,8 +47,11 @@ pub(super) fn edge_split(
     let bright = |c: [f32; 4]| c[..3].iter().any(|&v| v > hdr_threshold);
     // The nearest neighbour in the 3x3 window, or a bright one in the 5x5 window.
     let mut best: Option<(usize, i32, i32, f32)> = None;
-    for dy in -2i32..=2 {
-        for dx in -2i32..=2 {
+    // Without a bright pixel in the 5x5 window the outer ring holds no candidate: only the
+    // 3x3 window is walked, in the same order.
+    let reach = if bright_near.get(i).copied().unwrap_or(true) { 2 } else { 1 };
+    for dy in -reach..=reach {
+        for dx in -reach..=reach {
             if dx == 0 && dy == 0 {
                 continue;
             }
@@ -127,4 +131,101 @@ pub(super) fn edge_split(
         foreground_color,
         background_color: cb,
     })
+}
+
+/// Per pixel of `g`, whether its 5x5 window holds a pixel brighter than `hdr_threshold` in
+/// some channel: the edge split looks two pixels away only for such a neighbour.
+pub(super) fn bright_near(g: &GBuffer, hdr_threshold: f32) -> Vec<bool> {
+    let (w, h) = (g.width, g.height);
+    let bright: Vec<bool> = g
+        .color
+        .iter()
+        .map(|c| c[..3].iter().any(|&v| v > hdr_threshold))
+        .collect();
+    // Widened by two pixels along rows, then along columns.
+    let mut across = vec![false; w * h];
+    for y in 0..h {
+        let row = &bright[y * w..(y + 1) * w];
+        for x in 0..w {
+            across[y * w + x] = row[x.saturating_sub(2)..(x + 3).min(w)].iter().any(|&b| b);
+        }
+    }
+    let mut near = vec![false; w * h];
+    for y in 0..h {
+        for x in 0..w {
+            near[y * w + x] = (y.saturating_sub(2)..(y + 3).min(h)).any(|yy| across[yy * w + x]);
+        }
+    }
+    near
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A frame of nested depth steps, textured colour and a few HDR pixels (one at the border).
+    fn frame() -> GBuffer {
+        let (w, h) = (23, 17);
+        let mut color = Vec::with_capacity(w * h);
+        let mut depth = Vec::with_capacity(w * h);
+        for y in 0..h {
+            for x in 0..w {
+                let near = (6..15).contains(&x) && (4..12).contains(&y);
+                let v = 0.2 + 0.05 * ((x * 7 + y * 3) % 5) as f32;
+                let lit = [(10, 8), (6, 8), (0, 0), (22, 3), (3, 16)].contains(&(x, y));
+                // Anti-aliased: half the near square's colour, the far depth.
+                let rim = !near && (5..16).contains(&x) && (3..13).contains(&y);
+                let c = if lit {
+                    40.0
+                } else if near {
+                    0.9
+                } else if rim {
+                    0.5 * (0.9 + v)
+                } else {
+                    v
+                };
+                color.push([c, 0.5 * c, v, 1.0]);
+                depth.push(if near { 1.0 } else { 4.0 + 0.01 * x as f32 });
+            }
+        }
+        GBuffer::from_planes(w, h, color, Some(depth), None).expect("frame")
+    }
+
+    /// The 5x5 windows holding a bright pixel are flagged, and no other.
+    #[test]
+    fn bright_windows_are_found() {
+        let g = frame();
+        let near = bright_near(&g, 8.0);
+        let lit = |x: usize, y: usize| g.color[y * g.width + x][0] > 8.0;
+        for y in 0..g.height {
+            for x in 0..g.width {
+                let expected = (y.saturating_sub(2)..(y + 3).min(g.height))
+                    .any(|yy| (x.saturating_sub(2)..(x + 3).min(g.width)).any(|xx| lit(xx, yy)));
+                assert_eq!(near[y * g.width + x], expected, "pixel ({x}, {y})");
+            }
+        }
+    }
+
+    /// Walking the 3x3 window where no bright pixel is near splits every pixel as the full
+    /// 5x5 walk does.
+    #[test]
+    fn the_short_walk_splits_as_the_full_one() {
+        let g = frame();
+        let depth = g.depth.clone().expect("depth");
+        // A CoC growing with the distance from a focus at depth 2.
+        let coc_at = |i: usize| 6.0 * (depth[i] - 2.0) / depth[i];
+        let depth_at = |i: usize| depth[i];
+        let near = bright_near(&g, 8.0);
+        let everywhere = vec![true; near.len()];
+        let mut splits = 0;
+        for y in 0..g.height {
+            for x in 0..g.width {
+                let full = edge_split(&g, x, y, &coc_at, &depth_at, 8.0, &everywhere);
+                let short = edge_split(&g, x, y, &coc_at, &depth_at, 8.0, &near);
+                assert_eq!(full, short, "pixel ({x}, {y})");
+                splits += usize::from(full.is_some());
+            }
+        }
+        assert!(splits > 10, "{splits} pixels split: the frame should have edges");
+    }
 }

@@ -167,6 +167,11 @@ pub(super) fn pixel_fragments(
         .map(|i| signed_coc(depth_at(i)))
         .collect();
     let coc_at = |i: usize| cocs[i];
+    let bright_near = if split_edges && model.is_some() {
+        super::edge_split::bright_near(gbuffer, options.hdr_dense_threshold)
+    } else {
+        Vec::new()
+    };
 
     // Fragments per pixel (up to two: edge split), a row per task, the rows joined in order:
     // the same fragments in the same order as one pass.
@@ -200,6 +205,7 @@ pub(super) fn pixel_fragments(
                         &coc_at,
                         &depth_at,
                         options.hdr_dense_threshold,
+                        &bright_near,
                     )
                 } else {
                     None
