@@ -224,28 +224,64 @@ impl ParamSpace {
             return None;
         }
         let u = self.to_grid([f64::from(s[0]), f64::from(s[1])]);
-        let n = self.grid.n() as f64;
         let cell = self.grid.cell_box(self.grid.index_of(u))?;
         let (lo, hi) = (cell.min[dim], cell.max[dim]);
+        self.tent_share(
+            u[dim],
+            lo,
+            hi,
+            || self.neighbour_along(u, dim, lo, hi, false),
+            || self.neighbour_along(u, dim, lo, hi, true),
+        )
+    }
+
+    /// The cell next to the cell `[lo, hi]` (grid units along `dim`) holding grid point `u`,
+    /// below it or `above` it along `dim`: its index and its centre along `dim`.
+    fn neighbour_along(
+        &self,
+        u: [f64; 2],
+        dim: usize,
+        lo: f64,
+        hi: f64,
+        above: bool,
+    ) -> Option<(u32, f64)> {
+        // A point just inside the neighbour.
         let edge = hi - lo;
-        if edge <= 0.0 {
+        let mut at = u;
+        at[dim] = if above {
+            hi + 1e-6 * edge
+        } else {
+            lo - 1e-6 * edge
+        };
+        let index = self.grid.index_of(at);
+        let b = self.grid.cell_box(index)?;
+        Some((index, 0.5 * (b.min[dim] + b.max[dim])))
+    }
+
+    /// The neighbour and share of [`ParamSpace::neighbour_blend`] for grid coordinate `u` in
+    /// the cell `[lo, hi]` along one dimension, given its `lower` and `upper` neighbours
+    /// (index and centre), asked for only on the side `u` lies.
+    fn tent_share(
+        &self,
+        u: f64,
+        lo: f64,
+        hi: f64,
+        lower: impl FnOnce() -> Option<(u32, f64)>,
+        upper: impl FnOnce() -> Option<(u32, f64)>,
+    ) -> Option<(u32, f32)> {
+        let n = self.grid.n() as f64;
+        if hi - lo <= 0.0 {
             return None;
         }
         let centre = 0.5 * (lo + hi);
-        let offset = u[dim] - centre;
-        // A point just inside the neighbour: its cell's centre along `dim`.
-        let probe = if offset > 0.0 && hi < n {
-            hi + 1e-6 * edge
+        let offset = u - centre;
+        let (neighbour_index, neighbour_centre) = if offset > 0.0 && hi < n {
+            upper()?
         } else if offset < 0.0 && lo > 0.0 {
-            lo - 1e-6 * edge
+            lower()?
         } else {
             return None;
         };
-        let mut at = u;
-        at[dim] = probe;
-        let neighbour_index = self.grid.index_of(at);
-        let neighbour = self.grid.cell_box(neighbour_index)?;
-        let neighbour_centre = 0.5 * (neighbour.min[dim] + neighbour.max[dim]);
         // From 0 at the own centre to 1/2 at the boundary. A narrower ramp (the cell's own PSF
         // over the middle of the cell) would halve the second splats, but leaves the ramp a
         // step: a ramp over half the distance left dips of 2.5 % on a CoC ramp, 1.7 % on a
@@ -287,7 +323,7 @@ impl ParamSpace {
             }
         };
         let blend = (blend && s.is_finite())
-            .then(|| self.blend_in(u[0], &cell))
+            .then(|| self.tent_share(u[0], cell.lo, cell.hi, || cell.lower, || cell.upper))
             .flatten();
         (cell.index, clamped, blend)
     }
@@ -301,47 +337,18 @@ impl ParamSpace {
             .grid
             .cell_box(index)
             .map_or((0.0, 0.0), |b| (b.min[0], b.max[0]));
-        let edge = hi - lo;
-        let neighbour = |probe: f64| {
-            let j = self.grid.index_of([probe, u[1]]);
-            let b = self.grid.cell_box(j)?;
-            Some((j, 0.5 * (b.min[0] + b.max[0])))
-        };
-        let valid = edge > 0.0;
+        let valid = hi - lo > 0.0;
         MemoCell {
             index,
             lo,
             hi,
             lower: (valid && lo > 0.0)
-                .then(|| neighbour(lo - 1e-6 * edge))
+                .then(|| self.neighbour_along(u, 0, lo, hi, false))
                 .flatten(),
             upper: (valid && hi < n)
-                .then(|| neighbour(hi + 1e-6 * edge))
+                .then(|| self.neighbour_along(u, 0, lo, hi, true))
                 .flatten(),
         }
-    }
-
-    /// [`ParamSpace::neighbour_blend`]'s share for grid coordinate `u` in the one-dimensional `cell`.
-    fn blend_in(&self, u: f64, cell: &MemoCell) -> Option<(u32, f32)> {
-        let n = self.grid.n() as f64;
-        let (lo, hi) = (cell.lo, cell.hi);
-        if hi - lo <= 0.0 {
-            return None;
-        }
-        let centre = 0.5 * (lo + hi);
-        let offset = u - centre;
-        let (neighbour_index, neighbour_centre) = if offset > 0.0 && hi < n {
-            cell.upper?
-        } else if offset < 0.0 && lo > 0.0 {
-            cell.lower?
-        } else {
-            return None;
-        };
-        let share = (offset.abs() / (neighbour_centre - centre).abs()).min(0.5);
-        if share <= 0.0 {
-            return None;
-        }
-        Some((neighbour_index, share as f32))
     }
 
     /// The box of PSF `i` in physical units (the region its PSF is pre-filtered over);

@@ -58,18 +58,19 @@ pub(super) fn lookup_psf(
     let (mut rot_cos, mut rot_sin) = (1.0f32, 0.0f32);
     let offset = dbs.main_offset;
     let mut blend = None;
+    // The blend with PSF `j` of the combined database at `share`.
+    let blend_with = |(j, share): (u32, f32)| Blend {
+        path: combined.map_or(SplatPath::Copy, |all| path_of(all, j)),
+        psf_index: j,
+        share,
+    };
     // The neighbour along `dim` that a continuous lookup blends the PSF of `s` with.
     let neighbour = |db: &PsfDatabase, s: [f32; 2], dim: usize, offset: u32| {
         if !continuous {
             return None;
         }
         let (i, share) = db.neighbour_blend(s, dim)?;
-        let j = i + offset;
-        Some(Blend {
-            path: combined.map_or(SplatPath::Copy, |all| path_of(all, j)),
-            psf_index: j,
-            share,
-        })
+        Some(blend_with((i + offset, share)))
     };
     let (path, psf_index, clamped) = match (model, main, combined) {
         (Some(PsfModel::PhysicalLens), Some(db), Some(all)) => {
@@ -90,11 +91,7 @@ pub(super) fn lookup_psf(
             let still = motion_len < options.copy_threshold_px;
             let mut thin_lookup = |t: &PsfDatabase| {
                 let (i, clamped, neighbour) = t.lookup_blended_1d(coc, continuous, memo);
-                blend = neighbour.map(|(j, share)| Blend {
-                    path: combined.map_or(SplatPath::Copy, |all| path_of(all, j)),
-                    psf_index: j,
-                    share,
-                });
+                blend = neighbour.map(blend_with);
                 (i, clamped)
             };
             let (idx, cl) = match (thin, main) {
