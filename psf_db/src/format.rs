@@ -566,8 +566,22 @@ impl PsfDatabase {
         Ok(db)
     }
 
-    /// Checks every count, index, offset and position, and computes `max_extent_px`.
+    /// Checks every count, index, offset, position and value, computes `max_extent_px` and
+    /// finds the dense rows' spans.
     pub(crate) fn validate(&mut self) -> Result<(), DbError> {
+        self.validate_structure()?;
+        if let Some(k) = first_not_finite(&self.dense_data) {
+            return Err(DbError::OutOfBounds {
+                what: format!("dense value {k} is not finite"),
+            });
+        }
+        self.find_dense_row_spans();
+        Ok(())
+    }
+
+    /// [`PsfDatabase::validate`] but for the dense images' values and row spans: every count,
+    /// index, offset and position, the spreadlets' values, and `max_extent_px`.
+    pub(crate) fn validate_structure(&mut self) -> Result<(), DbError> {
         let oob = |what: String| Err(DbError::OutOfBounds { what });
         let h = &self.header;
         if let Some(r) = &h.shard {
@@ -632,9 +646,6 @@ impl PsfDatabase {
         if let Some(k) = self.values.iter().position(|v| !v.is_finite()) {
             return oob(format!("spreadlet value {k} is not finite"));
         }
-        if let Some(k) = self.dense_data.iter().position(|v| !v.is_finite()) {
-            return oob(format!("dense value {k} is not finite"));
-        }
         let mut used = vec![false; self.dense.len()];
         for (i, &slot) in self.dense_slot.iter().enumerate() {
             if slot == SPARSE_SLOT {
@@ -690,41 +701,76 @@ impl PsfDatabase {
                 self.dense_data.len()
             ));
         }
-        self.find_dense_row_spans();
         Ok(())
     }
 
     /// Fills `dense_row_start` and `dense_row_spans` from the dense images (whose bounds
-    /// `validate` has checked).
+    /// `validate_structure` has checked).
     fn find_dense_row_spans(&mut self) {
         let ch = self.channels();
-        let rows: usize = self.dense.iter().map(|e| e.height as usize).sum();
-        let mut starts = Vec::with_capacity(self.dense.len());
+        self.dense_row_start.clear();
+        self.dense_row_spans.clear();
+        let rows = self.append_dense_row_starts(0);
         let mut spans = Vec::with_capacity(rows);
         for e in &self.dense {
-            starts.push(spans.len() as u32);
             let width = e.width as usize;
             let len = width * e.height as usize * ch;
             if len == 0 {
                 continue;
             }
             let image = &self.dense_data[e.offset as usize..e.offset as usize + len];
-            for row in image.chunks_exact(width * ch) {
-                let lit = |px: &[f32]| px.iter().any(|&v| v != 0.0);
-                let span = match row.chunks_exact(ch).position(lit) {
-                    None => [0, 0],
-                    Some(first) => {
-                        let end = width - row.chunks_exact(ch).rev().position(lit).unwrap_or(0);
-                        // Widths are u16 in the format.
-                        [first as u16, end as u16]
-                    }
-                };
-                spans.push(span);
-            }
+            spans.extend(image.chunks_exact(width * ch).map(|row| row_span(row, ch)));
         }
-        self.dense_row_start = starts;
         self.dense_row_spans = spans;
     }
+
+    /// Appends to `dense_row_start` the first rows of dense entries `first_entry..`, as if
+    /// `dense_row_spans` held every row before them; returns how many rows they have.
+    pub(crate) fn append_dense_row_starts(&mut self, first_entry: usize) -> usize {
+        let mut next = self.dense_row_spans.len();
+        for e in self.dense.get(first_entry..).unwrap_or(&[]) {
+            self.dense_row_start.push(next as u32);
+            next += rows_of(e);
+        }
+        next - self.dense_row_spans.len()
+    }
+}
+
+/// Rows of a dense image in the row spans: none for an image without pixels.
+pub(crate) fn rows_of(e: &DenseEntry) -> usize {
+    if e.width == 0 {
+        0
+    } else {
+        e.height as usize
+    }
+}
+
+/// The columns `[first, end)` outside which `row` (`ch` channels a pixel) is zero in every
+/// channel; `[0, 0]` for a zero row.
+pub(crate) fn row_span(row: &[f32], ch: usize) -> [u16; 2] {
+    let lit = |px: &[f32]| px.iter().any(|&v| v != 0.0);
+    match row.chunks_exact(ch).position(lit) {
+        None => [0, 0],
+        Some(first) => {
+            let width = row.len() / ch;
+            let end = width - row.chunks_exact(ch).rev().position(lit).unwrap_or(0);
+            // Widths are u16 in the format.
+            [first as u16, end as u16]
+        }
+    }
+}
+
+/// Index of the first value of `values` that is not finite, the values checked in parallel.
+fn first_not_finite(values: &[f32]) -> Option<usize> {
+    use rayon::prelude::*;
+    const CHUNK: usize = 1 << 16;
+    let chunk = values
+        .par_chunks(CHUNK)
+        .position_first(|c| c.iter().any(|v| !v.is_finite()))?;
+    let within = values[chunk * CHUNK..]
+        .iter()
+        .position(|v| !v.is_finite())?;
+    Some(chunk * CHUNK + within)
 }
 
 fn read_u32(b: &[u8], at: usize) -> u32 {

@@ -19,6 +19,7 @@
 
 pub mod builder;
 pub mod error;
+pub mod extension;
 pub mod format;
 pub mod grid;
 pub mod header;
@@ -27,6 +28,7 @@ pub mod shard;
 pub mod space;
 
 pub use error::{DbError, SpaceError};
+pub use extension::{DenseExtension, DenseShape};
 pub use format::{
     Aperture, BuildInfo, DatabaseBuilder, DbHeader, DenseEntry, DenseView, Dispersion,
     LensPrescription, PsfDatabase, PsfStats, FORMAT_VERSION, MAGIC, SPARSE_SLOT,

@@ -6,7 +6,7 @@
 //! pixels wide). The splat stage, CPU or GPU, sees one database: the thin-lens PSFs first, then
 //! the other database's, so a [`crate::pipeline::SplatRecord::psf_index`] addresses either.
 
-use psf_db::{DatabaseBuilder, DbError, DbHeader, ParamSpace, PsfDatabase, PsfModel};
+use psf_db::{DenseShape, DatabaseBuilder, DbError, DbHeader, ParamSpace, PsfDatabase, PsfModel};
 
 /// The databases of one synthesis.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -208,25 +208,36 @@ impl DbSet {
 /// (channel-interleaved).
 type DenseImage = ([i16; 2], u16, u16, Vec<f32>);
 
-/// `db` followed by the dense PSF images `extra` (with `db`'s channel count), in one database
-/// whose spreadlets are in row order; the images' indices follow `db`'s PSFs in order.
+/// `db` followed by one dense image of zeros per `(origin, width, height)` of `boxes` (origin:
+/// top-left pixel from the centre, px; `db`'s channel count), whose values the caller writes
+/// in place ([`psf_db::DenseExtension::fill`]); the images' indices follow `db`'s PSFs in
+/// order, and `db`'s PSFs are kept as stored.
 pub fn extend_with_dense(
     db: &PsfDatabase,
-    extra: Vec<crate::motion_smear::PsfImage>,
-) -> Result<PsfDatabase, DbError> {
-    let mut images = Vec::with_capacity(extra.len());
-    for img in extra {
-        let (width, height, channels, origin) = (img.width, img.height, img.channels, img.origin);
-        let dense = (channels == db.channels()).then(|| into_dense_image(img)).flatten();
-        let Some(dense) = dense else {
+    boxes: &[([i32; 2], usize, usize)],
+) -> Result<psf_db::DenseExtension, DbError> {
+    let mut shapes = Vec::with_capacity(boxes.len());
+    for &(origin, width, height) in boxes {
+        let shape = || {
+            Some(DenseShape {
+                origin: [
+                    i16::try_from(origin[0]).ok()?,
+                    i16::try_from(origin[1]).ok()?,
+                ],
+                width: u16::try_from(width).ok()?,
+                height: u16::try_from(height).ok()?,
+            })
+        };
+        let Some(shape) = shape() else {
             return Err(DbError::Invalid(format!(
-                "a {width} x {height} PSF image of {channels} channels at {origin:?} does not fit a database of {} channels",
-                db.channels()
+                "a {width} x {height} PSF image at {origin:?} does not fit the format's sizes"
             )));
         };
-        images.push(dense);
+        shapes.push(shape);
     }
-    Ok(concatenate(&[db], &images)?.into_spreadlets_in_row_order())
+    let header = combined_header(&[db], &shapes)?;
+    let empty = header.stored_psf_count() - db.psf_count() - shapes.len();
+    psf_db::DenseExtension::new(db, header, &shapes, empty)
 }
 
 /// `img` in the database's dense form, or `None` where its size or origin does not fit the
@@ -396,22 +407,15 @@ fn physical_twins(db: &PsfDatabase) -> Vec<Option<(TwinCell, Vec<DenseImage>)>> 
         .collect()
 }
 
-/// The PSFs of `dbs` in order, then the dense `extra` ones, in one database (same channel
-/// count). The header is the last database's with a one-dimensional index space large enough
-/// for all, labelled thin-lens (lookups are never made in it; unused trailing cells are empty
-/// PSFs).
-fn concatenate(dbs: &[&PsfDatabase], extra: &[DenseImage]) -> Result<PsfDatabase, DbError> {
+/// The header of a database holding the PSFs of `dbs` in order, then dense images of shapes
+/// `extra`: the last database's, with a one-dimensional index space large enough for all,
+/// labelled thin-lens (lookups are never made in it; unused trailing cells are empty PSFs),
+/// and a PSF bound that reaches every image.
+fn combined_header(dbs: &[&PsfDatabase], extra: &[DenseShape]) -> Result<DbHeader, DbError> {
     let Some(last) = dbs.last() else {
         return Err(DbError::Invalid("no database to combine".into()));
     };
     let channels = last.channels();
-    if let Some(other) = dbs.iter().find(|d| d.channels() != channels) {
-        return Err(DbError::Invalid(format!(
-            "cannot combine databases of {} and {} channels",
-            other.channels(),
-            channels
-        )));
-    }
     let total = (dbs.iter().map(|d| d.psf_count()).sum::<usize>() + extra.len()) as u32;
     // The combined database's space only indexes its PSFs (lookups go through the sources'
     // own spaces): one dimension while a 1-D nested grid holds them (at most 361 cells), two
@@ -438,9 +442,10 @@ fn concatenate(dbs: &[&PsfDatabase], extra: &[DenseImage]) -> Result<PsfDatabase
     header.model = model;
     // The extra images (twins, PSFs smeared along a motion) may reach beyond the sources' PSF
     // bound, which the file format checks every dense PSF against.
-    for (origin, w, h, _) in extra {
-        let (x0, y0) = (i32::from(origin[0]), i32::from(origin[1]));
-        let reach = [x0, y0, x0 + i32::from(*w) - 1, y0 + i32::from(*h) - 1]
+    for shape in extra {
+        let (x0, y0) = (i32::from(shape.origin[0]), i32::from(shape.origin[1]));
+        let (w, h) = (i32::from(shape.width), i32::from(shape.height));
+        let reach = [x0, y0, x0 + w - 1, y0 + h - 1]
             .into_iter()
             .map(i32::unsigned_abs)
             .max()
@@ -461,6 +466,36 @@ fn concatenate(dbs: &[&PsfDatabase], extra: &[DenseImage]) -> Result<PsfDatabase
         extent_px: 0.0,
     });
     header.stats.resize(capacity as usize, filler);
+    Ok(header)
+}
+
+/// The PSFs of `dbs` in order, then the dense `extra` ones, in one database (same channel
+/// count). The header is the last database's with a one-dimensional index space large enough
+/// for all, labelled thin-lens (lookups are never made in it; unused trailing cells are empty
+/// PSFs).
+fn concatenate(dbs: &[&PsfDatabase], extra: &[DenseImage]) -> Result<PsfDatabase, DbError> {
+    let Some(last) = dbs.last() else {
+        return Err(DbError::Invalid("no database to combine".into()));
+    };
+    let channels = last.channels();
+    if let Some(other) = dbs.iter().find(|d| d.channels() != channels) {
+        return Err(DbError::Invalid(format!(
+            "cannot combine databases of {} and {} channels",
+            other.channels(),
+            channels
+        )));
+    }
+    let shapes: Vec<DenseShape> = extra
+        .iter()
+        .map(|&(origin, width, height, _)| DenseShape {
+            origin,
+            width,
+            height,
+        })
+        .collect();
+    let header = combined_header(dbs, &shapes)?;
+    let total = (dbs.iter().map(|d| d.psf_count()).sum::<usize>() + extra.len()) as u32;
+    let capacity = header.stored_psf_count() as u32;
     let mut builder = DatabaseBuilder::new(header);
     builder.reserve(
         capacity as usize,
@@ -682,14 +717,11 @@ mod tests {
         let db = test_db(PsfModel::ThinLens);
         let bound = db.header().psf_resolution as i32;
         let (w, h) = (2 * bound as usize + 41, 3);
-        let streak = crate::motion_smear::PsfImage {
-            origin: [-(w as i32) / 2, -1],
-            width: w,
-            height: h,
-            channels: db.channels(),
-            data: vec![1.0 / (w * h) as f32; w * h * db.channels()],
-        };
-        let extended = extend_with_dense(&db, vec![streak]).expect("extended");
+        let streak = ([-(w as i32) / 2, -1], w, h);
+        let extended = extend_with_dense(&db, &[streak])
+            .expect("extended")
+            .fill(|_, out| out.fill(1.0 / (w * h) as f32))
+            .expect("filled");
         let i = db.psf_count();
         let d = extended.dense(i).expect("the streak is dense");
         assert_eq!((d.width, d.height), (w, h));

@@ -331,11 +331,9 @@ impl PsfImage {
     }
 }
 
-/// `psf` convolved with a uniform segment of `length` px centred on the PSF centre, at
-/// `angle` radians from +x (y down): the mean of `psf` shifted to `taps` points spaced at most
-/// one pixel apart along the segment (the midpoints of equal parts), each shift drawn with
-/// bilinear weights. Every channel keeps its sum.
-pub fn smear(psf: &PsfImage, length: f32, angle: f32) -> Result<PsfImage, SmearError> {
+/// Where `psf` smeared along `length` px at `angle` radians lies: [`smear`]'s image without
+/// its values. Errors where it would be larger than the renderer draws per PSF.
+pub fn smear_extent(psf: &PsfImage, length: f32, angle: f32) -> Result<SmearExtent, SmearError> {
     let (dx, dy) = (angle.cos(), angle.sin());
     let half = 0.5 * length;
     // One pixel more on each side than the segment reaches: the bilinear weights of a shift
@@ -351,8 +349,56 @@ pub fn smear(psf: &PsfImage, length: f32, angle: f32) -> Result<PsfImage, SmearE
             height,
         });
     }
+    Ok(SmearExtent {
+        origin: [psf.origin[0] - grow_x, psf.origin[1] - grow_y],
+        width,
+        height,
+        grow: [grow_x, grow_y],
+    })
+}
+
+/// The box of a smeared PSF ([`smear_extent`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SmearExtent {
+    /// Top-left pixel relative to the centre, px.
+    pub origin: [i32; 2],
+    /// Width, px.
+    pub width: usize,
+    /// Height, px.
+    pub height: usize,
+    /// How far the box reaches beyond the unsmeared PSF's on each side, px per axis.
+    grow: [i32; 2],
+}
+
+/// `psf` convolved with a uniform segment of `length` px centred on the PSF centre, at
+/// `angle` radians from +x (y down): the mean of `psf` shifted to `taps` points spaced at most
+/// one pixel apart along the segment (the midpoints of equal parts), each shift drawn with
+/// bilinear weights. Every channel keeps its sum.
+pub fn smear(psf: &PsfImage, length: f32, angle: f32) -> Result<PsfImage, SmearError> {
+    let extent = smear_extent(psf, length, angle)?;
+    let mut data = vec![0f32; extent.width * extent.height * psf.channels];
+    smear_into(psf, length, angle, extent, &mut data);
+    Ok(PsfImage {
+        origin: extent.origin,
+        width: extent.width,
+        height: extent.height,
+        channels: psf.channels,
+        data,
+    })
+}
+
+/// [`smear`] into `out`, which it overwrites: `extent.width * extent.height * psf.channels`
+/// values, for `extent` = [`smear_extent`]`(psf, length, angle)`.
+pub fn smear_into(psf: &PsfImage, length: f32, angle: f32, extent: SmearExtent, out: &mut [f32]) {
+    let (dx, dy) = (angle.cos(), angle.sin());
+    let [grow_x, grow_y] = extent.grow;
+    let width = extent.width;
     let ch = psf.channels;
-    let mut out = vec![0f32; width * height * ch];
+    debug_assert_eq!(out.len(), width * extent.height * ch);
+    // Written before it is read: fresh zero pages read first are mapped to the shared zero
+    // page and faulted again on the first write, each such fault flushing the other threads'
+    // TLBs.
+    out.fill(0.0);
     // A tap's bilinear weights widen a PSF by up to a pixel, most at half-pixel shifts: on a
     // PSF only a few pixels wide, taps a pixel apart draw a beaded streak whose beads move
     // with the angle, and neighbouring pixels' streaks no longer add up to a flat surface.
@@ -401,13 +447,6 @@ pub fn smear(psf: &PsfImage, length: f32, angle: f32) -> Result<PsfImage, SmearE
             }
         }
     }
-    Ok(PsfImage {
-        origin: [psf.origin[0] - grow_x, psf.origin[1] - grow_y],
-        width,
-        height,
-        channels: ch,
-        data: out,
-    })
 }
 
 /// The turn of quantised step `step` of `steps` over a full turn, radians.

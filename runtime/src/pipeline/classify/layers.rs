@@ -690,32 +690,45 @@ impl SmearedPsfs {
                     .map(|psf| crate::motion_smear::turn(&psf, angle))
             })
             .collect();
-        let images = keys
+        let base_of = |k: &SmearKey| {
+            let i = turned
+                .binary_search(&(k.cell, k.turn_step, k.turn_steps))
+                .expect("every key's turn is listed");
+            bases[i].as_ref()
+        };
+        // Each image's box first, then all written in place into the frame's database.
+        let extents = keys
             .par_iter()
             .map(|k| {
-                let i = turned
-                    .binary_search(&(k.cell, k.turn_step, k.turn_steps))
-                    .expect("every key's turn is listed");
-                match &bases[i] {
-                    Some(base) => {
-                        crate::motion_smear::smear(base, k.length_px(), k.angle_rad()).map(Some)
-                    }
-                    None => Ok(None),
-                }
+                base_of(k)
+                    .map(|base| crate::motion_smear::smear_extent(base, k.length_px(), k.angle_rad()))
+                    .transpose()
             })
             .collect::<Result<Vec<_>, _>>()?;
-        let base = all.psf_count() as u32;
-        let mut extra = Vec::new();
+        let first = all.psf_count() as u32;
+        let mut drawn = Vec::new();
         let mut indexed = Vec::with_capacity(keys.len());
-        for (key, image) in keys.into_iter().zip(images) {
-            let index = image.map(|img| {
-                extra.push(img);
-                base + extra.len() as u32 - 1
+        for (&key, extent) in keys.iter().zip(&extents) {
+            let index = extent.map(|e| {
+                drawn.push((key, e));
+                first + drawn.len() as u32 - 1
             });
             indexed.push((key, index));
         }
-        let database = crate::dbset::extend_with_dense(all, extra)
-            .map_err(|e| ClassifyError::PhysicalLens(e.to_string()))?;
+        let boxes: Vec<_> = drawn
+            .iter()
+            .map(|(_, e)| (e.origin, e.width, e.height))
+            .collect();
+        let not_built = |e: psf_db::DbError| ClassifyError::PhysicalLens(e.to_string());
+        let extension = crate::dbset::extend_with_dense(all, &boxes).map_err(not_built)?;
+        let database = extension
+            .fill(|i, out| {
+                let (k, extent) = drawn[i];
+                if let Some(base) = base_of(&k) {
+                    crate::motion_smear::smear_into(base, k.length_px(), k.angle_rad(), extent, out);
+                }
+            })
+            .map_err(not_built)?;
         Ok(Self {
             database: Some(std::sync::Arc::new(database)),
             keys: indexed,
