@@ -416,7 +416,7 @@ pub(crate) fn classify_samples(
         ..options.classify.clone()
     };
     let classified = classify_fragments(
-        &fragments,
+        fragments,
         frames.width,
         frames.height,
         DataWindow::frame(frames.width, frames.height),

@@ -46,7 +46,7 @@ fn bin(
 ) -> (Vec<Vec<(u32, f32)>>, spreadlet::pipeline::Classified) {
     let n = fragments.len();
     let c = classify_fragments(
-        fragments,
+        fragments.to_vec(),
         n,
         1,
         DataWindow::frame(n, 1),

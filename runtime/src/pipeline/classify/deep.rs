@@ -190,7 +190,7 @@ pub(crate) fn classify_deep_with(
         y1: (deep.height - o.top) as i32 - 1,
     };
     classify_fragments(
-        &fragments,
+        fragments,
         deep.frame_width(),
         deep.frame_height(),
         data,

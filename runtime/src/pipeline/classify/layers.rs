@@ -18,7 +18,7 @@ use rayon::prelude::*;
 /// [`resolve_model`]; `counts` carries what the caller already counted (dropped, edge splits).
 #[allow(clippy::too_many_arguments)]
 pub fn classify_fragments(
-    fragments: &[Fragment],
+    mut fragments: Vec<Fragment>,
     w: usize,
     h: usize,
     data: DataWindow,
@@ -56,14 +56,13 @@ pub fn classify_fragments(
         }
     };
 
-    let with_continuations;
     let first_source = fragments.first().map_or(0, |f| f.source);
     // Through a real lens a pixel's PSF changes over the field too: not continued.
     let continue_layers = options.continue_layers
         && matches!(model, Some(PsfModel::ThinLens | PsfModel::LensMotion))
         && n_layers > 1
         && fragments.iter().all(|f| f.source == first_source);
-    let fragments = if continue_layers {
+    if continue_layers {
         let layer_of = |f: &Fragment| {
             (layer_coord(f.parallax).floor() as usize).min(n_layers - 1)
         };
@@ -72,17 +71,18 @@ pub fn classify_fragments(
             let m = f.motion;
             coc + 0.5 * (m[0] * m[0] + m[1] * m[1]).sqrt()
         };
-        with_continuations = continue_across_layers(
-            fragments,
+        let continued = continue_across_layers(
+            &fragments,
             (w, h),
             &layer_of,
             &blur_of,
             options.hdr_dense_threshold,
         );
-        &with_continuations[..]
-    } else {
-        fragments
-    };
+        // Within the room the fragments were made with, where they can: copied, all of them
+        // would be touched again in fresh memory.
+        fragments.extend(continued);
+    }
+    let fragments = &fragments[..];
 
     // Layer weights: hard, or blended near the boundary between two layer centres. A sharp
     // fragment is not split: its PSF barely differs between the two layers, and a surface
@@ -482,8 +482,8 @@ fn merge_coincident(classified: &mut Classified) {
     classified.frame.record_count = classified.records.len() as u32;
 }
 
-/// `fragments` followed by the continuation of every surface that crosses from a depth layer
-/// into a nearer one: where a pixel's fragment (the pixel's heaviest, opaque) lies in layer
+/// The fragments to append to `fragments` to continue every surface that crosses from a depth
+/// layer into a nearer one: where a pixel's fragment (the pixel's heaviest, opaque) lies in layer
 /// `l` and its neighbour's along an axis direction in a nearer layer, with blurs within a
 /// pixel of each other (one surface, not an occluder's silhouette, which the hidden background
 /// handles), the pixel is repeated into the nearer region along that direction, as far as the
@@ -573,8 +573,7 @@ pub(super) fn continue_across_layers(
         }
     }
     let extra: usize = walks.iter().map(|&(_, _, steps)| steps as usize).sum();
-    let mut out = Vec::with_capacity(fragments.len() + extra);
-    out.extend_from_slice(fragments);
+    let mut out = Vec::with_capacity(extra);
     for (m, d, steps) in walks {
         let f = fragments[m as usize];
         for k in 1..=steps {

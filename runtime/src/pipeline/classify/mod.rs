@@ -292,7 +292,7 @@ pub(crate) fn classify_with(
         &mut counts,
     );
     classify_fragments(
-        &fragments,
+        fragments,
         gbuffer.frame_width(),
         gbuffer.frame_height(),
         data_window(gbuffer),
@@ -404,7 +404,7 @@ pub(crate) fn classify_layers_with(
         );
     }
     classify_fragments(
-        &fragments,
+        fragments,
         first.gbuffer.frame_width(),
         first.gbuffer.frame_height(),
         data_window(&first.gbuffer),
