@@ -156,18 +156,48 @@ pub fn splat(
     let reach: Vec<i32> = db.map_or_else(Vec::new, psf_reach);
     let in_row_order = db.is_some_and(PsfDatabase::spreadlets_in_row_order);
 
-    // Tasks: (layer, band, kind) with kind 0 = Laplacian, 1 = direct.
+    // Per (layer, kind), with kind 0 = Laplacian, 1 = direct: whether any record draws in it.
+    let present = |l: usize, kind: usize| {
+        let info = &classified.layers[l];
+        [info.sparse > 0, info.dense + info.copied > 0][kind]
+    };
+    // The planes first, zeroed on every thread by the allocator, four per present layer and
+    // kind (`planes[kind][layer * 4 + channel]`): each band is drawn into a buffer of its
+    // thread's, reused from band to band, and written into its rows of its planes, so that
+    // the bands' rows are never held twice and no band allocates fresh memory.
+    let mut planes: [Vec<Plane>; 2] = [0, 1].map(|kind| {
+        (0..n_layers * 4)
+            .into_par_iter()
+            .map(|index| {
+                if present(index / 4, kind) {
+                    Plane::new(pw, ph)
+                } else {
+                    Plane::default()
+                }
+            })
+            .collect()
+    });
+    // Tasks: (layer, band, kind) and the band's rows of the four planes.
     let mut tasks = Vec::new();
-    for (l, info) in classified.layers.iter().enumerate() {
-        for (kind, present) in [(0, info.sparse > 0), (1, info.dense + info.copied > 0)] {
-            if present {
-                tasks.extend((0..bands).map(|b| (l, b, kind)));
+    for (kind, kind_planes) in planes.iter_mut().enumerate() {
+        for (l, layer_planes) in kind_planes.chunks_mut(4).enumerate() {
+            if !present(l, kind) {
+                continue;
+            }
+            let mut rows = layer_planes
+                .iter_mut()
+                .map(|p| p.data.chunks_mut(BAND_ROWS * pw))
+                .collect::<Vec<_>>();
+            for b in 0..bands {
+                let mut channel = rows.iter_mut().filter_map(|r| r.next());
+                let band_rows = [(); 4].map(|_| channel.next().unwrap_or_default());
+                tasks.push(((l, b, kind), band_rows));
             }
         }
     }
-    let results: Vec<Option<BandResult>> = tasks
-        .par_iter()
-        .map(|&(l, b, kind)| {
+    let drawn: Vec<Option<(usize, usize, usize)>> = tasks
+        .into_par_iter()
+        .map_init(Vec::new, |buffer: &mut Vec<[f32; 4]>, ((l, b, kind), out)| {
             let info = &classified.layers[l];
             let recs =
                 &classified.records[info.first_record..info.first_record + info.record_count];
@@ -176,9 +206,9 @@ pub fn splat(
             // Records are in row order within a layer: the ones that can reach the band.
             let lo = recs.partition_point(|r| r.center_y < y0 - extent);
             let hi = recs.partition_point(|r| r.center_y < y1 + extent);
-            // A band no record draws in stays zero: it is allocated at its first record, so
-            // the rows no record reaches are never allocated or copied (a depth layer of a
-            // slanted surface covers a strip of the frame).
+            // A band no record draws in stays zero: its buffer is cleared at its first
+            // record, so the rows no record reaches are never cleared or written (a depth
+            // layer of a slanted surface covers a strip of the frame).
             let mut band: Option<Band> = None;
             let recs = &recs[lo..hi];
             let mut i = 0;
@@ -197,11 +227,16 @@ pub fn splat(
                 if !drawn_here {
                     continue;
                 }
-                let band = band.get_or_insert_with(|| Band {
-                    data: vec![[0.0f32; 4]; (y1 - y0) as usize * pw],
-                    width: pw as i32,
-                    y0,
-                    y1,
+                let band = band.get_or_insert_with(|| {
+                    let mut data = std::mem::take(buffer);
+                    data.clear();
+                    data.resize((y1 - y0) as usize * pw, [0.0f32; 4]);
+                    Band {
+                        data,
+                        width: pw as i32,
+                        y0,
+                        y1,
+                    }
                 });
                 match (kind, r.path) {
                     (0, p) if p == SplatPath::Sparse as u32 => {
@@ -236,44 +271,34 @@ pub fn splat(
                     _ => {}
                 }
             }
-            band.map(|band| ((l, b, kind), band.data))
+            let band = band?;
+            let [r, g, bl, a] = out;
+            for ((((px, r), g), bl), a) in band.data.iter().zip(r).zip(g).zip(bl).zip(a) {
+                (*r, *g, *bl, *a) = (px[0], px[1], px[2], px[3]);
+            }
+            *buffer = band.data;
+            Some((l, b, kind))
         })
         .collect();
 
-    // Each plane gathers its channel from its layer's bands, every plane on its own thread.
-    // Per (layer, kind), its drawn bands: (band, RGBA rows).
-    type Bands<'a> = Vec<(usize, &'a [[f32; 4]])>;
-    let mut bands_of: Vec<Bands> = vec![Vec::new(); n_layers * 2];
-    for ((l, b, kind), data) in results.iter().flatten() {
-        bands_of[l * 2 + kind].push((*b, data));
+    // A layer and kind no band drew in keeps no planes.
+    let mut drawn_bands: Vec<Vec<usize>> = vec![Vec::new(); n_layers * 2];
+    for &(l, b, kind) in drawn.iter().flatten() {
+        drawn_bands[l * 2 + kind].push(b);
     }
-    let planes_of = |kind: usize| -> Vec<Plane> {
-        (0..n_layers * 4)
-            .into_par_iter()
-            .map(|index| {
-                let (l, c) = (index / 4, index % 4);
-                let bands = &bands_of[l * 2 + kind];
-                if bands.is_empty() {
-                    return Plane::default();
-                }
-                let mut plane = Plane::new(pw, ph);
-                for &(b, data) in bands {
-                    let start = b * BAND_ROWS * pw;
-                    for (dst, src) in plane.data[start..start + data.len()].iter_mut().zip(data) {
-                        *dst = src[c];
-                    }
-                }
-                plane
-            })
-            .collect()
-    };
-    let laplacian = planes_of(0);
-    let direct = planes_of(1);
+    for (kind, kind_planes) in planes.iter_mut().enumerate() {
+        for (l, layer_planes) in kind_planes.chunks_mut(4).enumerate() {
+            if drawn_bands[l * 2 + kind].is_empty() {
+                layer_planes.fill_with(Plane::default);
+            }
+        }
+    }
+    let [laplacian, direct] = planes;
     let direct_rows = (0..n_layers)
         .map(|l| {
-            let bands = &bands_of[l * 2 + 1];
-            match (bands.iter().map(|b| b.0).min(), bands.iter().map(|b| b.0).max()) {
-                (Some(first), Some(last)) => [first * BAND_ROWS, ((last + 1) * BAND_ROWS).min(ph)],
+            let bands = &drawn_bands[l * 2 + 1];
+            match (bands.iter().min(), bands.iter().max()) {
+                (Some(&first), Some(&last)) => [first * BAND_ROWS, ((last + 1) * BAND_ROWS).min(ph)],
                 _ => [0, 0],
             }
         })
@@ -285,9 +310,6 @@ pub fn splat(
         direct_rows,
     }
 }
-
-/// A finished band: (layer, band, kind) and its RGBA rows.
-type BandResult = ((usize, usize, usize), Vec<[f32; 4]>);
 
 /// Rows `[y0, y1)` of a padded layer, RGBA interleaved.
 struct Band {
