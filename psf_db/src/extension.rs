@@ -34,7 +34,7 @@ impl DenseExtension {
     /// `base`'s PSFs (as stored), then one dense image of zeros per shape of `shapes`, then
     /// `empty` PSFs without spreadlets, under `header`. `header` must hold `base`'s channel
     /// count and a space storing exactly that many PSFs; its PSF resolution must reach every
-    /// image (checked by [`DenseExtension::finish`]).
+    /// image (checked by [`DenseExtension::fill`]).
     pub fn new(
         base: &PsfDatabase,
         header: DbHeader,

@@ -78,8 +78,8 @@ pub fn classify_fragments(
             &blur_of,
             options.hdr_dense_threshold,
         );
-        // Within the room the fragments were made with, where they can: copied, all of them
-        // would be touched again in fresh memory.
+        // Appended in the room the fragments were made with: a copy would touch all of them
+        // (13 MB on a 512 px frame) again in fresh memory.
         fragments.extend(continued);
     }
     let fragments = &fragments[..];
