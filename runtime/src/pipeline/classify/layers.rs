@@ -695,37 +695,39 @@ impl SmearedPsfs {
                 .expect("every key's turn is listed");
             bases[i].as_ref()
         };
-        // Each image's box first, then all written in place into the frame's database.
+        // Each image's box (and the turned lens PSF it smears) first, then all written in
+        // place into the frame's database.
         let extents = keys
             .par_iter()
             .map(|k| {
                 base_of(k)
-                    .map(|base| crate::motion_smear::smear_extent(base, k.length_px(), k.angle_rad()))
+                    .map(|base| {
+                        crate::motion_smear::smear_extent(base, k.length_px(), k.angle_rad())
+                            .map(|extent| (base, extent))
+                    })
                     .transpose()
             })
             .collect::<Result<Vec<_>, _>>()?;
         let first = all.psf_count() as u32;
         let mut drawn = Vec::new();
         let mut indexed = Vec::with_capacity(keys.len());
-        for (&key, extent) in keys.iter().zip(&extents) {
-            let index = extent.map(|e| {
-                drawn.push((key, e));
+        for (&key, found) in keys.iter().zip(extents) {
+            let index = found.map(|(base, extent)| {
+                drawn.push((key, base, extent));
                 first + drawn.len() as u32 - 1
             });
             indexed.push((key, index));
         }
         let boxes: Vec<_> = drawn
             .iter()
-            .map(|(_, e)| (e.origin, e.width, e.height))
+            .map(|(_, _, e)| (e.origin, e.width, e.height))
             .collect();
         let not_built = |e: psf_db::DbError| ClassifyError::PhysicalLens(e.to_string());
         let extension = crate::dbset::extend_with_dense(all, &boxes).map_err(not_built)?;
         let database = extension
             .fill(|i, out| {
-                let (k, extent) = drawn[i];
-                if let Some(base) = base_of(&k) {
-                    crate::motion_smear::smear_into(base, k.length_px(), k.angle_rad(), extent, out);
-                }
+                let (k, base, extent) = drawn[i];
+                crate::motion_smear::smear_into(base, k.length_px(), k.angle_rad(), extent, out);
             })
             .map_err(not_built)?;
         Ok(Self {
