@@ -369,7 +369,8 @@ fn the_motion_psf_of_a_real_lens_matches_light_tracing() {
         channels: 3,
         data,
     };
-    let smeared = spreadlet::motion_smear::smear(&image, len as f32, angle as f32).expect("smear");
+    let smeared =
+        spreadlet::motion_smear::smear(&image, len as f32, angle as f32, 0.0).expect("smear");
     let renderer = on_lattice(&smeared, half);
     for (c, light) in brute.iter().enumerate() {
         let mb = moments_along(light, half, dir);

@@ -3,8 +3,11 @@
 //! Two layouts:
 //! - **Blender multilayer** (`<Layer>.Combined.{R,G,B,A}`, `<Layer>.Depth.Z`,
 //!   `<Layer>.Vector.{X,Y,Z,W}`): the layer name is found, not assumed. Blender's vector pass
-//!   has y up and `Z, W` = position now minus position in the next frame, so the forward motion
-//!   in image coordinates (x right, y down) is `(-Z, +W)`.
+//!   has y up, `X, Y` = position in the previous frame minus position now and `Z, W` = position
+//!   now minus position in the next frame, so the forward motion in image coordinates (x right,
+//!   y down) is `(-Z, +W)` and the backward `(X, -Y)`. The motion read is the centred
+//!   difference `((-Z - X) / 2, (W + Y) / 2)`, the tangent of the path at the frame time; a
+//!   file without `X, Y`, or a pixel whose `X, Y` are both zero, gives the forward motion.
 //! - **plain** single-layer files: `R, G, B` (and `A`, else 1), depth `Z` or `depth.Z` (or a
 //!   name given), forward motion `forward.u/forward.v` or `motion.x/motion.y` (or a pair given)
 //!   in pixels per frame, x right, y down (`motion_y_up` flips y).
@@ -160,7 +163,9 @@ pub struct GBuffer {
     pub color: Vec<[f32; 4]>,
     /// Planar depth in scene units, when the file has it.
     pub depth: Option<Vec<f32>>,
-    /// Forward motion per frame in pixels (x right, y down), when the file has it.
+    /// Motion per frame at the frame time in pixels (x right, y down), when the file has it:
+    /// the centred difference of the previous and next frames' positions where the file has
+    /// both (Blender's vector pass), else the forward motion.
     pub motion: Option<Vec<[f32; 2]>>,
     /// Pixels whose colour was NaN or infinite, dropped (made transparent black).
     pub dropped_pixels: usize,
@@ -712,8 +717,29 @@ fn select_planes<'a>(
                 get("Combined.A").ok(),
             ];
             let depth = get("Depth.Z").ok();
-            let motion = match (get("Vector.Z").ok(), get("Vector.W").ok()) {
-                (Some(z), Some(w)) => Some(
+            let forward = get("Vector.Z").ok().zip(get("Vector.W").ok());
+            let backward = get("Vector.X").ok().zip(get("Vector.Y").ok());
+            let motion = match (forward, backward) {
+                // The tangent at the frame time: half the step from the previous frame's
+                // position to the next one's, `((next - now) - (previous - now)) / 2`. A point
+                // turning about a centre moves along its chord to the next frame, which leans
+                // inward by half the turn; drawn along that, a spinning rim's streaks leave it.
+                // A pixel whose backward vector is exactly zero keeps the forward one: writers
+                // that fill only the forward vector leave it so.
+                (Some((z, w)), Some((x, y))) => Some(
+                    z.iter()
+                        .zip(w.iter())
+                        .zip(x.iter().zip(y.iter()))
+                        .map(|((&z, &w), (&x, &y))| {
+                            if x == 0.0 && y == 0.0 {
+                                [-z, w]
+                            } else {
+                                [0.5 * (-z - x), 0.5 * (w + y)]
+                            }
+                        })
+                        .collect::<Vec<_>>(),
+                ),
+                (Some((z, w)), None) => Some(
                     z.iter()
                         .zip(w.iter())
                         .map(|(&z, &w)| [-z, w])
@@ -887,6 +913,37 @@ mod tests {
         let mut bytes = std::io::Cursor::new(Vec::new());
         image.write().to_buffered(&mut bytes).expect("write");
         bytes.into_inner()
+    }
+
+    /// Blender's vector pass gives the motion at the frame time, the centred difference of the
+    /// previous and next positions: for a point turning about a centre, the tangent, where the
+    /// forward vector alone is the chord to the next frame. A pixel without a backward vector,
+    /// and a file without one, keep the forward motion.
+    #[test]
+    fn the_vector_pass_gives_the_centred_motion() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let path = dir.path().join("g.exr");
+        let ones = vec![1.0f32; 2];
+        let mut channels: Vec<(String, Vec<f32>)> = ["R", "G", "B", "A"]
+            .iter()
+            .map(|c| (format!("ViewLayer.Combined.{c}"), ones.clone()))
+            .collect();
+        // Pixel 0 (x right, y down): previous frame at (-4, 1) from now, next at (4, 1): the
+        // path bends downwards and its tangent now is (4, 0). In Blender's signs (y up):
+        // X, Y = previous - now, Z, W = now - next.
+        // Pixel 1: no backward vector, forward (2, 3).
+        channels.push(("ViewLayer.Vector.Z".to_string(), vec![-4.0, -2.0]));
+        channels.push(("ViewLayer.Vector.W".to_string(), vec![1.0, 3.0]));
+        let without_backward = channels.clone();
+        channels.push(("ViewLayer.Vector.X".to_string(), vec![-4.0, 0.0]));
+        channels.push(("ViewLayer.Vector.Y".to_string(), vec![-1.0, 0.0]));
+        let options = ChannelOptions::default();
+        crate::exr_io::write_channels(&path, 2, 1, channels, None).expect("write");
+        let g = GBuffer::read_exr(&path, &options).expect("read");
+        assert_eq!(g.motion, Some(vec![[4.0, 0.0], [2.0, 3.0]]));
+        crate::exr_io::write_channels(&path, 2, 1, without_backward, None).expect("write");
+        let g = GBuffer::read_exr(&path, &options).expect("read");
+        assert_eq!(g.motion, Some(vec![[4.0, 1.0], [2.0, 3.0]]));
     }
 
     #[test]

@@ -78,8 +78,9 @@ pub fn print_cache_event(event: spreadlet::dbcache::CacheEvent) {
     }
 }
 
-/// The renderer's G-buffer of what the scene renderer made (colour, planar depth, forward
-/// motion in pixels per frame), validated like any other input.
+/// The renderer's G-buffer of what the scene renderer made (colour, planar depth, motion at
+/// the frame time in pixels per frame, as the file's reader takes it), validated like any
+/// other input.
 pub fn gbuffer_of(
     g: &scene::GBuffer,
 ) -> Result<spreadlet::GBuffer, spreadlet::gbuffer::GBufferError> {
@@ -88,6 +89,6 @@ pub fn gbuffer_of(
         g.height,
         g.color_image().pixels,
         Some(g.depth.clone()),
-        Some(g.forward_motion_plane()),
+        Some(g.motion_plane()),
     )
 }

@@ -39,6 +39,11 @@ const COARSE_LENGTH_RATIO: f32 = 1.02;
 /// A lens PSF narrower than this (px, its trimmed image's smaller side) is smeared with taps a
 /// quarter pixel apart rather than one.
 const NARROW_PSF_PX: usize = 8;
+/// Bend quantisation step, px: a step moves the path's ends sideways by 1/4 px.
+const BEND_STEP_PX: f32 = 2.0;
+/// A bend smaller than this (px; its ends off the straight line by under 1/8 px) is drawn
+/// straight: a path is then a key like any straight one.
+const MIN_BEND_PX: f32 = 1.0;
 /// Largest motion length smeared, px: a longer one is clamped (and counted as clamped).
 pub const MAX_SMEAR_PX: f32 = 512.0;
 /// Largest smeared PSF image, pixels: its width times height. Beyond it the smear's taps are
@@ -69,14 +74,24 @@ pub struct SmearKey {
     /// Angle steps four times finer (a lens PSF reaching under [`NARROW_PSF_PX`] / 2 px: its
     /// streak is a thin line, whose tip a step moves visibly between neighbouring pixels).
     pub fine_angles: bool,
+    /// Quantised bend of the motion path (see [`SmearKey::bend_px`]), signed, relative to the
+    /// key's angle: positive bends towards the angle turned a quarter turn clockwise on screen
+    /// (`(-sin, cos)`, y down).
+    pub bend_step: i32,
 }
 
 impl SmearKey {
     /// The key of lens PSF `cell` (reaching `reach_px` from its centre) turned onto `radial`
     /// (unit vector, x right, y down) and smeared along `motion` (px over the shutter, x
     /// right, y down). Returns the key and whether the length was clamped.
-    pub fn new(cell: u32, motion: [f32; 2], radial: [f32; 2], reach_px: f32) -> (Self, bool) {
-        Self::dithered(cell, motion, radial, reach_px, 0.5)
+    pub fn new(
+        cell: u32,
+        motion: [f32; 2],
+        bend: f32,
+        radial: [f32; 2],
+        reach_px: f32,
+    ) -> (Self, bool) {
+        Self::dithered(cell, motion, bend, radial, reach_px, 0.5)
     }
 
     /// [`SmearKey::new`] with the length's quantisation dithered: the length step below or
@@ -85,9 +100,12 @@ impl SmearKey {
     /// are spread evenly over `[0, 1)`, the smeared PSF is then the linear interpolation
     /// between the two steps, continuous in the length, where rounding (`threshold` 1/2)
     /// steps: a surface whose motion varies smoothly shows no line where the rounding turns.
+    /// The path's `bend` (px, relative to the motion's own direction: see `Fragment::bend`)
+    /// is rounded to its step.
     pub fn dithered(
         cell: u32,
         motion: [f32; 2],
+        bend: f32,
         radial: [f32; 2],
         reach_px: f32,
         threshold: f32,
@@ -116,17 +134,42 @@ impl SmearKey {
             turn_step,
             turn_steps,
             fine_angles: 2.0 * reach_px < NARROW_PSF_PX as f32,
+            bend_step: 0,
         };
         let n = key.angle_steps();
         let angle = motion[1].atan2(motion[0]).rem_euclid(std::f32::consts::PI);
         let step = ((angle / std::f32::consts::PI * n as f32).round() as u32) % n;
-        (
-            SmearKey {
-                angle_step: step,
-                ..key
-            },
-            clamped,
-        )
+        let key = SmearKey {
+            angle_step: step,
+            ..key
+        };
+        // The key's direction may be the motion's reversed (angles are taken modulo pi): the
+        // same arc is then bent the other way relative to it.
+        let (sin, cos) = key.angle_rad().sin_cos();
+        let facing = cos * motion[0] + sin * motion[1] >= 0.0;
+        let bend = if facing { bend } else { -bend };
+        // At most half a turn over the shutter (beyond, the quadratic estimate means little).
+        let most = std::f32::consts::PI * key.length_px();
+        let bend = if bend.is_finite() {
+            bend.clamp(-most, most)
+        } else {
+            0.0
+        };
+        // Rounded, not dithered: a step moves a streak's ends sideways by a quarter pixel and
+        // leaves its light where it was, and dithering it too doubled a spinning disc's keys.
+        let bend_step = if bend.abs() < MIN_BEND_PX {
+            0
+        } else {
+            (bend / BEND_STEP_PX).round() as i32
+        };
+        (SmearKey { bend_step, ..key }, clamped)
+    }
+
+    /// How far the motion path bends sideways, px: its sideways acceleration over the shutter,
+    /// `8` times how far the path's ends lie off the straight line through its centre. The
+    /// path is the arc of curvature `bend / length^2` (see [`smear`]).
+    pub fn bend_px(&self) -> f32 {
+        self.bend_step as f32 * BEND_STEP_PX
     }
 
     /// The motion length this key smears over, px.
@@ -153,12 +196,13 @@ impl SmearKey {
     }
 
     /// An upper bound on the pixels of this key's smeared image, for a lens PSF reaching
-    /// `reach_px` from its centre: its turned box, grown by the segment on each axis.
+    /// `reach_px` from its centre: its turned box, grown by the path on each axis.
     pub fn estimated_pixels(&self, reach_px: f32) -> usize {
         let side = 2.0 * reach_px.max(0.0) + 5.0;
         let (sin, cos) = self.angle_rad().sin_cos();
         let len = self.length_px();
-        ((side + len * cos.abs() + 2.0) * (side + len * sin.abs() + 2.0)) as usize
+        let sag = 2.0 * sagitta(len, self.bend_px());
+        ((side + len * cos.abs() + sag + 2.0) * (side + len * sin.abs() + sag + 2.0)) as usize
     }
 
     /// The turn of the lens PSF's +x onto the radial direction, radians in `[0, 2 pi)`.
@@ -331,15 +375,35 @@ impl PsfImage {
     }
 }
 
-/// Where `psf` smeared along `length` px at `angle` radians lies: [`smear`]'s image without
-/// its values. Errors where it would be larger than the renderer draws per PSF.
-pub fn smear_extent(psf: &PsfImage, length: f32, angle: f32) -> Result<SmearExtent, SmearError> {
+/// How far an arc of `length` px bent by `bend` px ([`SmearKey::bend_px`]) lies off its
+/// tangent at the centre at its ends, px: `(1 - cos(phi)) / kappa` with curvature
+/// `kappa = bend / length^2` and `phi = kappa length / 2` the turn from the centre to an end.
+pub fn sagitta(length: f32, bend: f32) -> f32 {
+    if bend == 0.0 || length <= 0.0 {
+        return 0.0;
+    }
+    let kappa = bend.abs() / (length * length);
+    let phi = (0.5 * kappa * length).min(std::f32::consts::FRAC_PI_2);
+    (1.0 - phi.cos()) / kappa
+}
+
+/// Where `psf` smeared along the path of `length` px at `angle` radians bent by `bend` px
+/// lies: [`smear`]'s image without its values. Errors where it would be larger than the
+/// renderer draws per PSF.
+pub fn smear_extent(
+    psf: &PsfImage,
+    length: f32,
+    angle: f32,
+    bend: f32,
+) -> Result<SmearExtent, SmearError> {
     let (dx, dy) = (angle.cos(), angle.sin());
     let half = 0.5 * length;
-    // One pixel more on each side than the segment reaches: the bilinear weights of a shift
-    // spill one pixel beyond its integer part.
-    let grow_x = (half * dx.abs()).ceil() as i32 + 1;
-    let grow_y = (half * dy.abs()).ceil() as i32 + 1;
+    let sag = sagitta(length, bend);
+    // One pixel more on each side than the path reaches: the bilinear weights of a shift
+    // spill one pixel beyond its integer part. Along the chord the arc reaches no further than
+    // half its length, across it no further than its sagitta.
+    let grow_x = (half * dx.abs() + sag * dy.abs()).ceil() as i32 + 1;
+    let grow_y = (half * dy.abs() + sag * dx.abs()).ceil() as i32 + 1;
     let width = psf.width + 2 * grow_x as usize;
     let height = psf.height + 2 * grow_y as usize;
     if width * height > MAX_SMEARED_PIXELS {
@@ -370,14 +434,21 @@ pub struct SmearExtent {
     grow: [i32; 2],
 }
 
-/// `psf` convolved with a uniform segment of `length` px centred on the PSF centre, at
-/// `angle` radians from +x (y down): the mean of `psf` shifted to `taps` points spaced at most
-/// one pixel apart along the segment (the midpoints of equal parts), each shift drawn with
-/// bilinear weights. Every channel keeps its sum.
-pub fn smear(psf: &PsfImage, length: f32, angle: f32) -> Result<PsfImage, SmearError> {
-    let extent = smear_extent(psf, length, angle)?;
+/// `psf` convolved with a uniform path of `length` px centred on the PSF centre, leaving it
+/// at `angle` radians from +x (y down) both ways: the mean of `psf` shifted to `taps` points
+/// spaced at most one pixel apart along the path (the midpoints of equal parts), each shift
+/// drawn with bilinear weights. Every channel keeps its sum.
+///
+/// The path is the segment when `bend` is 0, else the arc of the same length whose curvature
+/// is `kappa = bend / length^2`, bent towards `(-sin, cos)` for a positive `bend`: the point
+/// at arc length `s` from the centre lies at `sin(kappa s) / kappa` along the angle and
+/// `(1 - cos(kappa s)) / kappa` across it. A point turning about a centre travels such an
+/// arc; for small turns it is the quadratic path `t m + t^2 a / 2` of a motion `m` with
+/// sideways acceleration `a = bend`.
+pub fn smear(psf: &PsfImage, length: f32, angle: f32, bend: f32) -> Result<PsfImage, SmearError> {
+    let extent = smear_extent(psf, length, angle, bend)?;
     let mut data = vec![0f32; extent.width * extent.height * psf.channels];
-    smear_into(psf, length, angle, extent, &mut data);
+    smear_into(psf, length, angle, bend, extent, &mut data);
     Ok(PsfImage {
         origin: extent.origin,
         width: extent.width,
@@ -388,8 +459,15 @@ pub fn smear(psf: &PsfImage, length: f32, angle: f32) -> Result<PsfImage, SmearE
 }
 
 /// [`smear`] into `out`, which it overwrites: `extent.width * extent.height * psf.channels`
-/// values, for `extent` = [`smear_extent`]`(psf, length, angle)`.
-pub fn smear_into(psf: &PsfImage, length: f32, angle: f32, extent: SmearExtent, out: &mut [f32]) {
+/// values, for `extent` = [`smear_extent`]`(psf, length, angle, bend)`.
+pub fn smear_into(
+    psf: &PsfImage,
+    length: f32,
+    angle: f32,
+    bend: f32,
+    extent: SmearExtent,
+    out: &mut [f32],
+) {
     let (dx, dy) = (angle.cos(), angle.sin());
     let [grow_x, grow_y] = extent.grow;
     let width = extent.width;
@@ -413,11 +491,30 @@ pub fn smear_into(psf: &PsfImage, length: f32, angle: f32, extent: SmearExtent, 
     // over the PSF than one per tap and weight.
     let (kw, kh) = (2 * grow_x as usize + 1, 2 * grow_y as usize + 1);
     let mut kernel = vec![0f32; kw * kh];
+    let kappa = if length > 0.0 {
+        bend / (length * length)
+    } else {
+        0.0
+    };
+    // On an arc, the turn at each tap by rotating the first tap's by the taps' spacing (one
+    // sine and cosine per image rather than per tap), in f64.
+    let spacing = f64::from(length) / taps as f64;
+    let (step_sin, step_cos) = (f64::from(kappa) * spacing).sin_cos();
+    let (mut sin, mut cos) = (f64::from(kappa) * (0.5 * spacing - 0.5 * f64::from(length))).sin_cos();
     for k in 0..taps {
         let t = ((k as f32 + 0.5) / taps as f32 - 0.5) * length;
+        // Along the chord and across it (towards `(-dy, dx)`).
+        let (along, across) = if kappa == 0.0 {
+            (t, 0.0)
+        } else {
+            let k64 = f64::from(kappa);
+            let at = ((sin / k64) as f32, ((1.0 - cos) / k64) as f32);
+            (sin, cos) = (sin * step_cos + cos * step_sin, cos * step_cos - sin * step_sin);
+            at
+        };
         // The shift of this tap, in output pixels relative to the input's placement.
-        let sx = t * dx + grow_x as f32;
-        let sy = t * dy + grow_y as f32;
+        let sx = along * dx - across * dy + grow_x as f32;
+        let sy = along * dy + across * dx + grow_y as f32;
         let (ix, iy) = (sx.floor(), sy.floor());
         let (fx, fy) = (sx - ix, sy - iy);
         let (ix, iy) = (ix as usize, iy as usize);
@@ -460,7 +557,8 @@ pub fn smeared_psf(db: &PsfDatabase, key: SmearKey) -> Result<Option<PsfImage>, 
     let Some(psf) = psf_image(db, key.cell as usize) else {
         return Ok(None);
     };
-    smear(&turn(&psf, key.turn_rad()), key.length_px(), key.angle_rad()).map(Some)
+    let turned = turn(&psf, key.turn_rad());
+    smear(&turned, key.length_px(), key.angle_rad(), key.bend_px()).map(Some)
 }
 
 /// `psf` turned by `angle` radians about its centre (its +x onto `(cos, sin)`, y down), as
@@ -610,7 +708,7 @@ mod tests {
         }
         for (psf, ch) in [(disk(1.5, 1), 1), (disk(6.0, 1), 1), (disk(2.5, 3), 3)] {
             for (length, angle) in [(0.7f32, 0.3f32), (9.0, 0.0), (14.5, 1.1), (23.0, -2.6)] {
-                let fast = smear(&psf, length, angle).expect("smear");
+                let fast = smear(&psf, length, angle, 0.0).expect("smear");
                 let slow = by_taps(&psf, length, angle);
                 assert_eq!(fast.data.len(), slow.len());
                 let worst = fast
@@ -631,7 +729,7 @@ mod tests {
         let psf = disk(4.0, 3);
         let (_, _, var0) = moments(&psf, 1);
         for (len, angle) in [(12.0f32, 0.0f32), (20.0, 0.7), (7.5, 2.0)] {
-            let out = smear(&psf, len, angle).expect("smear");
+            let out = smear(&psf, len, angle, 0.0).expect("smear");
             let (s, c, var) = moments(&out, 1);
             assert!((s - 1.0).abs() < 1e-5, "sum {s}");
             assert!(c[0].abs() < 1e-3 && c[1].abs() < 1e-3, "centroid {c:?}");
@@ -726,11 +824,17 @@ mod tests {
     fn the_estimate_bounds_the_smeared_image() {
         let psf = disk(6.0, 3);
         let reach = 7.0 * std::f32::consts::SQRT_2;
-        for (len, angle, turn_by) in [(30.0f32, 0.4f32, 1.0f32), (3.0, 2.0, 4.0), (80.0, 1.57, 0.0)] {
+        for (len, angle, turn_by, bend) in [
+            (30.0f32, 0.4f32, 1.0f32, 0.0f32),
+            (3.0, 2.0, 4.0, 0.0),
+            (80.0, 1.57, 0.0, 0.0),
+            (30.0, 0.4, 1.0, 40.0),
+            (80.0, 2.5, 0.0, -200.0),
+        ] {
             let m = [len * angle.cos(), len * angle.sin()];
-            let (key, _) = SmearKey::new(0, m, [turn_by.cos(), turn_by.sin()], reach);
+            let (key, _) = SmearKey::new(0, m, bend, [turn_by.cos(), turn_by.sin()], reach);
             let turned = turn(&psf, key.turn_rad());
-            let out = smear(&turned, key.length_px(), key.angle_rad()).expect("smear");
+            let out = smear(&turned, key.length_px(), key.angle_rad(), key.bend_px()).expect("smear");
             assert!(
                 out.width * out.height <= key.estimated_pixels(reach),
                 "{} x {} > {}",
@@ -741,12 +845,77 @@ mod tests {
         }
     }
 
+    /// A point smeared along a bent path lies on the arc: its light's mean offset across the
+    /// chord is the arc's, `mean over s of (1 - cos(kappa s)) / kappa`, and its ends sit the
+    /// sagitta off the chord. Reversing the motion and the bend draws the same arc.
+    #[test]
+    fn a_bent_smear_lies_on_its_arc() {
+        let point = PsfImage {
+            origin: [0, 0],
+            width: 1,
+            height: 1,
+            channels: 1,
+            data: vec![1.0],
+        };
+        let (len, bend) = (30.0f32, 12.0f32);
+        let out = smear(&point, len, 0.0, bend).expect("smear");
+        let total: f64 = out.data.iter().map(|&v| f64::from(v)).sum();
+        assert!((total - 1.0).abs() < 1e-5, "{total}");
+        let mean_y: f64 = (0..out.height)
+            .flat_map(|y| (0..out.width).map(move |x| (x, y)))
+            .map(|(x, y)| f64::from(out.data[y * out.width + x]) * f64::from(out.origin[1] + y as i32))
+            .sum();
+        let kappa = f64::from(bend) / f64::from(len * len);
+        let n = 10_000;
+        let arc: f64 = (0..n)
+            .map(|k| (1.0 - (kappa * ((k as f64 + 0.5) / n as f64 - 0.5) * f64::from(len)).cos()) / kappa)
+            .sum::<f64>()
+            / n as f64;
+        assert!((mean_y - arc).abs() < 0.02, "mean offset {mean_y}, arc {arc}");
+        assert!((f64::from(sagitta(len, bend)) - 1.4950).abs() < 1e-3);
+        // The end columns hold light at the sagitta's rows only.
+        let end = |x: usize| -> f64 {
+            let col: Vec<f64> = (0..out.height).map(|y| f64::from(out.data[y * out.width + x])).collect();
+            let w: f64 = col.iter().sum();
+            col.iter().enumerate().map(|(y, v)| v * f64::from(out.origin[1] + y as i32)).sum::<f64>() / w
+        };
+        let lit: Vec<usize> = (0..out.width)
+            .filter(|&x| (0..out.height).any(|y| out.data[y * out.width + x] > 0.0))
+            .collect();
+        for x in [lit[0], lit[lit.len() - 1]] {
+            assert!(end(x) > 1.0 && end(x) < 1.6, "column {x} centred at {}", end(x));
+        }
+        let reversed = smear(&point, len, std::f32::consts::PI, -bend).expect("smear");
+        let sum_diff: f32 = reversed
+            .data
+            .iter()
+            .zip(&out.data)
+            .map(|(a, b)| (a - b).abs())
+            .sum();
+        assert_eq!((reversed.width, reversed.height), (out.width, out.height));
+        assert!(sum_diff < 1e-4, "{sum_diff}");
+    }
+
+    /// A key bends the same arc whichever way along it the motion points.
+    #[test]
+    fn a_reversed_motion_keeps_its_arc() {
+        let (forward, _) = SmearKey::new(0, [20.0, 5.0], 10.0, [1.0, 0.0], 3.0);
+        let (backward, _) = SmearKey::new(0, [-20.0, -5.0], -10.0, [1.0, 0.0], 3.0);
+        assert_eq!(forward, backward);
+        assert_eq!(forward.bend_px(), 10.0);
+        let (up, _) = SmearKey::new(0, [20.0, -5.0], 10.0, [1.0, 0.0], 3.0);
+        // Folded onto the opposite direction (angles modulo pi): the bend turns over with it.
+        assert_eq!(up.bend_px(), -10.0);
+        let (straight, _) = SmearKey::new(0, [20.0, 5.0], 0.9, [1.0, 0.0], 3.0);
+        assert_eq!(straight.bend_step, 0);
+    }
+
     #[test]
     fn keys_quantise_lengths_and_angles_finely() {
         for len in [0.6f32, 3.3, 8.0, 9.7, 37.0, 200.0] {
             for angle in [0.0f32, 0.3, 1.5, 2.9, -1.0] {
                 let m = [len * angle.cos(), len * angle.sin()];
-                let (key, clamped) = SmearKey::new(7, m, [0.6, -0.8], 10.0);
+                let (key, clamped) = SmearKey::new(7, m, 0.0, [0.6, -0.8], 10.0);
                 let turn = (-0.8f32).atan2(0.6).rem_euclid(std::f32::consts::TAU);
                 let mut dt = (key.turn_rad() - turn).abs();
                 dt = dt.min(std::f32::consts::TAU - dt);
@@ -766,7 +935,7 @@ mod tests {
                 assert!(tip <= 0.3, "length {len} angle {angle}: tip off by {tip} px");
             }
         }
-        let (_, clamped) = SmearKey::new(0, [MAX_SMEAR_PX + 10.0, 0.0], [1.0, 0.0], 4.0);
+        let (_, clamped) = SmearKey::new(0, [MAX_SMEAR_PX + 10.0, 0.0], 0.0, [1.0, 0.0], 4.0);
         assert!(clamped);
     }
 

@@ -247,6 +247,8 @@ impl<'a> PlacedSamples<'a> {
             parallax: 1.0 / s.depth,
             depth: s.depth,
             motion: [motion[0] * self.shutter, motion[1] * self.shutter],
+            // A sample's own path is not known: its label holds one instant of it.
+            bend: 0.0,
             source: 0,
         }
     }

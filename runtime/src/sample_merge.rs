@@ -287,6 +287,7 @@ mod tests {
             parallax: 1.0 / depth,
             depth,
             motion,
+            bend: 0.0,
             source: 0,
         }
     }

@@ -84,6 +84,7 @@ fn fragments_from(parallax: &[f32], weights: &[f32]) -> Vec<Fragment> {
             parallax: p,
             depth: 1.0 / p,
             motion: [0.0, 0.0],
+            bend: 0.0,
             source: 0,
         })
         .collect()

@@ -36,13 +36,18 @@ impl GBuffer {
         DVec2::new(-f64::from(v[2]), f64::from(v[3]))
     }
 
-    /// Every pixel's forward motion, row-major (pixels per frame, x right, y down): the motion
-    /// plane a renderer's G-buffer holds.
-    pub fn forward_motion_plane(&self) -> Vec<[f32; 2]> {
-        (0..self.width * self.height)
-            .map(|i| {
-                let m = self.forward_motion(i % self.width, i / self.width);
-                [m.x as f32, m.y as f32]
+    /// Every pixel's motion at the frame time, row-major (pixels per frame, x right, y down),
+    /// as a reader of the written file takes it: the centred difference of the previous and
+    /// next frames' positions, or the forward motion where the backward vector is zero.
+    pub fn motion_plane(&self) -> Vec<[f32; 2]> {
+        self.vector
+            .iter()
+            .map(|v| {
+                if v[0] == 0.0 && v[1] == 0.0 {
+                    [-v[2], v[3]]
+                } else {
+                    [0.5 * (-v[2] - v[0]), 0.5 * (v[3] + v[1])]
+                }
             })
             .collect()
     }

@@ -121,7 +121,7 @@ pub fn gbuffer_of(g: &scene::GBuffer) -> GBuffer {
         g.height,
         g.color_image().pixels,
         Some(g.depth.clone()),
-        Some(g.forward_motion_plane()),
+        Some(g.motion_plane()),
     )
     .expect("a valid scene G-buffer")
 }

@@ -62,6 +62,7 @@ pub fn deep_fragments(deep: &DeepImage, camera: &Camera, effects: Effects) -> Ve
                     },
                     depth: s.depth,
                     motion,
+                    bend: 0.0,
                     source: k,
                 });
             }

@@ -29,6 +29,12 @@ pub struct Fragment {
     pub depth: f32,
     /// Motion over the shutter, pixels (x right, y down).
     pub motion: [f32; 2],
+    /// How far its path over the shutter bends away from the straight line, px: the path's
+    /// acceleration across the motion, `(m . grad) m . n` for the motion field `m` and `n`
+    /// the motion's direction turned a quarter turn clockwise on screen (`(-m_y, m_x) / |m|`,
+    /// y down). The path's ends lie `bend / 8` px off the line; a point turning about a
+    /// centre bends towards it. 0 for a straight path.
+    pub bend: f32,
     /// Which input surface of its pixel it comes from: the render layer, or the deep sample's
     /// index; 0 for a single input. Where fragments of one pixel from different sources fall
     /// into the same depth layer, the nearer ones occlude the farther ("over" within the
@@ -168,6 +174,18 @@ pub(super) fn pixel_fragments(
         .map(|i| signed_coc(depth_at(i)))
         .collect();
     let coc_at = |i: usize| cocs[i];
+    // Every pixel's path bend, where anything moves: found in the frame's units (px per
+    // frame), and a bend scales with the square of the shutter (the motion with it, and the
+    // field's Jacobian not at all).
+    let bends: Vec<f32> = match (&gbuffer.motion, effects.motion) {
+        (Some(m), true) => {
+            let mut bends = super::bend::path_bends(w, h, m, gbuffer.depth.as_deref(), &gbuffer.color);
+            bends.iter_mut().for_each(|b| *b *= shutter * shutter);
+            bends
+        }
+        _ => Vec::new(),
+    };
+    let bend_at = |i: usize| bends.get(i).copied().unwrap_or(0.0);
     let bright_near = if split_edges && model.is_some() {
         super::edge_split::bright_near(gbuffer, options.hdr_dense_threshold)
     } else {
@@ -196,6 +214,7 @@ pub(super) fn pixel_fragments(
                     parallax: parallax_of(d),
                     depth: d,
                     motion: motion_at(i),
+                    bend: bend_at(i),
                     source: 0,
                 };
                 let split = if split_edges && model.is_some() {
@@ -222,6 +241,7 @@ pub(super) fn pixel_fragments(
                             parallax: parallax_of(dj),
                             depth: dj,
                             motion: motion_at(j),
+                            bend: bend_at(j),
                             ..own
                         });
                         if split.alpha < 1.0 {
@@ -231,6 +251,7 @@ pub(super) fn pixel_fragments(
                                 color: split.background_color,
                                 weight: 1.0 - split.alpha,
                                 motion: motion_at(o),
+                                bend: bend_at(o),
                                 ..own
                             });
                         }
@@ -271,6 +292,7 @@ pub(super) fn pixel_fragments(
                 parallax: parallax_of(depth_at(i)),
                 depth: depth_at(i),
                 motion: motion_at(i),
+                bend: bend_at(i),
                 source: 0,
             },
         );
@@ -324,6 +346,7 @@ mod tests {
             parallax: 0.1,
             depth: 10.0,
             motion: [1.0, -2.0],
+            bend: 0.5,
             source: x as u32,
         };
         let pieces: Vec<Vec<Fragment>> = vec![

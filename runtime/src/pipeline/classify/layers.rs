@@ -157,6 +157,7 @@ pub fn classify_fragments(
             y: frag.y.div_euclid(1 << level),
             color: frag.color.map(|c| c / (s * s)),
             motion: frag.motion.map(|m| m / s),
+            bend: frag.bend / s,
             ..*frag
         };
         (coarse, signed_coc(frag.depth) / s)
@@ -186,7 +187,7 @@ pub fn classify_fragments(
                         let radial = if turned { [-1.0, 0.0] } else { [1.0, 0.0] };
                         let reach = reach.get(i as usize).copied().unwrap_or(0) as f32;
                         let threshold = ordered_dither(frag.x, frag.y);
-                        let (key, too_long) = SmearKey::dithered(i, m, radial, reach, threshold);
+                        let (key, too_long) = SmearKey::dithered(i, m, frag.bend, radial, reach, threshold);
                         return Some((key, clamped || too_long));
                     }
                     let found = lookup_psf(
@@ -207,7 +208,7 @@ pub fn classify_fragments(
                     let i = found.psf_index;
                     let reach = reach.get(i as usize).copied().unwrap_or(0) as f32;
                     let radial = [found.rot_cos, found.rot_sin];
-                    Some(SmearKey::new(i, m, radial, reach))
+                    Some(SmearKey::new(i, m, frag.bend, radial, reach))
                 })
                 .collect()
         }
@@ -702,7 +703,8 @@ impl SmearedPsfs {
             .map(|k| {
                 base_of(k)
                     .map(|base| {
-                        crate::motion_smear::smear_extent(base, k.length_px(), k.angle_rad())
+                        let (length, angle) = (k.length_px(), k.angle_rad());
+                        crate::motion_smear::smear_extent(base, length, angle, k.bend_px())
                             .map(|extent| (base, extent))
                     })
                     .transpose()
@@ -727,7 +729,8 @@ impl SmearedPsfs {
         let database = extension
             .fill(|i, out| {
                 let (k, base, extent) = drawn[i];
-                crate::motion_smear::smear_into(base, k.length_px(), k.angle_rad(), extent, out);
+                let (length, angle, bend) = (k.length_px(), k.angle_rad(), k.bend_px());
+                crate::motion_smear::smear_into(base, length, angle, bend, extent, out);
             })
             .map_err(not_built)?;
         Ok(Self {

@@ -26,6 +26,7 @@
 //! `hidden.rs` (background continued behind occluders) and `frame_edges.rs` are the special
 //! cases.
 
+mod bend;
 mod deep;
 mod edge_split;
 mod fragments;
