@@ -660,20 +660,6 @@ impl SmearedPsfs {
         }
         keys.par_sort_unstable();
         keys.dedup();
-        let pixels: usize = keys
-            .iter()
-            .map(|k| {
-                let r = reach.get(k.cell as usize).copied().unwrap_or(0) as f32;
-                k.estimated_pixels(r)
-            })
-            .sum();
-        if pixels > crate::motion_smear::MAX_FRAME_SMEARED_PIXELS {
-            return Err(crate::motion_smear::SmearError::FrameTooLarge {
-                keys: keys.len(),
-                pixels,
-            }
-            .into());
-        }
         // Each lens PSF turned once (a sparse one is integrated from its spreadlets first),
         // then smeared for every key that uses it: many keys share a cell and a turn.
         let mut turned: Vec<(u32, u32, u32)> = keys
@@ -690,18 +676,62 @@ impl SmearedPsfs {
                     .map(|psf| crate::motion_smear::turn(&psf, angle))
             })
             .collect();
-        let base_of = |k: &SmearKey| {
-            let i = turned
+        // Turned lens PSFs that are the same image smear alike: the cells of a sharp pixel
+        // all trim to a single pixel, and an in-focus spinning disc's keys differed in their
+        // cell alone. Each key is drawn from the first turn of its image, and keys that then
+        // agree share one smeared PSF.
+        let mut first_of_image = std::collections::HashMap::new();
+        let canonical: Vec<usize> = bases
+            .iter()
+            .enumerate()
+            .map(|(i, base)| match base {
+                Some(b) => {
+                    let bits: Vec<u32> = b.data.iter().map(|v| v.to_bits()).collect();
+                    *first_of_image
+                        .entry((b.origin, b.width, b.height, b.channels, bits))
+                        .or_insert(i)
+                }
+                None => i,
+            })
+            .collect();
+        let turn_of = |k: &SmearKey| {
+            turned
                 .binary_search(&(k.cell, k.turn_step, k.turn_steps))
-                .expect("every key's turn is listed");
-            bases[i].as_ref()
+                .expect("every key's turn is listed")
         };
+        let drawn_as = |k: &SmearKey| {
+            let (cell, turn_step, turn_steps) = turned[canonical[turn_of(k)]];
+            SmearKey {
+                cell,
+                turn_step,
+                turn_steps,
+                ..*k
+            }
+        };
+        let mut unique: Vec<SmearKey> = keys.par_iter().map(drawn_as).collect();
+        unique.par_sort_unstable();
+        unique.dedup();
+        let pixels: usize = unique
+            .iter()
+            .map(|k| {
+                let r = reach.get(k.cell as usize).copied().unwrap_or(0) as f32;
+                k.estimated_pixels(r)
+            })
+            .sum();
+        if pixels > crate::motion_smear::MAX_FRAME_SMEARED_PIXELS {
+            return Err(crate::motion_smear::SmearError::FrameTooLarge {
+                keys: unique.len(),
+                pixels,
+            }
+            .into());
+        }
         // Each image's box (and the turned lens PSF it smears) first, then all written in
         // place into the frame's database.
-        let extents = keys
+        let extents = unique
             .par_iter()
             .map(|k| {
-                base_of(k)
+                bases[turn_of(k)]
+                    .as_ref()
                     .map(|base| {
                         let (length, angle) = (k.length_px(), k.angle_rad());
                         crate::motion_smear::smear_extent(base, length, angle, k.bend_px())
@@ -712,14 +742,23 @@ impl SmearedPsfs {
             .collect::<Result<Vec<_>, _>>()?;
         let first = all.psf_count() as u32;
         let mut drawn = Vec::new();
-        let mut indexed = Vec::with_capacity(keys.len());
-        for (&key, found) in keys.iter().zip(extents) {
+        let mut unique_index = Vec::with_capacity(unique.len());
+        for (&key, found) in unique.iter().zip(extents) {
             let index = found.map(|(base, extent)| {
                 drawn.push((key, base, extent));
                 first + drawn.len() as u32 - 1
             });
-            indexed.push((key, index));
+            unique_index.push(index);
         }
+        let indexed: Vec<(SmearKey, Option<u32>)> = keys
+            .iter()
+            .map(|k| {
+                let i = unique
+                    .binary_search(&drawn_as(k))
+                    .expect("every key is drawn as a listed key");
+                (*k, unique_index[i])
+            })
+            .collect();
         let boxes: Vec<_> = drawn
             .iter()
             .map(|(_, _, e)| (e.origin, e.width, e.height))
