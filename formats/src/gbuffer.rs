@@ -167,6 +167,12 @@ pub struct GBuffer {
     /// the centred difference of the previous and next frames' positions where the file has
     /// both (Blender's vector pass), else the forward motion.
     pub motion: Option<Vec<[f32; 2]>>,
+    /// Acceleration per frame squared at the frame time in pixels (x right, y down),
+    /// `(next - now) + (previous - now)`, where the file has both of Blender's vectors for every
+    /// moving pixel: with the motion it gives the path's bend over the shutter, also where the
+    /// motion field itself moves (a rolling wheel). `None` where the file has the forward
+    /// vector alone.
+    pub acceleration: Option<Vec<[f32; 2]>>,
     /// Pixels whose colour was NaN or infinite, dropped (made transparent black).
     pub dropped_pixels: usize,
     /// The names of the channels in the file (for messages).
@@ -190,11 +196,21 @@ impl GBuffer {
             color,
             depth,
             motion,
+            acceleration: None,
             dropped_pixels: 0,
             channels_present: Vec::new(),
         };
         g.sanitize("<memory>")?;
         Ok(g)
+    }
+
+    /// This G-buffer with each pixel's acceleration at the frame time (px per frame squared, x
+    /// right, y down; see [`GBuffer::acceleration`]); an error for a plane of the wrong size or
+    /// with a non-finite value.
+    pub fn with_acceleration(mut self, acceleration: Vec<[f32; 2]>) -> Result<Self, GBufferError> {
+        self.acceleration = Some(acceleration);
+        self.sanitize("<memory>")?;
+        Ok(self)
     }
 
     /// Declares the outer `overscan` pixels of this G-buffer to lie outside the frame (the
@@ -246,6 +262,10 @@ impl GBuffer {
                 .motion
                 .as_ref()
                 .map(|m| (0..fw * fh).map(|i| m[pick(i)]).collect()),
+            acceleration: self
+                .acceleration
+                .as_ref()
+                .map(|a| (0..fw * fh).map(|i| a[pick(i)]).collect()),
             dropped_pixels: self.dropped_pixels,
             channels_present: self.channels_present.clone(),
         }
@@ -346,6 +366,25 @@ impl GBuffer {
                 });
             }
         }
+        if let Some(acceleration) = &self.acceleration {
+            if acceleration.len() != n {
+                return Err(layout_err("acceleration", acceleration.len()));
+            }
+            if let Some(i) = acceleration
+                .iter()
+                .position(|a| !(a[0].is_finite() && a[1].is_finite()))
+            {
+                let a = acceleration[i];
+                return Err(GBufferError::BadValue {
+                    path: name.to_string(),
+                    what: "acceleration",
+                    x: i % w,
+                    y: i / w,
+                    value: if a[0].is_finite() { a[1] } else { a[0] },
+                    why: "accelerations must be finite",
+                });
+            }
+        }
         Ok(())
     }
 }
@@ -432,7 +471,7 @@ impl Decoded {
         );
         let names: Vec<String> = channels.iter().map(|(n, _)| n.clone()).collect();
         let n = width * height;
-        let (rgba, depth, motion) = select_planes(&name, channels, options)?;
+        let (rgba, depth, motion, acceleration) = select_planes(&name, channels, options)?;
         // Sub-sampled channels (EXR x/y sampling above 1) hold fewer values than pixels.
         for plane in rgba.iter().flatten() {
             if plane.len() != n {
@@ -461,6 +500,7 @@ impl Decoded {
             color,
             depth: depth.cloned(),
             motion,
+            acceleration,
             dropped_pixels: 0,
             channels_present: names,
         };
@@ -616,10 +656,12 @@ fn merged_channels(
     Ok(channels)
 }
 
-/// Borrowed planes of a decoded file: colour (R, G, B, optional A), depth, forward motion.
+/// Borrowed planes of a decoded file: colour (R, G, B, optional A), depth, motion and
+/// acceleration.
 type Planes<'a> = (
     [Option<&'a Vec<f32>>; 4],
     Option<&'a Vec<f32>>,
+    Option<Vec<[f32; 2]>>,
     Option<Vec<[f32; 2]>>,
 );
 
@@ -747,7 +789,26 @@ fn select_planes<'a>(
                 ),
                 _ => None,
             };
-            (rgba, depth, motion)
+            // `(next - now) + (previous - now)`, when every moving pixel has both vectors (a
+            // pixel that moves forward with no backward vector says the file fills only the
+            // forward one).
+            let acceleration = match (forward, backward) {
+                (Some((z, w)), Some((x, y))) => {
+                    let forward_only =
+                        z.iter().zip(w.iter()).zip(x.iter().zip(y.iter())).any(
+                            |((&z, &w), (&x, &y))| x == 0.0 && y == 0.0 && (z != 0.0 || w != 0.0),
+                        );
+                    (!forward_only).then(|| {
+                        z.iter()
+                            .zip(w.iter())
+                            .zip(x.iter().zip(y.iter()))
+                            .map(|((&z, &w), (&x, &y))| [x - z, w - y])
+                            .collect::<Vec<_>>()
+                    })
+                }
+                _ => None,
+            };
+            (rgba, depth, motion, acceleration)
         }
         Layout::Plain | Layout::Auto => {
             let get = |c: &str| find(c).ok_or_else(|| missing(c.to_string()));
@@ -769,7 +830,7 @@ fn select_planes<'a>(
                     .map(|(&u, &v)| [u, flip * v])
                     .collect::<Vec<_>>()
             });
-            (rgba, depth, motion)
+            (rgba, depth, motion, None)
         }
     };
     Ok(planes)
@@ -938,9 +999,23 @@ mod tests {
         channels.push(("ViewLayer.Vector.X".to_string(), vec![-4.0, 0.0]));
         channels.push(("ViewLayer.Vector.Y".to_string(), vec![-1.0, 0.0]));
         let options = ChannelOptions::default();
-        crate::exr_io::write_channels(&path, 2, 1, channels, None).expect("write");
+        crate::exr_io::write_channels(&path, 2, 1, channels.clone(), None).expect("write");
         let g = GBuffer::read_exr(&path, &options).expect("read");
         assert_eq!(g.motion, Some(vec![[4.0, 0.0], [2.0, 3.0]]));
+        // Pixel 1 moves with no backward vector: the file fills only the forward one.
+        assert_eq!(g.acceleration, None);
+        // Both vectors on every moving pixel: pixel 0's path bends downwards by 2 px per
+        // frame squared.
+        let mut both = channels;
+        for (name, plane) in both.iter_mut() {
+            if name.ends_with("Vector.X") || name.ends_with("Vector.Y") {
+                // Pixel 1 moving steadily: previous - now = -(2, 3), so X = -2, Y = 3.
+                plane[1] = if name.ends_with('X') { -2.0 } else { 3.0 };
+            }
+        }
+        crate::exr_io::write_channels(&path, 2, 1, both, None).expect("write");
+        let g = GBuffer::read_exr(&path, &options).expect("read");
+        assert_eq!(g.acceleration, Some(vec![[0.0, 2.0], [0.0, 0.0]]));
         crate::exr_io::write_channels(&path, 2, 1, without_backward, None).expect("write");
         let g = GBuffer::read_exr(&path, &options).expect("read");
         assert_eq!(g.motion, Some(vec![[4.0, 1.0], [2.0, 3.0]]));

@@ -90,5 +90,6 @@ pub fn gbuffer_of(
         g.color_image().pixels,
         Some(g.depth.clone()),
         Some(g.motion_plane()),
-    )
+    )?
+    .with_acceleration(g.acceleration_plane())
 }

@@ -545,6 +545,10 @@ fn centre_crop(
             .motion
             .as_ref()
             .map(|m| (0..n).map(|i| m[pick(i)]).collect()),
+        acceleration: g
+            .acceleration
+            .as_ref()
+            .map(|a| (0..n).map(|i| a[pick(i)]).collect()),
         ..g.clone()
     };
     let images = images

@@ -49,6 +49,7 @@ fn crop(g: &GBuffer, cam: &Camera) -> (GBuffer, Camera) {
         color,
         depth,
         motion,
+        acceleration: None,
         ..g.clone()
     };
     let mut c = cam.clone();

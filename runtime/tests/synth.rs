@@ -367,6 +367,7 @@ fn still_defocus_needs_only_the_thin_lens_model() {
         GBuffer::from_planes(4, 4, vec![[1.0; 4]; 16], Some(vec![2.0; 16]), None).expect("g");
     let still = GBuffer {
         motion: Some(vec![[0.0; 2]; 16]),
+        acceleration: None,
         ..still
     };
     assert_eq!(

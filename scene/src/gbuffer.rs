@@ -52,6 +52,16 @@ impl GBuffer {
             .collect()
     }
 
+    /// Every pixel's acceleration at the frame time, row-major (pixels per frame squared, x
+    /// right, y down), as a reader of the written file takes it: `(next - now) +
+    /// (previous - now)`.
+    pub fn acceleration_plane(&self) -> Vec<[f32; 2]> {
+        self.vector
+            .iter()
+            .map(|v| [v[0] - v[2], v[3] - v[1]])
+            .collect()
+    }
+
     /// Blender's `[X, Y, Z, W]` from the image positions (pixels, y down) of a surface point in
     /// the previous frame, now and in the next frame.
     pub fn blender_vector(previous: DVec2, now: DVec2, next: DVec2) -> [f32; 4] {

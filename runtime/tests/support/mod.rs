@@ -123,5 +123,6 @@ pub fn gbuffer_of(g: &scene::GBuffer) -> GBuffer {
         Some(g.depth.clone()),
         Some(g.motion_plane()),
     )
+    .and_then(|g2| g2.with_acceleration(g.acceleration_plane()))
     .expect("a valid scene G-buffer")
 }

@@ -12,6 +12,11 @@
 //! weight does not show. For a rigid turn `m = theta A (p - c)` (`A` a quarter turn),
 //! `a = -theta^2 (p - c)`: towards the centre, `theta |m|` across the motion.
 //!
+//! That holds for a field that stays where it is (a wheel turning on its axle, a camera pan).
+//! Where the G-buffer holds each pixel's own acceleration (Blender's vector pass has the
+//! previous and the next frame's positions: `a = (next - now) + (previous - now)`), that is
+//! used instead, which also holds where the field travels (a rolling wheel).
+//!
 //! `J` is fitted by least squares to the pixels within [`FIT_RADIUS`] of the same surface
 //! (depth within [`SAME_SURFACE_DEPTH`], motion within [`SAME_SURFACE_MOTION`]), so a moving
 //! object's edge does not take the still background's motion for a bend, and none is fitted
@@ -141,11 +146,37 @@ pub(super) fn path_bends(
         .collect()
 }
 
+/// Every pixel's path bend (px, `Fragment::bend`, for the motion given) from its own
+/// acceleration (`acceleration[i]`, px per the motion's time unit squared), as Blender's two
+/// vectors give it: exact where the field itself moves, which the field's derivatives miss (a
+/// rolling wheel's field travels with the wheel; `(m . grad) m` then adds `theta A v` to the
+/// rim's true `-theta^2 (p - c)`).
+pub(super) fn bends_from_acceleration(motion: &[[f32; 2]], acceleration: &[[f32; 2]]) -> Vec<f32> {
+    motion
+        .par_iter()
+        .zip(acceleration.par_iter())
+        .map(|(&m, &a)| {
+            let len = (m[0] * m[0] + m[1] * m[1]).sqrt();
+            if len < MIN_MOTION_PX {
+                0.0
+            } else {
+                across_motion(m, len, a)
+            }
+        })
+        .collect()
+}
+
 /// The path's acceleration `a = J m` across the motion `m` (of length `len`), towards
 /// `(-m_y, m_x) / |m|`, from the field's derivatives along x and y (`dx = d m / d x`); 0 where
 /// it is not finite.
 fn across(m: [f32; 2], len: f32, dx: [f32; 2], dy: [f32; 2]) -> f32 {
     let a = [m[0] * dx[0] + m[1] * dy[0], m[0] * dx[1] + m[1] * dy[1]];
+    across_motion(m, len, a)
+}
+
+/// The part of acceleration `a` across the motion `m` (of length `len`), towards
+/// `(-m_y, m_x) / |m|`; 0 where it is not finite.
+fn across_motion(m: [f32; 2], len: f32, a: [f32; 2]) -> f32 {
     let bend = (m[0] * a[1] - m[1] * a[0]) / len;
     if bend.is_finite() {
         bend
@@ -195,6 +226,41 @@ mod tests {
         let field: Vec<[f32; 2]> = (0..w * h).map(scaling).collect();
         let bends = path_bends(w, h, &field, Some(&flat), &all);
         assert!(bends.iter().all(|b| b.abs() < 1e-3), "{:?}", bends.iter().fold(0f32, |a, b| a.max(b.abs())));
+    }
+
+    /// A rolling wheel: its rim turns about a centre that travels. Its own acceleration (the
+    /// two vectors) bends the top of the rim by `theta^2 R` towards the hub; the field's
+    /// derivatives, which take the field as standing still, double it.
+    #[test]
+    fn a_rolling_wheel_bends_by_its_own_acceleration() {
+        let (w, h) = (64usize, 64usize);
+        let (cx, cy) = (32.0f32, 32.0f32);
+        let (theta, radius) = (0.2f32, 20.0f32);
+        // Rolling to the right without slipping (y down, turning clockwise on screen): the
+        // hub moves theta R, a point at p moves v + theta (-(y - cy), x - cx).
+        let v = theta * radius;
+        let field = |i: usize| {
+            let (x, y) = ((i % w) as f32 - cx, (i / w) as f32 - cy);
+            [v - theta * y, theta * x]
+        };
+        let motion: Vec<[f32; 2]> = (0..w * h).map(field).collect();
+        let acceleration: Vec<[f32; 2]> = (0..w * h)
+            .map(|i| {
+                let (x, y) = ((i % w) as f32 - cx, (i / w) as f32 - cy);
+                [-theta * theta * x, -theta * theta * y]
+            })
+            .collect();
+        // The top of the rim (y = cy - R) moves 2 v to the right and bends down, towards the
+        // hub, by theta^2 R.
+        let top = (cy - radius) as usize * w + cx as usize;
+        let own = bends_from_acceleration(&motion, &acceleration)[top];
+        let expected = theta * theta * radius;
+        let m = motion[top];
+        let len = (m[0] * m[0] + m[1] * m[1]).sqrt();
+        // (-m_y, m_x) / |m| is straight down here: a positive bend.
+        assert!((own - expected).abs() < 1e-4, "{own} against {expected}");
+        let fitted = path_bends(w, h, &motion, Some(&vec![5.0; w * h]), &vec![[1.0; 4]; w * h])[top];
+        assert!((fitted - 2.0 * expected).abs() < 1e-3, "{fitted}, length {len}");
     }
 
     /// At a silhouette the still background is not taken for the moving surface's field.

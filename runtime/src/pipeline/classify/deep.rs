@@ -113,6 +113,7 @@ fn hidden_behind_deep(deep: &DeepImage, camera: &Camera, fragments: &[Fragment])
         color: flat,
         depth: None,
         motion: None,
+        acceleration: None,
         dropped_pixels: 0,
         channels_present: Vec::new(),
     };

@@ -68,6 +68,9 @@ pub(super) fn with_edge_depths(gbuffer: &GBuffer) -> Option<GBuffer> {
         if let Some(m) = out.motion.as_mut() {
             m[i] = m[j];
         }
+        if let Some(a) = out.acceleration.as_mut() {
+            a[i] = a[j];
+        }
     }
     Some(out)
 }
@@ -179,7 +182,10 @@ pub(super) fn pixel_fragments(
     // field's Jacobian not at all).
     let bends: Vec<f32> = match (&gbuffer.motion, effects.motion) {
         (Some(m), true) => {
-            let mut bends = super::bend::path_bends(w, h, m, gbuffer.depth.as_deref(), &gbuffer.color);
+            let mut bends = match &gbuffer.acceleration {
+                Some(a) => super::bend::bends_from_acceleration(m, a),
+                None => super::bend::path_bends(w, h, m, gbuffer.depth.as_deref(), &gbuffer.color),
+            };
             bends.iter_mut().for_each(|b| *b *= shutter * shutter);
             bends
         }
