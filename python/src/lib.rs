@@ -129,7 +129,8 @@ impl PyCamera {
 }
 
 /// A G-buffer read from an EXR: `color` (h, w, 4), `depth` (h, w) or None, `motion` (h, w, 2)
-/// forward, pixels per frame, x right, y down, or None.
+/// at the frame time, pixels per frame, x right, y down, or None, and `acceleration` (h, w, 2),
+/// pixels per frame squared, where the file has both of Blender's vectors, else None.
 #[pyclass(name = "GBuffer", module = "spreadlet")]
 struct PyGBuffer {
     #[pyo3(get)]
@@ -138,6 +139,8 @@ struct PyGBuffer {
     depth: Option<Py<PyArray2<f32>>>,
     #[pyo3(get)]
     motion: Option<Py<PyArray3<f32>>>,
+    #[pyo3(get)]
+    acceleration: Option<Py<PyArray3<f32>>>,
 }
 
 fn rgba_array<'py>(py: Python<'py>, image: &formats::RgbaImage) -> Bound<'py, PyArray3<f32>> {
@@ -173,17 +176,18 @@ fn read_gbuffer(py: Python<'_>, path: PathBuf) -> PyResult<PyGBuffer> {
             .expect("shape")
             .unbind()
     });
-    let motion = g.motion.as_ref().map(|m| {
+    let pairs = |m: &Vec<[f32; 2]>| {
         let flat: Vec<f32> = m.iter().flatten().copied().collect();
         numpy::PyArray1::from_vec(py, flat)
             .reshape([h, w, 2])
             .expect("shape")
             .unbind()
-    });
+    };
     Ok(PyGBuffer {
         color: color.unbind(),
         depth,
-        motion,
+        motion: g.motion.as_ref().map(pairs),
+        acceleration: g.acceleration.as_ref().map(pairs),
     })
 }
 
@@ -308,11 +312,14 @@ impl PyRenderer {
     }
 
     /// Depth of field and motion blur from a pinhole G-buffer: `color` (h, w, 4) float32,
-    /// `depth` (h, w) planar, scene units, `motion` (h, w, 2) forward, pixels per frame, x
-    /// right, y down (or None for a still frame). Returns the image (h, w, 4), and with
-    /// `stats=True` also a dict of what was done. `progress(message, fraction)` hears of
-    /// database builds (fraction in [0, 1]) and fallbacks (fraction None).
-    #[pyo3(signature = (color, depth, motion, camera, stats=false, progress=None))]
+    /// `depth` (h, w) planar, scene units, `motion` (h, w, 2) at the frame time, pixels per
+    /// frame, x right, y down (or None for a still frame), and optionally `acceleration`
+    /// (h, w, 2), pixels per frame squared (what `read_gbuffer` gives: each path's bend over
+    /// the shutter; without it the bend is taken from the motion field). Returns the image
+    /// (h, w, 4), and with `stats=True` also a dict of what was done.
+    /// `progress(message, fraction)` hears of database builds (fraction in [0, 1]) and
+    /// fallbacks (fraction None).
+    #[pyo3(signature = (color, depth, motion, camera, stats=false, progress=None, acceleration=None))]
     #[allow(clippy::too_many_arguments)]
     fn synthesize<'py>(
         &mut self,
@@ -323,6 +330,7 @@ impl PyRenderer {
         camera: &PyCamera,
         stats: bool,
         progress: Option<Py<PyAny>>,
+        acceleration: Option<PyReadonlyArray3<'py, f32>>,
     ) -> PyResult<PyObject> {
         let shape = color.shape();
         let (h, w) = (shape[0], shape[1]);
@@ -370,6 +378,20 @@ impl PyRenderer {
         };
         let gbuffer =
             renderer::GBuffer::from_planes(w, h, pixels, depth, motion).map_err(value_error)?;
+        let gbuffer = match acceleration {
+            Some(a) => {
+                if a.shape() != [h, w, 2] {
+                    return Err(value_error(format!(
+                        "acceleration must have shape ({h}, {w}, 2), got {:?}",
+                        a.shape()
+                    )));
+                }
+                let flat: Vec<f32> = a.as_array().iter().copied().collect();
+                let plane = flat.chunks_exact(2).map(|c| [c[0], c[1]]).collect();
+                gbuffer.with_acceleration(plane).map_err(value_error)?
+            }
+            None => gbuffer,
+        };
         let camera = camera.inner.clone();
         let renderer = &mut self.inner;
         let frame = self.progress.around(py, progress, || {

@@ -44,7 +44,9 @@ def test_the_module_writes_what_the_cli_writes(scene):
     gbuffer = spreadlet.read_gbuffer(g)
     camera = spreadlet.Camera.from_json(cam)
     r = spreadlet.Renderer(backend="cpu")
-    image = r.synthesize(gbuffer.color, gbuffer.depth, gbuffer.motion, camera)
+    assert gbuffer.acceleration is not None and gbuffer.acceleration.shape == gbuffer.motion.shape
+    image = r.synthesize(gbuffer.color, gbuffer.depth, gbuffer.motion, camera,
+                         acceleration=gbuffer.acceleration)
     cli = spreadlet.read_gbuffer(out).color
     assert image.dtype == np.float32 and image.shape == (camera.height, camera.width, 4)
     assert np.array_equal(image, cli), "the module and the CLI differ"
@@ -79,6 +81,9 @@ def test_bad_input_raises_value_error(scene):
     bad[3, 5] = np.nan
     with pytest.raises(ValueError, match="(?i)depth"):
         r.synthesize(gbuffer.color, bad, gbuffer.motion, camera)
+    with pytest.raises(ValueError, match="acceleration"):
+        r.synthesize(gbuffer.color, gbuffer.depth, gbuffer.motion, camera,
+                     acceleration=gbuffer.motion[:-1].copy())
     with pytest.raises(ValueError, match="f_stop"):
         spreadlet.Camera(64, 64, 50.0, 36.0, f_stop=-1.0, focus_distance=1.0)
     with pytest.raises(ValueError, match="backend"):
