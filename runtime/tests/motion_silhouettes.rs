@@ -220,10 +220,10 @@ fn a_spinning_disc_keeps_its_rim() {
     let (inside, outside) = (f64::from(DISC), f64::from(WALL));
     let rim = half_level_radius(&profile, inside, outside);
     let still_rim = half_level_radius(&still, inside, outside);
-    // Light beyond the rim, over the wall: the mean of the rings 2-8 px outside, as a share of
-    // the step from wall to disc.
-    let outer = |p: &[f64]| {
-        let rings = (2.0 * (DISC_RADIUS + 2.0)) as usize..(2.0 * (DISC_RADIUS + 8.0)) as usize;
+    // The mean level of the rings from `from` to `to` px off the rim (negative: inside), as a
+    // share of the step from wall to disc.
+    let level = |p: &[f64], from: f64, to: f64| {
+        let rings = (2.0 * (DISC_RADIUS + from)) as usize..(2.0 * (DISC_RADIUS + to)) as usize;
         let n = rings.len() as f64;
         p[rings]
             .iter()
@@ -231,16 +231,9 @@ fn a_spinning_disc_keeps_its_rim() {
             .sum::<f64>()
             / n
     };
-    // The disc's level just inside the rim, 2-8 px in.
-    let inner = |p: &[f64]| {
-        let rings = (2.0 * (DISC_RADIUS - 8.0)) as usize..(2.0 * (DISC_RADIUS - 2.0)) as usize;
-        let n = rings.len() as f64;
-        p[rings]
-            .iter()
-            .map(|v| (v - outside) / (inside - outside))
-            .sum::<f64>()
-            / n
-    };
+    // Light beyond the rim, over the wall, 2-8 px out; the disc just inside it, 2-8 px in.
+    let outer = |p: &[f64]| level(p, 2.0, 8.0);
+    let inner = |p: &[f64]| level(p, -8.0, -2.0);
     eprintln!(
         "rim at {rim:.2} px (still {still_rim:.2}); beyond it {:.4} of the step (still {:.4}); \
          inside {:.4} (still {:.4})",
