@@ -21,8 +21,12 @@
 //! draw costs four bilinear taps per pixel). A segment reversed is the same segment, so the
 //! motion's angle is taken modulo pi.
 //!
-//! The smeared PSFs are built per frame, for the (cell, turn, length, angle) keys its moving
-//! pixels use, and appended to the frame's database as dense PSFs. Keys are quantised so that
+//! Where the pixel's path over the shutter bends (a point turning about a centre), the segment
+//! is the arc of the same length and the path's curvature ([`smear`]; docs/DESIGN.md, "Curved
+//! paths").
+//!
+//! The smeared PSFs are built per frame, for the (cell, turn, length, angle, bend) keys its
+//! moving pixels use, and appended to the frame's database as dense PSFs. Keys are quantised so that
 //! a streak's ends and a PSF's rim are off by at most about a quarter pixel: the length in
 //! steps of 1/4 px up to 8 px and of 2 % beyond, the angle in steps of at most 1/length radians
 //! (the tip of a streak of length `L` moves `L/2 * dtheta/2` px at most), the turn in steps of
