@@ -347,41 +347,32 @@ impl GBuffer {
                 });
             }
         }
-        if let Some(motion) = &self.motion {
-            if motion.len() != n {
-                return Err(layout_err("motion", motion.len()));
+        // Motion and acceleration: the frame's size, finite.
+        let planes = [
+            (&self.motion, "motion", "motion vectors must be finite"),
+            (
+                &self.acceleration,
+                "acceleration",
+                "accelerations must be finite",
+            ),
+        ];
+        for (plane, what, why) in planes {
+            let Some(plane) = plane else { continue };
+            if plane.len() != n {
+                return Err(layout_err(what, plane.len()));
             }
-            if let Some(i) = motion
+            if let Some(i) = plane
                 .iter()
                 .position(|m| !(m[0].is_finite() && m[1].is_finite()))
             {
-                let m = motion[i];
+                let m = plane[i];
                 return Err(GBufferError::BadValue {
                     path: name.to_string(),
-                    what: "motion",
+                    what,
                     x: i % w,
                     y: i / w,
                     value: if m[0].is_finite() { m[1] } else { m[0] },
-                    why: "motion vectors must be finite",
-                });
-            }
-        }
-        if let Some(acceleration) = &self.acceleration {
-            if acceleration.len() != n {
-                return Err(layout_err("acceleration", acceleration.len()));
-            }
-            if let Some(i) = acceleration
-                .iter()
-                .position(|a| !(a[0].is_finite() && a[1].is_finite()))
-            {
-                let a = acceleration[i];
-                return Err(GBufferError::BadValue {
-                    path: name.to_string(),
-                    what: "acceleration",
-                    x: i % w,
-                    y: i / w,
-                    value: if a[0].is_finite() { a[1] } else { a[0] },
-                    why: "accelerations must be finite",
+                    why,
                 });
             }
         }
@@ -699,6 +690,36 @@ fn check_header(name: &str, meta: &exr::meta::MetaData, file_len: u64) -> Result
     Ok(())
 }
 
+/// The motion per frame at the frame time (px, x right, y down) of one pixel of Blender's
+/// vector pass `[X, Y, Z, W]` (y up; `X, Y` = previous minus now, `Z, W` = now minus next):
+/// the tangent, half the step from the previous frame's position to the next one's,
+/// `((-Z - X) / 2, (W + Y) / 2)`. A point turning about a centre moves along its chord to the
+/// next frame, `(-Z, W)`, which leans inward by half the turn; drawn along that, a spinning
+/// rim's streaks leave it. A pixel whose backward vector is exactly zero keeps the forward one:
+/// writers that fill only the forward vector leave it so.
+pub fn blender_motion(v: [f32; 4]) -> [f32; 2] {
+    let [x, y, z, w] = v;
+    if x == 0.0 && y == 0.0 {
+        [-z, w]
+    } else {
+        [0.5 * (-z - x), 0.5 * (w + y)]
+    }
+}
+
+/// The acceleration per frame squared at the frame time (px, x right, y down) of one pixel of
+/// Blender's vector pass `[X, Y, Z, W]`: `(next - now) + (previous - now) = (X - Z, W - Y)`.
+pub fn blender_acceleration(v: [f32; 4]) -> [f32; 2] {
+    let [x, y, z, w] = v;
+    [x - z, w - y]
+}
+
+/// Whether a pixel of Blender's vector pass moves forward with no backward vector: the mark of
+/// a file that fills only the forward one.
+fn fills_only_forward(v: [f32; 4]) -> bool {
+    let [x, y, z, w] = v;
+    x == 0.0 && y == 0.0 && (z != 0.0 || w != 0.0)
+}
+
 /// The colour planes (R, G, B and A when present), depth and forward motion (pixels per frame,
 /// x right, y down) of a decoded file, found by the layout `options` ask for.
 fn select_planes<'a>(
@@ -761,52 +782,27 @@ fn select_planes<'a>(
             let depth = get("Depth.Z").ok();
             let forward = get("Vector.Z").ok().zip(get("Vector.W").ok());
             let backward = get("Vector.X").ok().zip(get("Vector.Y").ok());
-            let motion = match (forward, backward) {
-                // The tangent at the frame time: half the step from the previous frame's
-                // position to the next one's, `((next - now) - (previous - now)) / 2`. A point
-                // turning about a centre moves along its chord to the next frame, which leans
-                // inward by half the turn; drawn along that, a spinning rim's streaks leave it.
-                // A pixel whose backward vector is exactly zero keeps the forward one: writers
-                // that fill only the forward vector leave it so.
-                (Some((z, w)), Some((x, y))) => Some(
-                    z.iter()
-                        .zip(w.iter())
-                        .zip(x.iter().zip(y.iter()))
-                        .map(|((&z, &w), (&x, &y))| {
-                            if x == 0.0 && y == 0.0 {
-                                [-z, w]
-                            } else {
-                                [0.5 * (-z - x), 0.5 * (w + y)]
-                            }
-                        })
-                        .collect::<Vec<_>>(),
-                ),
-                (Some((z, w)), None) => Some(
-                    z.iter()
-                        .zip(w.iter())
-                        .map(|(&z, &w)| [-z, w])
-                        .collect::<Vec<_>>(),
-                ),
-                _ => None,
-            };
-            // `(next - now) + (previous - now)`, when every moving pixel has both vectors (a
-            // pixel that moves forward with no backward vector says the file fills only the
-            // forward one).
-            let acceleration = match (forward, backward) {
-                (Some((z, w)), Some((x, y))) => {
-                    let forward_only =
-                        z.iter().zip(w.iter()).zip(x.iter().zip(y.iter())).any(
-                            |((&z, &w), (&x, &y))| x == 0.0 && y == 0.0 && (z != 0.0 || w != 0.0),
-                        );
-                    (!forward_only).then(|| {
-                        z.iter()
-                            .zip(w.iter())
-                            .zip(x.iter().zip(y.iter()))
-                            .map(|((&z, &w), (&x, &y))| [x - z, w - y])
-                            .collect::<Vec<_>>()
-                    })
+            let (motion, acceleration) = match forward {
+                None => (None, None),
+                Some((z, w)) => {
+                    // Each pixel's `[X, Y, Z, W]`, a missing backward vector read as zero.
+                    let vector = |i: usize| {
+                        let (x, y) = backward.map_or((0.0, 0.0), |(x, y)| (x[i], y[i]));
+                        [x, y, z[i], w[i]]
+                    };
+                    // The shortest plane's length: a plane short of the frame is then a
+                    // wrong-sized motion, which the checks name, rather than a read past its end.
+                    let n = backward
+                        .map_or(usize::MAX, |(x, y)| x.len().min(y.len()))
+                        .min(z.len())
+                        .min(w.len());
+                    let motion = (0..n).map(|i| blender_motion(vector(i))).collect();
+                    // Only where every moving pixel has both vectors.
+                    let both = backward.is_some() && !(0..n).any(|i| fills_only_forward(vector(i)));
+                    let acceleration =
+                        both.then(|| (0..n).map(|i| blender_acceleration(vector(i))).collect());
+                    (Some(motion), acceleration)
                 }
-                _ => None,
             };
             (rgba, depth, motion, acceleration)
         }

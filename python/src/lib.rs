@@ -191,6 +191,24 @@ fn read_gbuffer(py: Python<'_>, path: PathBuf) -> PyResult<PyGBuffer> {
     })
 }
 
+/// The (h, w, 2) array `array` named `what` as one pair a pixel; an error naming its shape
+/// where it is another.
+fn pairs_of_array(
+    what: &str,
+    array: &PyReadonlyArray3<'_, f32>,
+    h: usize,
+    w: usize,
+) -> PyResult<Vec<[f32; 2]>> {
+    if array.shape() != [h, w, 2] {
+        return Err(value_error(format!(
+            "{what} must have shape ({h}, {w}, 2), got {:?}",
+            array.shape()
+        )));
+    }
+    let flat: Vec<f32> = array.as_array().iter().copied().collect();
+    Ok(flat.chunks_exact(2).map(|c| [c[0], c[1]]).collect())
+}
+
 /// The renderer: keeps its databases and GPU pipelines between calls.
 #[pyclass(name = "Renderer", module = "spreadlet", unsendable)]
 struct PyRenderer {
@@ -359,37 +377,15 @@ impl PyRenderer {
             }
             None => None,
         };
-        let motion = match motion {
-            Some(m) => {
-                if m.shape() != [h, w, 2] {
-                    return Err(value_error(format!(
-                        "motion must have shape ({h}, {w}, 2), got {:?}",
-                        m.shape()
-                    )));
-                }
-                let flat: Vec<f32> = m.as_array().iter().copied().collect();
-                Some(
-                    flat.chunks_exact(2)
-                        .map(|c| [c[0], c[1]])
-                        .collect::<Vec<[f32; 2]>>(),
-                )
-            }
-            None => None,
-        };
+        let motion = motion
+            .map(|m| pairs_of_array("motion", &m, h, w))
+            .transpose()?;
         let gbuffer =
             renderer::GBuffer::from_planes(w, h, pixels, depth, motion).map_err(value_error)?;
         let gbuffer = match acceleration {
-            Some(a) => {
-                if a.shape() != [h, w, 2] {
-                    return Err(value_error(format!(
-                        "acceleration must have shape ({h}, {w}, 2), got {:?}",
-                        a.shape()
-                    )));
-                }
-                let flat: Vec<f32> = a.as_array().iter().copied().collect();
-                let plane = flat.chunks_exact(2).map(|c| [c[0], c[1]]).collect();
-                gbuffer.with_acceleration(plane).map_err(value_error)?
-            }
+            Some(a) => gbuffer
+                .with_acceleration(pairs_of_array("acceleration", &a, h, w)?)
+                .map_err(value_error)?,
             None => gbuffer,
         };
         let camera = camera.inner.clone();

@@ -42,13 +42,7 @@ impl GBuffer {
     pub fn motion_plane(&self) -> Vec<[f32; 2]> {
         self.vector
             .iter()
-            .map(|v| {
-                if v[0] == 0.0 && v[1] == 0.0 {
-                    [-v[2], v[3]]
-                } else {
-                    [0.5 * (-v[2] - v[0]), 0.5 * (v[3] + v[1])]
-                }
-            })
+            .map(|&v| formats::gbuffer::blender_motion(v))
             .collect()
     }
 
@@ -58,7 +52,7 @@ impl GBuffer {
     pub fn acceleration_plane(&self) -> Vec<[f32; 2]> {
         self.vector
             .iter()
-            .map(|v| [v[0] - v[2], v[3] - v[1]])
+            .map(|&v| formats::gbuffer::blender_acceleration(v))
             .collect()
     }
 

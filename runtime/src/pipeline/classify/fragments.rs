@@ -29,10 +29,10 @@ pub struct Fragment {
     pub depth: f32,
     /// Motion over the shutter, pixels (x right, y down).
     pub motion: [f32; 2],
-    /// How far its path over the shutter bends away from the straight line, px: the path's
-    /// acceleration across the motion, `(m . grad) m . n` for the motion field `m` and `n`
-    /// the motion's direction turned a quarter turn clockwise on screen (`(-m_y, m_x) / |m|`,
-    /// y down). The path's ends lie `bend / 8` px off the line; a point turning about a
+    /// How far its path over the shutter bends away from the straight line, px: the part of
+    /// the path's acceleration over the shutter (the pixel's own, `GBuffer::acceleration`, else
+    /// `(m . grad) m` from the motion field) along `n`, the motion's direction turned a quarter
+    /// turn clockwise on screen (`(-m_y, m_x) / |m|`, y down). The path's ends lie `bend / 8` px off the line; a point turning about a
     /// centre bends towards it. 0 for a straight path.
     pub bend: f32,
     /// Which input surface of its pixel it comes from: the render layer, or the deep sample's
@@ -178,8 +178,8 @@ pub(super) fn pixel_fragments(
         .collect();
     let coc_at = |i: usize| cocs[i];
     // Every pixel's path bend, where anything moves: found in the frame's units (px per
-    // frame), and a bend scales with the square of the shutter (the motion with it, and the
-    // field's Jacobian not at all).
+    // frame); over the shutter it scales with the shutter's square (an acceleration's time
+    // unit, squared).
     let bends: Vec<f32> = match (&gbuffer.motion, effects.motion) {
         (Some(m), true) => {
             let mut bends = match &gbuffer.acceleration {
