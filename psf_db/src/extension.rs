@@ -119,12 +119,25 @@ impl DenseExtension {
 
     /// Writes the appended images with `fill(i, values)` for image `i` (in the order of the
     /// shapes; `values`: its `width * height * channels` values, row-major,
-    /// channel-interleaved primal values, zero or left from an earlier use, to be overwritten)
-    /// in parallel; checks the database's structure and each image's values as it is written
-    /// (`base`'s were checked when it was), finds its rows' spans, and returns the database.
+    /// channel-interleaved primal values, all zero, to be written) in parallel; checks the
+    /// database's structure and each image's values as it is written (`base`'s were checked
+    /// when it was), finds its rows' spans, and returns the database.
     pub fn fill<F>(self, fill: F) -> Result<PsfDatabase, DbError>
     where
         F: Fn(usize, &mut [f32]) + Sync,
+    {
+        self.fill_within(|i, values, _| fill(i, values))
+    }
+
+    /// [`DenseExtension::fill`] for images whose rows are mostly zero, such as a thin streak in
+    /// its box: `fill(i, values, written)` also gives, per row of image `i`, the columns
+    /// `[first, end)` outside which it left the row's zeros untouched (`written` holds the
+    /// whole row when it is called). Only those columns are read back, to check them and to
+    /// find the row's span; the rest of the image is never touched, so its memory is not
+    /// faulted in. Columns beyond the row are ignored.
+    pub fn fill_within<F>(self, fill: F) -> Result<PsfDatabase, DbError>
+    where
+        F: Fn(usize, &mut [f32], &mut [[u16; 2]]) + Sync,
     {
         use rayon::prelude::*;
         let mut db = self.db;
@@ -150,14 +163,25 @@ impl DenseExtension {
             .into_par_iter()
             .enumerate()
             .map(|(i, (width, image, spans))| {
-                fill(i, image);
-                let bad = image.iter().position(|v| !v.is_finite());
-                if bad.is_none() && !image.is_empty() {
-                    for (row, span) in image.chunks_exact(width * ch).zip(spans) {
-                        *span = row_span(row, ch);
-                    }
+                // The format's widths are u16, so every row's width fits.
+                spans.fill([0, width as u16]);
+                fill(i, image, spans);
+                if image.is_empty() {
+                    return None;
                 }
-                bad
+                for (r, (row, span)) in image.chunks_exact(width * ch).zip(spans).enumerate() {
+                    let end = usize::from(span[1]).min(width);
+                    let first = usize::from(span[0]).min(end);
+                    let written = &row[first * ch..end * ch];
+                    if let Some(k) = written.iter().position(|v| !v.is_finite()) {
+                        return Some((r * width + first) * ch + k);
+                    }
+                    *span = match row_span(written, ch) {
+                        [0, 0] => [0, 0],
+                        [a, b] => [a + first as u16, b + first as u16],
+                    };
+                }
+                None
             })
             .collect();
         let mut offset = self.first_value;
@@ -241,6 +265,57 @@ mod tests {
         assert_eq!(grown.max_extent_px(), 5);
         let first = grown.dense(base.psf_count()).expect("dense");
         assert_eq!(first.row_spans, &[[1, 2], [0, 0], [0, 4]]);
+    }
+
+    /// Images written within the columns they name give the database that whole images give,
+    /// spans included; columns named beyond a row are ignored, and a value that is not finite
+    /// within them is refused.
+    #[test]
+    fn images_written_within_columns_equal_whole_ones() {
+        let (base, header) = base_and_header();
+        let extra = header.stored_psf_count() - base.psf_count();
+        let shape = DenseShape {
+            origin: [-3, -1],
+            width: 6,
+            height: 3,
+        };
+        #[rustfmt::skip]
+        let image: [f32; 18] = [
+            0.0, 0.0, 0.5, 0.25, 0.0, 0.0,
+            0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+            0.0, 0.0, 0.0, 0.0, 1.0, 0.0,
+        ];
+        let columns = [[1u16, 5], [2, 2], [3, 60]];
+        let whole = DenseExtension::new(&base, header.clone(), &[shape], extra - 1)
+            .unwrap()
+            .fill(|_, out| out.copy_from_slice(&image))
+            .unwrap();
+        let within = DenseExtension::new(&base, header.clone(), &[shape], extra - 1)
+            .unwrap()
+            .fill_within(|_, out, written| {
+                assert_eq!(written, &[[0, 6]; 3]);
+                for (r, c) in columns.iter().enumerate() {
+                    let end = usize::from(c[1]).min(6);
+                    for x in usize::from(c[0])..end {
+                        out[r * 6 + x] = image[r * 6 + x];
+                    }
+                }
+                written.copy_from_slice(&columns);
+            })
+            .unwrap();
+        assert_eq!(within, whole);
+        let spans = within.dense(base.psf_count()).expect("dense").row_spans;
+        assert_eq!(spans, &[[2, 4], [0, 0], [4, 5]]);
+
+        let err = DenseExtension::new(&base, header, &[shape], extra - 1)
+            .unwrap()
+            .fill_within(|_, out, written| {
+                out[13] = f32::INFINITY;
+                written.copy_from_slice(&[[0, 0], [0, 0], [1, 2]]);
+            })
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("not finite"), "{err}");
     }
 
     /// A value that is not finite, an image beyond the resolution, or a count that does not

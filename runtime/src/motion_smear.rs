@@ -472,15 +472,32 @@ pub fn smear_into(
     extent: SmearExtent,
     out: &mut [f32],
 ) {
+    out.fill(0.0);
+    let mut written = vec![[0u16; 2]; extent.height];
+    smear_within(psf, length, angle, bend, extent, out, &mut written);
+}
+
+/// [`smear`] into `out`, which must hold zeros (`extent.width * extent.height *
+/// psf.channels` values, for `extent` = [`smear_extent`]`(psf, length, angle, bend)`),
+/// touching only the pixels the streak can reach: `written[row]` is set to the columns
+/// `[first, end)` of each of the `extent.height` rows outside which the row keeps its zeros. A
+/// thin streak turned across its box lights a few pixels of each row, and the box's other
+/// pixels are then never read or written.
+pub fn smear_within(
+    psf: &PsfImage,
+    length: f32,
+    angle: f32,
+    bend: f32,
+    extent: SmearExtent,
+    out: &mut [f32],
+    written: &mut [[u16; 2]],
+) {
     let (dx, dy) = (angle.cos(), angle.sin());
     let [grow_x, grow_y] = extent.grow;
     let width = extent.width;
     let ch = psf.channels;
     debug_assert_eq!(out.len(), width * extent.height * ch);
-    // Written before it is read: fresh zero pages read first are mapped to the shared zero
-    // page and faulted again on the first write, each such fault flushing the other threads'
-    // TLBs.
-    out.fill(0.0);
+    debug_assert_eq!(written.len(), extent.height);
     // A tap's bilinear weights widen a PSF by up to a pixel, most at half-pixel shifts: on a
     // PSF only a few pixels wide, taps a pixel apart draw a beaded streak whose beads move
     // with the angle, and neighbouring pixels' streaks no longer add up to a flat surface.
@@ -494,32 +511,43 @@ pub fn smear_into(
     // taps a quarter pixel apart share their pixels, so this is several times fewer passes
     // over the PSF than one per tap and weight.
     let (kw, kh) = (2 * grow_x as usize + 1, 2 * grow_y as usize + 1);
-    let mut kernel = vec![0f32; kw * kh];
     let kappa = if length > 0.0 {
         bend / (length * length)
     } else {
         0.0
     };
-    // On an arc, the turn at each tap by rotating the first tap's by the taps' spacing (one
-    // sine and cosine per image rather than per tap), in f64.
-    let spacing = f64::from(length) / taps as f64;
-    let (step_sin, step_cos) = (f64::from(kappa) * spacing).sin_cos();
-    let (mut sin, mut cos) = (f64::from(kappa) * (0.5 * spacing - 0.5 * f64::from(length))).sin_cos();
-    for k in 0..taps {
-        let t = ((k as f32 + 0.5) / taps as f32 - 0.5) * length;
-        // Along the chord and across it (towards `(-dy, dx)`).
-        let (along, across) = if kappa == 0.0 {
-            (t, 0.0)
-        } else {
-            let k64 = f64::from(kappa);
-            let at = ((sin / k64) as f32, ((1.0 - cos) / k64) as f32);
+    // The taps' shifts first, then their weights: apart, neither loop waits on the other's
+    // chain (the arc's rotation recurrence; the kernel's sums, a tap a quarter pixel on
+    // adding to the pixels the last one did).
+    let mut shifts: Vec<[f32; 2]> = Vec::with_capacity(taps);
+    if kappa == 0.0 {
+        for k in 0..taps {
+            let t = ((k as f32 + 0.5) / taps as f32 - 0.5) * length;
+            let (along, across) = (t, 0.0);
+            // The shift of this tap, in output pixels relative to the input's placement.
+            let sx = along * dx - across * dy + grow_x as f32;
+            let sy = along * dy + across * dx + grow_y as f32;
+            shifts.push([sx, sy]);
+        }
+    } else {
+        // On an arc, the turn at each tap by rotating the first tap's by the taps' spacing
+        // (one sine and cosine per image rather than per tap), in f64. Along the chord and
+        // across it (towards `(-dy, dx)`).
+        let spacing = f64::from(length) / taps as f64;
+        let k64 = f64::from(kappa);
+        let (step_sin, step_cos) = (k64 * spacing).sin_cos();
+        let (mut sin, mut cos) = (k64 * (0.5 * spacing - 0.5 * f64::from(length))).sin_cos();
+        for _ in 0..taps {
+            let (along, across) = ((sin / k64) as f32, ((1.0 - cos) / k64) as f32);
             (sin, cos) = (sin * step_cos + cos * step_sin, cos * step_cos - sin * step_sin);
-            at
-        };
-        // The shift of this tap, in output pixels relative to the input's placement.
-        let sx = along * dx - across * dy + grow_x as f32;
-        let sy = along * dy + across * dx + grow_y as f32;
-        let (ix, iy) = (sx.floor(), sy.floor());
+            let sx = along * dx - across * dy + grow_x as f32;
+            let sy = along * dy + across * dx + grow_y as f32;
+            shifts.push([sx, sy]);
+        }
+    }
+    let mut kernel = vec![0f32; kw * kh];
+    for [sx, sy] in shifts {
+        let (ix, iy) = (floor(sx), floor(sy));
         let (fx, fy) = (sx - ix, sy - iy);
         let (ix, iy) = (ix as usize, iy as usize);
         let weights = [
@@ -534,19 +562,84 @@ pub fn smear_into(
             }
         }
     }
-    for (k, &w) in kernel.iter().enumerate() {
-        if w == 0.0 {
+    // Per kernel row, the columns `[first, end)` outside which it is zero.
+    let kernel_columns: Vec<[usize; 2]> = kernel
+        .chunks_exact(kw)
+        .map(|row| match row.iter().position(|&v| v != 0.0) {
+            None => [0, 0],
+            Some(first) => [first, kw - row.iter().rev().position(|&v| v != 0.0).unwrap_or(0)],
+        })
+        .collect();
+    // Each PSF row's span, and from them and the kernel's, the columns each output row can
+    // reach; written with zeros first (a fresh page read before it is written is faulted
+    // twice, each fault flushing the other threads' TLBs).
+    let psf_spans: Vec<[usize; 2]> = psf
+        .data
+        .chunks_exact(psf.width * ch)
+        .map(|row| {
+            let lit = |px: &[f32]| px.iter().any(|&v| v != 0.0);
+            match row.chunks_exact(ch).position(lit) {
+                None => [0, 0],
+                Some(first) => [first, psf.width - row.chunks_exact(ch).rev().position(lit).unwrap_or(0)],
+            }
+        })
+        .collect();
+    let mut reach = vec![[usize::MAX, 0usize]; extent.height];
+    for (ky, k) in kernel_columns.iter().enumerate() {
+        if k[0] >= k[1] {
             continue;
         }
-        let (kx, ky) = (k % kw, k / kw);
-        for y in 0..psf.height {
-            let src = &psf.data[y * psf.width * ch..(y + 1) * psf.width * ch];
-            let row = (y + ky) * width + kx;
-            let dst = &mut out[row * ch..(row + psf.width) * ch];
-            for (d, s) in dst.iter_mut().zip(src) {
-                *d += w * s;
+        for (y, s) in psf_spans.iter().enumerate() {
+            if s[0] < s[1] {
+                let r = &mut reach[y + ky];
+                r[0] = r[0].min(k[0] + s[0]);
+                r[1] = r[1].max(k[1] - 1 + s[1]);
             }
         }
+    }
+    for ((row, r), w) in out.chunks_exact_mut(width * ch).zip(&reach).zip(written.iter_mut()) {
+        if r[0] < r[1] {
+            row[r[0] * ch..r[1] * ch].fill(0.0);
+            // A box wider than the format's u16 widths cannot be stored: its columns saturate.
+            let column = |c: usize| u16::try_from(c).unwrap_or(u16::MAX);
+            *w = [column(r[0]), column(r[1])];
+        } else {
+            *w = [0, 0];
+        }
+    }
+    for (ky, k) in kernel_columns.iter().enumerate() {
+        if k[0] >= k[1] {
+            continue;
+        }
+        for kx in k[0]..k[1] {
+            let w = kernel[ky * kw + kx];
+            if w == 0.0 {
+                continue;
+            }
+            for (y, s) in psf_spans.iter().enumerate() {
+                if s[0] >= s[1] {
+                    continue;
+                }
+                let src = &psf.data[(y * psf.width + s[0]) * ch..(y * psf.width + s[1]) * ch];
+                let at = (y + ky) * width + kx;
+                let dst = &mut out[(at + s[0]) * ch..(at + s[1]) * ch];
+                for (d, s) in dst.iter_mut().zip(src) {
+                    *d += w * s;
+                }
+            }
+        }
+    }
+}
+
+/// `v.floor()` for the non-negative shifts of a smear, without a call into libm where the
+/// target lacks a rounding instruction; the same value for every finite `v` in `i32`'s range.
+#[inline]
+fn floor(v: f32) -> f32 {
+    let t = v as i32 as f32;
+    if t > v {
+        t - 1.0
+    } else {
+        t
     }
 }
 
@@ -645,6 +738,103 @@ mod tests {
             height: n,
             channels,
             data,
+        }
+    }
+
+    /// The smear drawn tap by tap, each tap's shifted PSF added with its bilinear weights
+    /// straight into the image: the slow path the kernel of summed taps stands for.
+    fn smear_tap_by_tap(psf: &PsfImage, length: f32, angle: f32, bend: f32) -> PsfImage {
+        let extent = smear_extent(psf, length, angle, bend).unwrap();
+        let ch = psf.channels;
+        let mut out = vec![0f64; extent.width * extent.height * ch];
+        let narrow = psf.width.min(psf.height) < NARROW_PSF_PX;
+        let taps = ((length * if narrow { 4.0 } else { 1.0 }).ceil() as usize + 1).max(1);
+        let kappa = f64::from(bend) / f64::from(length * length);
+        let (dx, dy) = (f64::from(angle.cos()), f64::from(angle.sin()));
+        for k in 0..taps {
+            let s = ((k as f64 + 0.5) / taps as f64 - 0.5) * f64::from(length);
+            let (along, across) = if bend == 0.0 {
+                (s, 0.0)
+            } else {
+                ((kappa * s).sin() / kappa, (1.0 - (kappa * s).cos()) / kappa)
+            };
+            let sx = along * dx - across * dy + f64::from(extent.grow[0]);
+            let sy = along * dy + across * dx + f64::from(extent.grow[1]);
+            let (ix, iy) = (sx.floor(), sy.floor());
+            let (fx, fy) = (sx - ix, sy - iy);
+            for (ox, oy, w) in [
+                (0, 0, (1.0 - fx) * (1.0 - fy)),
+                (1, 0, fx * (1.0 - fy)),
+                (0, 1, (1.0 - fx) * fy),
+                (1, 1, fx * fy),
+            ] {
+                for y in 0..psf.height {
+                    for x in 0..psf.width {
+                        let at = (y + iy as usize + oy) * extent.width + x + ix as usize + ox;
+                        for c in 0..ch {
+                            let v = f64::from(psf.data[(y * psf.width + x) * ch + c]);
+                            out[at * ch + c] += w * v / taps as f64;
+                        }
+                    }
+                }
+            }
+        }
+        PsfImage {
+            origin: extent.origin,
+            width: extent.width,
+            height: extent.height,
+            channels: ch,
+            data: out.into_iter().map(|v| v as f32).collect(),
+        }
+    }
+
+    /// The smear written within the columns it names equals the tap-by-tap smear, holds all
+    /// of its light in those columns, and leaves every other pixel of its box untouched: a
+    /// single lit pixel (an in-focus PSF) and a three-channel disk, straight and bent, at
+    /// several angles.
+    #[test]
+    fn a_smear_written_within_its_columns_is_the_tap_by_tap_smear() {
+        let point = PsfImage {
+            origin: [0, 0],
+            width: 1,
+            height: 1,
+            channels: 1,
+            data: vec![1.0],
+        };
+        for psf in [point, disk(3.0, 3)] {
+            for (length, angle, bend) in [
+                (17.0, 0.0, 0.0),
+                (23.5, 0.7, 0.0),
+                (23.5, 2.3, 6.0),
+                (9.25, -1.1, -3.0),
+                (0.0, 0.4, 0.0),
+            ] {
+                let extent = smear_extent(&psf, length, angle, bend).unwrap();
+                let slow = smear_tap_by_tap(&psf, length, angle, bend);
+                let ch = psf.channels;
+                let mut out = vec![0f32; extent.width * extent.height * ch];
+                let mut written = vec![[0u16; 2]; extent.height];
+                smear_within(&psf, length, angle, bend, extent, &mut out, &mut written);
+                // The pixels outside the columns are not touched: marked, they keep the mark.
+                let mut marked = vec![-7.0f32; out.len()];
+                for (row, w) in marked.chunks_exact_mut(extent.width * ch).zip(&written) {
+                    row[usize::from(w[0]) * ch..usize::from(w[1]) * ch].fill(0.0);
+                }
+                let mut again = vec![[0u16; 2]; extent.height];
+                smear_within(&psf, length, angle, bend, extent, &mut marked, &mut again);
+                assert_eq!(again, written);
+                for (i, (&a, &b)) in out.iter().zip(&slow.data).enumerate() {
+                    assert!((a - b).abs() <= 1e-6, "{length} {angle} {bend}: {i}: {a} {b}");
+                    let (row, column) = (i / ch / extent.width, i / ch % extent.width);
+                    let [first, end] = written[row].map(usize::from);
+                    if (first..end).contains(&column) {
+                        assert_eq!(marked[i].to_bits(), a.to_bits(), "{i}");
+                    } else {
+                        assert_eq!(a, 0.0, "{length} {angle} {bend}: light outside at {i}");
+                        assert_eq!(marked[i], -7.0, "{length} {angle} {bend}: touched at {i}");
+                    }
+                }
+            }
         }
     }
 

@@ -766,10 +766,10 @@ impl SmearedPsfs {
         let not_built = |e: psf_db::DbError| ClassifyError::PhysicalLens(e.to_string());
         let extension = crate::dbset::extend_with_dense(all, &boxes).map_err(not_built)?;
         let database = extension
-            .fill(|i, out| {
+            .fill_within(|i, out, written| {
                 let (k, base, extent) = drawn[i];
                 let (length, angle, bend) = (k.length_px(), k.angle_rad(), k.bend_px());
-                crate::motion_smear::smear_into(base, length, angle, bend, extent, out);
+                crate::motion_smear::smear_within(base, length, angle, bend, extent, out, written);
             })
             .map_err(not_built)?;
         Ok(Self {
