@@ -37,7 +37,8 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 HARD = os.path.join(ROOT, "scene", "scenes", "hard")
 SCENES = ["bokeh", "crossing", "occluder", "rotating", "physical"] + [
     os.path.join(HARD, f"{name}.json")
-    for name in ("car-on-road", "spinning-disc", "fast-box", "slanted-floor", "camera-pan")]
+    for name in ("car-on-road", "spinning-disc", "fast-box", "slanted-floor", "camera-pan",
+                 "rolling-wheel")]
 STAGES = ["read_input", "database", "classify", "splat", "integrate", "composite",
           "write_output"]
 
