@@ -33,6 +33,7 @@
 //! at most 1/(2 reach) radians.
 
 use psf_db::PsfDatabase;
+use crate::pipeline::splat::floor_exact;
 
 /// Lengths up to this (px) are quantised in steps of [`FINE_LENGTH_STEP_PX`].
 const FINE_LENGTH_MAX_PX: f32 = 8.0;
@@ -547,7 +548,7 @@ pub fn smear_within(
     }
     let mut kernel = vec![0f32; kw * kh];
     for [sx, sy] in shifts {
-        let (ix, iy) = (floor(sx), floor(sy));
+        let (ix, iy) = (floor_exact(sx), floor_exact(sy));
         let (fx, fy) = (sx - ix, sy - iy);
         let (ix, iy) = (ix as usize, iy as usize);
         let weights = [
@@ -628,18 +629,6 @@ pub fn smear_within(
                 }
             }
         }
-    }
-}
-
-/// `v.floor()` for the non-negative shifts of a smear, without a call into libm where the
-/// target lacks a rounding instruction; the same value for every finite `v` in `i32`'s range.
-#[inline]
-fn floor(v: f32) -> f32 {
-    let t = v as i32 as f32;
-    if t > v {
-        t - 1.0
-    } else {
-        t
     }
 }
 

@@ -92,7 +92,7 @@ pub fn bspline_footprint(rx: f32, ry: f32) -> ((i32, i32), [FootprintTap; 9]) {
 /// `v.floor()` for `|v| < 2^31`, without the libm call that `f32::floor` compiles to on a
 /// target without SSE4.1: a rotated dense pixel's bilinear split calls it twice per pixel.
 #[inline(always)]
-fn floor_exact(v: f32) -> f32 {
+pub(crate) fn floor_exact(v: f32) -> f32 {
     let t = v as i32 as f32;
     if t > v {
         t - 1.0

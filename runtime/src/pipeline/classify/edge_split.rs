@@ -32,8 +32,8 @@ pub(super) fn edge_split(
     g: &GBuffer,
     x: usize,
     y: usize,
-    coc_at: &dyn Fn(usize) -> f32,
-    depth_at: &dyn Fn(usize) -> f32,
+    coc_at: &impl Fn(usize) -> f32,
+    depth_at: &impl Fn(usize) -> f32,
     hdr_threshold: f32,
     bright_near: &[bool],
 ) -> Option<EdgeSplit> {
@@ -136,26 +136,32 @@ pub(super) fn edge_split(
 /// Per pixel of `g`, whether its 5x5 window holds a pixel brighter than `hdr_threshold` in
 /// some channel: the edge split looks two pixels away only for such a neighbour.
 pub(super) fn bright_near(g: &GBuffer, hdr_threshold: f32) -> Vec<bool> {
+    use rayon::prelude::*;
     let (w, h) = (g.width, g.height);
+    if w == 0 || h == 0 {
+        return Vec::new();
+    }
     let bright: Vec<bool> = g
         .color
-        .iter()
+        .par_iter()
         .map(|c| c[..3].iter().any(|&v| v > hdr_threshold))
         .collect();
-    // Widened by two pixels along rows, then along columns.
+    // Widened by two pixels along rows, then along columns, a row per task.
     let mut across = vec![false; w * h];
-    for y in 0..h {
-        let row = &bright[y * w..(y + 1) * w];
-        for x in 0..w {
-            across[y * w + x] = row[x.saturating_sub(2)..(x + 3).min(w)].iter().any(|&b| b);
-        }
-    }
+    across
+        .par_chunks_mut(w)
+        .zip(bright.par_chunks(w))
+        .for_each(|(out, row)| {
+            for (x, o) in out.iter_mut().enumerate() {
+                *o = row[x.saturating_sub(2)..(x + 3).min(w)].iter().any(|&b| b);
+            }
+        });
     let mut near = vec![false; w * h];
-    for y in 0..h {
-        for x in 0..w {
-            near[y * w + x] = (y.saturating_sub(2)..(y + 3).min(h)).any(|yy| across[yy * w + x]);
+    near.par_chunks_mut(w).enumerate().for_each(|(y, out)| {
+        for (x, o) in out.iter_mut().enumerate() {
+            *o = (y.saturating_sub(2)..(y + 3).min(h)).any(|yy| across[yy * w + x]);
         }
-    }
+    });
     near
 }
 

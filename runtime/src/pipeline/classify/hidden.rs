@@ -31,11 +31,11 @@ use rayon::prelude::*;
 pub(super) fn hidden_background(
     g: &GBuffer,
     was_split: &[bool],
-    coc_at: &(dyn Fn(usize) -> f32 + Sync),
-    depth_at: &(dyn Fn(usize) -> f32 + Sync),
-    blur_along: &(dyn Fn(usize, (i32, i32)) -> f32 + Sync),
+    coc_at: &(impl Fn(usize) -> f32 + Sync),
+    depth_at: &(impl Fn(usize) -> f32 + Sync),
+    blur_along: &(impl Fn(usize, (i32, i32)) -> f32 + Sync),
     hdr_threshold: f32,
-    own: &dyn Fn(usize) -> Fragment,
+    own: &impl Fn(usize) -> Fragment,
 ) -> Vec<Fragment> {
     let (w, h) = (g.width as i32, g.height as i32);
     const DIRECTIONS: [(i32, i32); 4] = [(1, 0), (-1, 0), (0, 1), (0, -1)];
@@ -53,6 +53,18 @@ pub(super) fn hidden_background(
                 let (db, coc_b) = (depth_at(b), coc_at(b));
                 let bright = g.color[b][..3].iter().any(|&c| c > hdr_threshold);
                 for d in DIRECTIONS {
+                    // Nearer than the background one step along `d`, or two past a split
+                    // pixel: what `first` below needs, without the blurs, which most pixels
+                    // (none of them nearer) never need.
+                    let nearer = |k: i32| {
+                        let (qx, qy) = (x + d.0 * k, y + d.1 * k);
+                        qx >= 0 && qy >= 0 && qx < w && qy < h && depth_at((qy * w + qx) as usize) < db
+                    };
+                    let split_next = was_split
+                        [((y + d.1).clamp(0, h - 1) * w + (x + d.0).clamp(0, w - 1)) as usize];
+                    if !(nearer(1) || (split_next && nearer(2))) {
+                        continue;
+                    }
                     let blur_b = blur_along(b, d);
                     // Hidden: nearer than the background, and sharper by more than a pixel or
                     // blurred by more than a pixel along `d` than it. The first step may be
@@ -77,10 +89,7 @@ pub(super) fn hidden_background(
                     let hidden = |k: i32| occluder(k).is_some();
                     let first = if hidden(1) {
                         1
-                    } else if was_split
-                        [((y + d.1).clamp(0, h - 1) * w + (x + d.0).clamp(0, w - 1)) as usize]
-                        && hidden(2)
-                    {
+                    } else if split_next && hidden(2) {
                         2
                     } else {
                         continue;

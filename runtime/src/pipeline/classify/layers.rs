@@ -500,8 +500,8 @@ fn merge_coincident(classified: &mut Classified) {
 pub(super) fn continue_across_layers(
     fragments: &[Fragment],
     (w, h): (usize, usize),
-    layer_of: &(dyn Fn(&Fragment) -> usize + Sync),
-    blur_of: &(dyn Fn(&Fragment) -> f32 + Sync),
+    layer_of: &(impl Fn(&Fragment) -> usize + Sync),
+    blur_of: &(impl Fn(&Fragment) -> f32 + Sync),
     bright_above: f32,
 ) -> Vec<Fragment> {
     const NONE: u32 = u32::MAX;
@@ -541,7 +541,9 @@ pub(super) fn continue_across_layers(
                 {
                     return out;
                 }
-                let (lp, blur_p) = (layers[p], blur_of(f));
+                let lp = layers[p];
+                // Found once a neighbour lies in a nearer layer: most pixels have none.
+                let mut own_blur = None;
                 for d in DIRECTIONS {
                     let at = |k: i32| -> Option<usize> {
                         let (qx, qy) = (x + d.0 * k, y + d.1 * k);
@@ -550,6 +552,7 @@ pub(super) fn continue_across_layers(
                             .filter(|&q| main[q] != NONE && layers[q] > lp)
                     };
                     let Some(q) = at(1) else { continue };
+                    let blur_p = *own_blur.get_or_insert_with(|| blur_of(f));
                     let blur_q = blur_of(&fragments[main[q] as usize]);
                     if (blur_q - blur_p).abs() > 1.0 {
                         continue;
