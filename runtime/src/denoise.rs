@@ -33,6 +33,11 @@
 //! larger ones (a contact shadow, a shadow's edge) are kept, and a noise-free frame is left
 //! as the first filter made it.
 //!
+//! The firefly cap takes light from the surface round a rare bright sample: the light that
+//! sample stands for in the converged frame. That light is spread back by wider passes of the
+//! guides alone ([`EXCESS_STEPS_PX`]) and added at a share that grows with the sample count
+//! ([`excess_weight`]).
+//!
 //! Samples without a hit, and samples whose neighbours all weigh nothing, keep their colour.
 
 use formats::{SampleGuides, StochasticFrames};
@@ -198,9 +203,10 @@ pub fn denoise_samples(
     };
     // The weighted mean illumination of `neighbours`, each neighbour's luminance capped at
     // `ceiling`, or without the brightest neighbour when `ceiling` is infinite (a level that
-    // one outlier does not move).
-    let mean_illumination = |neighbours: &[(f32, f32, [f32; 3])], ceiling: f32| {
+    // one outlier does not move); and what the cap took from that mean (zero without a cap).
+    let capped_mean = |neighbours: &[(f32, f32, [f32; 3])], ceiling: f32| {
         let mut sum = [0.0f32; 3];
+        let mut taken = [0.0f32; 3];
         let mut total = 0.0f32;
         // The brightest neighbour: luminance, weight and illumination.
         let mut brightest = (f32::NEG_INFINITY, 0.0f32, [0.0f32; 3]);
@@ -208,9 +214,16 @@ pub fn denoise_samples(
             if lum > brightest.0 {
                 brightest = (lum, weight, e);
             }
-            let cap = if lum > ceiling { ceiling / lum } else { 1.0 };
-            for (acc, e) in sum.iter_mut().zip(e) {
-                *acc += weight * cap * e;
+            if lum > ceiling {
+                let cap = ceiling / lum;
+                for c in 0..3 {
+                    sum[c] += weight * cap * e[c];
+                    taken[c] += weight * (1.0 - cap) * e[c];
+                }
+            } else {
+                for (acc, e) in sum.iter_mut().zip(e) {
+                    *acc += weight * e;
+                }
             }
             total += weight;
         }
@@ -221,7 +234,11 @@ pub fn denoise_samples(
             }
             total -= w;
         }
-        (total > 0.0 && total.is_finite()).then(|| sum.map(|v| v / total))
+        (total > 0.0 && total.is_finite())
+            .then(|| (sum.map(|v| v / total), taken.map(|v| (v / total).max(0.0))))
+    };
+    let mean_illumination = |neighbours: &[(f32, f32, [f32; 3])], ceiling: f32| {
+        capped_mean(neighbours, ceiling).map(|(mean, _)| mean)
     };
     // First the mean without the neighbourhood's brightest sample; then the mean with every
     // neighbour's luminance capped at FIREFLY_FACTOR times that level, so that one rare bright
@@ -232,16 +249,18 @@ pub fn denoise_samples(
         neighbours(target, found);
         let level = mean_illumination(found, f32::INFINITY)?;
         let ceiling = FIREFLY_FACTOR * luminance(level).max(0.0);
-        Some((mean_illumination(found, ceiling)?, ceiling))
+        let (mean, taken) = capped_mean(found, ceiling)?;
+        Some((mean, taken, ceiling))
     };
     let filter = |target: &Member, found: &mut Vec<(f32, f32, [f32; 3])>| {
-        filter_capped(target, found).map(|(mean, _)| mean)
+        filter_capped(target, found).map(|(mean, _, _)| mean)
     };
     // The filter's result and the noise it leaves: the standard deviation of the weighted mean
     // of the neighbourhood's luminance, capped as the filter capped it,
     // `sqrt(variance / effective count)`.
+    // And the light the cap took away: the uncapped mean less the capped one.
     let filter_with_noise = |target: &Member, found: &mut Vec<(f32, f32, [f32; 3])>| {
-        let (mean, ceiling) = filter_capped(target, found)?;
+        let (mean, excess, ceiling) = filter_capped(target, found)?;
         let mean_luminance = luminance(mean);
         let (mut sw, mut sw2, mut swd2) = (0.0f32, 0.0f32, 0.0f32);
         for &(weight, lum, _) in found.iter() {
@@ -253,12 +272,12 @@ pub fn denoise_samples(
         } else {
             0.0
         };
-        Some((mean, noise))
+        Some((mean, noise, excess))
     };
     // The members of one pixel that lie on one surface share one filtered illumination, that
     // of their mean position: the filter runs once per pixel and surface, not once per sample.
     let targets: Vec<Member> = rows.iter().flat_map(|r| r.targets.iter().copied()).collect();
-    let filtered: Vec<Option<([f32; 3], f32)>> = targets
+    let filtered: Vec<Option<FilteredGroup>> = targets
         .par_iter()
         .map_init(Vec::new, |found, t| filter_with_noise(t, found))
         .collect();
@@ -276,7 +295,7 @@ pub fn denoise_samples(
         .zip(counts)
         .zip(&filtered)
         .map(|((&at, count), filtered)| {
-            let (light, noise) = filtered.unwrap_or(([0.0; 3], 0.0));
+            let (light, noise, _) = filtered.unwrap_or(([0.0; 3], 0.0, [0.0; 3]));
             WideningNode {
                 at: Member {
                     illumination: light,
@@ -289,13 +308,31 @@ pub fn denoise_samples(
             }
         })
         .collect();
+    // The capped light, spread far by the guides alone: the cap keeps a rare bright sample
+    // from standing out as a speck or a blob, and this puts its light back as the smooth
+    // lift of the surface round it that it converges to.
+    let mut excess: Vec<[f32; 3]> = filtered
+        .iter()
+        .map(|f| f.map_or([0.0; 3], |(_, _, e)| e))
+        .collect();
     drop(filtered);
+    // Most frames' caps take nothing (no rare bright samples): nothing to spread.
+    if excess.iter().any(|e| e.iter().any(|&v| v > 0.0)) {
+        for &step in &EXCESS_STEPS_PX {
+            excess = spread_excess(&nodes, &excess, &target_starts, (w, h), step);
+        }
+    }
     for &step in &WIDENING_STEPS_PX {
         nodes = widen(&nodes, &target_starts, (w, h), step);
     }
+    let excess_weight = excess_weight(frames.spp);
     let illumination: Vec<Option<[f32; 3]>> = nodes
         .iter()
-        .map(|n| n.lit.then_some(n.at.illumination))
+        .zip(&excess)
+        .map(|(n, e)| {
+            n.lit
+                .then(|| std::array::from_fn(|c| n.at.illumination[c] + excess_weight * e[c]))
+        })
         .collect();
     let mut first_target = 0;
     let mut per_member = Vec::with_capacity(order.len());
@@ -440,6 +477,101 @@ fn widen(
                 },
                 luminance: luminance(light),
                 ..*me
+            }
+        })
+        .collect()
+}
+
+/// A group's first filter: its illumination, the noise the filter left on it (luminance),
+/// and the illumination the firefly cap took from its mean.
+type FilteredGroup = ([f32; 3], f32, [f32; 3]);
+
+/// The dilations of the passes that spread the light the firefly cap took away, pixels:
+/// 3 x 3 tents as in [`WIDENING_STEPS_PX`], reaching about 60 px: narrower passes (steps 2, 4,
+/// 8 or 3, 9, 27) left the spread light in blotches that FLIP and SSIM see.
+pub const EXCESS_STEPS_PX: [i64; 5] = [2, 4, 8, 16, 32];
+
+/// The samples per pixel at which the spread excess of the firefly cap is added back at half
+/// its weight ([`excess_weight`]).
+pub const EXCESS_HALF_WEIGHT_SPP: f32 = 8.0;
+
+/// The share of the firefly cap's spread excess added back at `spp` samples per pixel:
+/// `spp / (spp + EXCESS_HALF_WEIGHT_SPP)`. The excess is the light of a few rare samples, so
+/// at low counts it is mostly their noise, spread into blotches, and at high counts mostly
+/// the light the cap would otherwise take from the frame (a shrinkage towards the capped
+/// frame by the excess's noise, which falls as `1 / spp`).
+pub fn excess_weight(spp: usize) -> f32 {
+    let spp = spp.max(1) as f32;
+    spp / (spp + EXCESS_HALF_WEIGHT_SPP)
+}
+
+/// One pass spreading `excess` (per group of `nodes`, in their order): each group's becomes
+/// the mean of the groups' at the 3 x 3 taps `step` pixels apart, weighted by the tent, their
+/// member counts and the guides alone (no noise test: the light is to be spread, not kept).
+fn spread_excess(
+    nodes: &[WideningNode],
+    excess: &[[f32; 3]],
+    target_starts: &[usize],
+    (w, h): (usize, usize),
+    step: i64,
+) -> Vec<[f32; 3]> {
+    nodes
+        .par_iter()
+        .zip(excess.par_iter())
+        .map(|(me, &mine)| {
+            if !me.lit {
+                return mine;
+            }
+            let (cx, cy) = (me.at.q[0].floor() as i64, me.at.q[1].floor() as i64);
+            // Most groups, in the first passes, have no excess round them: nothing to weigh.
+            let cells = || {
+                TENT.iter().enumerate().flat_map(move |(j, ky)| {
+                    TENT.iter().enumerate().filter_map(move |(i, kx)| {
+                        let y = cy + (j as i64 - (TENT.len() / 2) as i64) * step;
+                        let x = cx + (i as i64 - (TENT.len() / 2) as i64) * step;
+                        (x >= 0 && y >= 0 && x < w as i64 && y < h as i64)
+                            .then(|| (y as usize * w + x as usize, kx * ky))
+                    })
+                })
+            };
+            let any = cells().any(|(cell, _)| {
+                excess[target_starts[cell]..target_starts[cell + 1]]
+                    .iter()
+                    .any(|e| e.iter().any(|&v| v > 0.0))
+            });
+            if !any {
+                return mine;
+            }
+            let inv_depth = 1.0 / (DEPTH_TOLERANCE * me.at.depth);
+            let mut sum = [0.0f32; 3];
+            let mut total = 0.0f32;
+            for (cell, tent) in cells() {
+                let first = target_starts[cell];
+                for (o, other) in nodes[first..target_starts[cell + 1]].iter().enumerate() {
+                    if !other.lit {
+                        continue;
+                    }
+                    let Some((guides, cosine)) = guide_exponent(&me.at, &other.at, inv_depth)
+                    else {
+                        continue;
+                    };
+                    if guides > 12.0 {
+                        continue;
+                    }
+                    let weight = tent * other.count * (-guides).exp() * cosine.powi(NORMAL_POWER);
+                    if !(weight > 0.0 && weight.is_finite()) {
+                        continue;
+                    }
+                    for (acc, e) in sum.iter_mut().zip(excess[first + o]) {
+                        *acc += weight * e;
+                    }
+                    total += weight;
+                }
+            }
+            if total > 0.0 && total.is_finite() {
+                sum.map(|v| v / total)
+            } else {
+                mine
             }
         })
         .collect()
@@ -875,6 +1007,59 @@ mod tests {
         let out = denoise_samples(&frames, &guides, &moved);
         let worst = out.iter().map(|c| c[0]).fold(0.0f32, f32::max);
         assert!(worst < 2.0 * 0.5, "brightest sample {worst}");
+    }
+
+    /// At 16 spp, rare bright samples (one in 128, 40 times the surface's light: bounces that
+    /// found the light) are part of the surface's converged level, 1.30 times the rest's. The
+    /// cap keeps each from standing out; the light it takes is spread back over the surface
+    /// (two thirds of it at 16 spp, [`excess_weight`]), so the frame's mean comes back
+    /// towards the converged level, and no pixel is a speck.
+    #[test]
+    fn the_light_of_capped_fireflies_is_spread_back() {
+        let (w, h, spp) = (48usize, 48usize, 16usize);
+        let firefly = |x: usize, y: usize, k: usize| {
+            let mut z = ((y * w + x) * spp + k) as u64;
+            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9).wrapping_add(0x9E37_79B9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+            (z ^ (z >> 31)).is_multiple_of(128)
+        };
+        let (mut samples, mut guides, mut moved) = (Vec::new(), Vec::new(), Vec::new());
+        for y in 0..h {
+            for x in 0..w {
+                for k in 0..spp {
+                    let light = if firefly(x, y, k) { 40.0 } else { 1.0 };
+                    samples.push(Sample {
+                        color: [0.5 * light, 0.5 * light, 0.5 * light, 1.0],
+                        depth: 2.0,
+                        ..Sample::default()
+                    });
+                    guides.push(SampleGuides {
+                        albedo: [0.5; 3],
+                        normal: [0.0, 0.0, -1.0],
+                    });
+                    let jitter = [(k % 4) as f32 * 0.25 + 0.125, (k / 4) as f32 * 0.25 + 0.125];
+                    moved.push(Some(MovedSample {
+                        q: [x as f32 + jitter[0], y as f32 + jitter[1]],
+                        coc: 0.0,
+                        motion: [0.0; 2],
+                    }));
+                }
+            }
+        }
+        let frames = StochasticFrames::new(w, h, spp, samples)
+            .with_guides(guides)
+            .expect("guides");
+        let converged: f64 = frames.samples.iter().map(|s| f64::from(s.color[0])).sum::<f64>()
+            / frames.samples.len() as f64;
+        let out = denoise_samples(&frames, &frames.guides.clone().expect("guides"), &moved);
+        let mean: f64 = out.iter().map(|c| f64::from(c[0])).sum::<f64>() / out.len() as f64;
+        let brightest = out.iter().map(|c| c[0]).fold(0.0f32, f32::max);
+        // The cap alone keeps a quarter of the fireflies' light (0.538 here).
+        assert!(
+            mean > 0.5 + 0.6 * (converged - 0.5),
+            "denoised mean {mean} against the converged {converged}"
+        );
+        assert!(f64::from(brightest) < 1.5 * converged, "brightest {brightest}");
     }
 
     /// Samples moved far outside the frame (a huge motion label) keep their colour and do not
