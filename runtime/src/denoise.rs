@@ -65,6 +65,13 @@ const CUTOFF_SIGMAS: f32 = 2.5;
 /// its brightest neighbour (luminance), in the filter's second pass.
 pub const FIREFLY_FACTOR: f32 = 8.0;
 
+/// A neighbour's illumination counts at most this many mean absolute deviations (of the
+/// neighbourhood's luminance, without its brightest) above that mean, where this is below
+/// [`FIREFLY_FACTOR`] times it: on a bright surface a bounce four times its level passes
+/// the factor and became a soft blob. About ten standard deviations of Gaussian noise, so
+/// shading (a shadow's edge lies within one deviation or two of the level) is never capped.
+pub const FIREFLY_DEVIATIONS: f32 = 12.0;
+
 /// Added to the albedo before demodulating, so that black surfaces keep their colour.
 const ALBEDO_EPSILON: f32 = 1e-3;
 
@@ -241,24 +248,48 @@ pub fn denoise_samples(
         capped_mean(neighbours, ceiling).map(|(mean, _)| mean)
     };
     // First the mean without the neighbourhood's brightest sample; then the mean with every
-    // neighbour's luminance capped at FIREFLY_FACTOR times that level, so that one rare bright
-    // sample (a bounce that found a small emitter) is not spread into a blob over its
-    // neighbours, nor kept as a speck. Both from one pass over the neighbourhood's weights.
-    // The filtered illumination and the luminance ceiling it capped its neighbours at.
+    // neighbour's luminance capped at FIREFLY_FACTOR times that level, or FIREFLY_DEVIATIONS
+    // mean absolute deviations above it where that is lower, so that one rare bright sample
+    // (a bounce that found a small emitter) is not spread into a blob over its neighbours,
+    // nor kept as a speck, on a dark surface or a bright one.
+    // The filtered illumination, the light the cap took, and the luminance ceiling under which
+    // the noise is measured.
     let filter_capped = |target: &Member, found: &mut Vec<(f32, f32, [f32; 3])>| {
         neighbours(target, found);
         let level = mean_illumination(found, f32::INFINITY)?;
-        let ceiling = FIREFLY_FACTOR * luminance(level).max(0.0);
+        let level_luminance = luminance(level).max(0.0);
+        // The spread round that level: the weighted mean absolute deviation of the
+        // neighbours' luminance, the brightest again left out.
+        let mut brightest = (f32::NEG_INFINITY, 0.0f32);
+        let (mut total, mut deviation) = (0.0f32, 0.0f32);
+        for &(weight, lum, _) in found.iter() {
+            if lum > brightest.0 {
+                brightest = (lum, weight);
+            }
+            total += weight;
+            deviation += weight * (lum - level_luminance).abs();
+        }
+        let (brightest_luminance, brightest_weight) = brightest;
+        let total = total - brightest_weight;
+        let deviation =
+            deviation - brightest_weight * (brightest_luminance - level_luminance).abs();
+        let mut ceiling = FIREFLY_FACTOR * level_luminance;
+        if total > 0.0 {
+            ceiling = ceiling.min(level_luminance + FIREFLY_DEVIATIONS * (deviation / total).max(0.0));
+        }
         let (mean, taken) = capped_mean(found, ceiling)?;
-        Some((mean, taken, ceiling))
+        // The widening passes read the noise of the neighbourhood under the factor's cap
+        // alone: the deviations' cap, tighter where the surface is quiet, would call a
+        // neighbourhood with fireflies in it quieter than it is, and the passes would then
+        // leave its bumps in place.
+        Some((mean, taken, FIREFLY_FACTOR * level_luminance))
     };
     let filter = |target: &Member, found: &mut Vec<(f32, f32, [f32; 3])>| {
         filter_capped(target, found).map(|(mean, _, _)| mean)
     };
-    // The filter's result and the noise it leaves: the standard deviation of the weighted mean
-    // of the neighbourhood's luminance, capped as the filter capped it,
-    // `sqrt(variance / effective count)`.
-    // And the light the cap took away: the uncapped mean less the capped one.
+    // The filter's result, the noise it leaves (the standard deviation of the weighted mean of
+    // the neighbourhood's luminance under the factor's cap, `sqrt(variance / effective
+    // count)`) and the light the cap took from the mean.
     let filter_with_noise = |target: &Member, found: &mut Vec<(f32, f32, [f32; 3])>| {
         let (mean, excess, ceiling) = filter_capped(target, found)?;
         let mean_luminance = luminance(mean);
@@ -925,6 +956,25 @@ mod tests {
         let out = denoise_samples(&frames, &guides, &moved);
         let worst = out.iter().map(|c| c[0]).fold(0.0f32, f32::max);
         assert!(worst < 2.0 * 0.5, "brightest sample {worst}");
+    }
+
+    /// On a noisy surface (light 1 +- 10 %), one sample five times its level, under the
+    /// factor's cap: it is not spread into a soft blob either (the factor alone let its
+    /// neighbours reach 1.31 times the level).
+    #[test]
+    fn a_moderate_firefly_on_a_quiet_surface_is_not_spread() {
+        let light = |x: usize, y: usize| {
+            if (x, y) == (12, 12) {
+                5.0
+            } else {
+                1.0 + 0.2 * noise(x, y)
+            }
+        };
+        let (frames, moved) = frame(25, 25, |_, _| 0.5, light, |_, _| 2.0);
+        let guides = frames.guides.clone().expect("guides");
+        let out = denoise_samples(&frames, &guides, &moved);
+        let worst = out.iter().map(|c| c[0] / 0.5).fold(0.0f32, f32::max);
+        assert!(worst < 1.15, "brightest light {worst}");
     }
 
     /// Four samples per pixel, `surface(x, y, k)` giving each one's (albedo, light, depth), at
