@@ -344,7 +344,12 @@ pub fn denoise_samples(
     // lift of the surface round it that it converges to.
     let mut excess: Vec<[f32; 3]> = filtered
         .iter()
-        .map(|f| f.map_or([0.0; 3], |(_, _, e)| e))
+        // Light beyond f32's range (sums of samples near its limit) is not spread: one
+        // infinite group would reach every group within 62 px.
+        .map(|f| match f {
+            Some((_, _, e)) if e.iter().all(|v| v.is_finite()) => *e,
+            _ => [0.0; 3],
+        })
         .collect();
     drop(filtered);
     // Most frames' caps take nothing (no rare bright samples): nothing to spread.
@@ -399,7 +404,12 @@ pub fn denoise_samples(
             for c in 0..3 {
                 out[c] = mean[c] * (a[c].max(0.0) + ALBEDO_EPSILON);
             }
-            out
+            // Means of samples near f32's limit can overflow: such a sample keeps its colour.
+            if out.iter().all(|v| v.is_finite()) {
+                out
+            } else {
+                original
+            }
         })
         .collect()
 }
@@ -975,6 +985,17 @@ mod tests {
         let out = denoise_samples(&frames, &guides, &moved);
         let worst = out.iter().map(|c| c[0] / 0.5).fold(0.0f32, f32::max);
         assert!(worst < 1.15, "brightest light {worst}");
+    }
+
+    /// Samples near the largest finite float (a broken shader, a light of absurd power) among
+    /// ordinary ones: every denoised sample stays finite, however much light the cap takes.
+    #[test]
+    fn samples_near_the_float_limit_leave_every_colour_finite() {
+        let light = |x: usize, y: usize| if (x + y) % 3 == 0 { 3.0e38 } else { 1.0 };
+        let (frames, moved) = frame(12, 12, |_, _| 1.0, light, |_, _| 2.0);
+        let guides = frames.guides.clone().expect("guides");
+        let out = denoise_samples(&frames, &guides, &moved);
+        assert!(out.iter().flatten().all(|v| v.is_finite()), "a colour is not finite");
     }
 
     /// Four samples per pixel, `surface(x, y, k)` giving each one's (albedo, light, depth), at
