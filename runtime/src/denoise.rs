@@ -991,7 +991,7 @@ mod tests {
     /// ordinary ones: every denoised sample stays finite, however much light the cap takes.
     #[test]
     fn samples_near_the_float_limit_leave_every_colour_finite() {
-        let light = |x: usize, y: usize| if (x + y) % 3 == 0 { 3.0e38 } else { 1.0 };
+        let light = |x: usize, y: usize| if (x + y).is_multiple_of(3) { 3.0e38 } else { 1.0 };
         let (frames, moved) = frame(12, 12, |_, _| 1.0, light, |_, _| 2.0);
         let guides = frames.guides.clone().expect("guides");
         let out = denoise_samples(&frames, &guides, &moved);
