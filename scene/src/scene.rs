@@ -187,9 +187,12 @@ impl Scene {
         Self::new(description, source_name)
     }
 
-    /// Reads a scene file, or a builtin scene when `path` names one and no such file exists.
+    /// Reads a scene file, or a builtin scene when `path` names one and no such file exists (a
+    /// folder of that name does not count).
     pub fn load(path: &Path) -> Result<Self> {
-        if !path.exists() {
+        // A built-in name wins unless a file of that name exists: a folder called `rotating`
+        // (where its renders went) is no scene file.
+        if !path.is_file() {
             if let Some(name) = path.to_str().filter(|n| builtin_json(n).is_some()) {
                 return builtin(name);
             }

@@ -47,6 +47,28 @@ fn renders_every_output_and_camera_json() {
     assert!(text.contains("\"scene\": \"rotating\""));
 }
 
+/// A built-in scene's name renders the built-in scene even where a folder of that name lies in
+/// the working directory (the natural place for its renders).
+#[test]
+fn a_folder_named_like_a_builtin_scene_does_not_hide_it() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    std::fs::create_dir(dir.path().join("rotating")).expect("folder");
+    let output = binary()
+        .current_dir(dir.path())
+        .args([
+            "render", "rotating", "--width", "16", "--quiet", "--aa", "1",
+        ])
+        .args(["--gbuffer", "rotating/g.exr"])
+        .output()
+        .expect("run");
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    assert!(dir.path().join("rotating/g.exr").exists());
+}
+
 #[test]
 fn bad_input_fails_cleanly() {
     let dir = tempfile::tempdir().expect("temp dir");
