@@ -464,47 +464,36 @@ fn widen(
             let (cx, cy) = (me.at.q[0].floor() as i64, me.at.q[1].floor() as i64);
             let mut sum = [0.0f32; 3];
             let mut total = 0.0f32;
-            for (j, ky) in TENT.iter().enumerate() {
-                let y = cy + (j as i64 - (TENT.len() / 2) as i64) * step;
-                if y < 0 || y >= h as i64 {
-                    continue;
-                }
-                for (i, kx) in TENT.iter().enumerate() {
-                    let x = cx + (i as i64 - (TENT.len() / 2) as i64) * step;
-                    if x < 0 || x >= w as i64 {
+            for (cell, tent) in tent_taps(cx, cy, step, (w, h)) {
+                for other in &nodes[target_starts[cell]..target_starts[cell + 1]] {
+                    if !other.lit {
                         continue;
                     }
-                    let cell = y as usize * w + x as usize;
-                    for other in &nodes[target_starts[cell]..target_starts[cell + 1]] {
-                        if !other.lit {
-                            continue;
-                        }
-                        let d = other.luminance - me.luminance;
-                        // The smaller of the two: a group whose first filter straddled a
-                        // shadow's edge reads the edge as noise, its neighbour does not.
-                        let sigma = me.noise.min(other.noise);
-                        let shading = d * d / (2.0 * (NOISE_TOLERANCE * sigma).powi(2) + 1e-12);
-                        if shading > 12.0 {
-                            continue;
-                        }
-                        let Some((guides, cosine)) = guide_exponent(&me.at, &other.at, inv_depth)
-                        else {
-                            continue;
-                        };
-                        let exponent = shading + guides;
-                        if exponent > 12.0 {
-                            continue;
-                        }
-                        let weight =
-                            kx * ky * other.count * (-exponent).exp() * cosine.powi(NORMAL_POWER);
-                        if !(weight > 0.0 && weight.is_finite()) {
-                            continue;
-                        }
-                        for (acc, e) in sum.iter_mut().zip(other.at.illumination) {
-                            *acc += weight * e;
-                        }
-                        total += weight;
+                    let d = other.luminance - me.luminance;
+                    // The smaller of the two: a group whose first filter straddled a
+                    // shadow's edge reads the edge as noise, its neighbour does not.
+                    let sigma = me.noise.min(other.noise);
+                    let shading = d * d / (2.0 * (NOISE_TOLERANCE * sigma).powi(2) + 1e-12);
+                    if shading > 12.0 {
+                        continue;
                     }
+                    let Some((guides, cosine)) = guide_exponent(&me.at, &other.at, inv_depth)
+                    else {
+                        continue;
+                    };
+                    let exponent = shading + guides;
+                    if exponent > 12.0 {
+                        continue;
+                    }
+                    let weight =
+                        tent * other.count * (-exponent).exp() * cosine.powi(NORMAL_POWER);
+                    if !(weight > 0.0 && weight.is_finite()) {
+                        continue;
+                    }
+                    for (acc, e) in sum.iter_mut().zip(other.at.illumination) {
+                        *acc += weight * e;
+                    }
+                    total += weight;
                 }
             }
             if !(total > 0.0 && total.is_finite()) {
@@ -521,6 +510,24 @@ fn widen(
             }
         })
         .collect()
+}
+
+/// The taps of the passes' 3 x 3 tent `step` pixels apart round pixel `(cx, cy)` of a
+/// `w x h` frame that fall inside it: each tap's pixel index and tent weight.
+fn tent_taps(
+    cx: i64,
+    cy: i64,
+    step: i64,
+    (w, h): (usize, usize),
+) -> impl Iterator<Item = (usize, f32)> {
+    let half = (TENT.len() / 2) as i64;
+    TENT.iter().enumerate().flat_map(move |(j, &ky)| {
+        TENT.iter().enumerate().filter_map(move |(i, &kx)| {
+            let (x, y) = (cx + (i as i64 - half) * step, cy + (j as i64 - half) * step);
+            (x >= 0 && y >= 0 && x < w as i64 && y < h as i64)
+                .then(|| (y as usize * w + x as usize, kx * ky))
+        })
+    })
 }
 
 /// A group's first filter: its illumination, the noise the filter left on it (luminance),
@@ -565,16 +572,7 @@ fn spread_excess(
             }
             let (cx, cy) = (me.at.q[0].floor() as i64, me.at.q[1].floor() as i64);
             // Most groups, in the first passes, have no excess round them: nothing to weigh.
-            let cells = || {
-                TENT.iter().enumerate().flat_map(move |(j, ky)| {
-                    TENT.iter().enumerate().filter_map(move |(i, kx)| {
-                        let y = cy + (j as i64 - (TENT.len() / 2) as i64) * step;
-                        let x = cx + (i as i64 - (TENT.len() / 2) as i64) * step;
-                        (x >= 0 && y >= 0 && x < w as i64 && y < h as i64)
-                            .then(|| (y as usize * w + x as usize, kx * ky))
-                    })
-                })
-            };
+            let cells = || tent_taps(cx, cy, step, (w, h));
             let any = cells().any(|(cell, _)| {
                 excess[target_starts[cell]..target_starts[cell + 1]]
                     .iter()

@@ -704,6 +704,17 @@ pub fn turn(psf: &PsfImage, angle: f32) -> PsfImage {
 mod tests {
     use super::*;
 
+    /// A single lit pixel: the PSF of an in-focus point.
+    fn point() -> PsfImage {
+        PsfImage {
+            origin: [0, 0],
+            width: 1,
+            height: 1,
+            channels: 1,
+            data: vec![1.0],
+        }
+    }
+
     fn disk(radius: f32, channels: usize) -> PsfImage {
         let r = radius.ceil() as i32 + 1;
         let n = (2 * r + 1) as usize;
@@ -783,13 +794,7 @@ mod tests {
     /// several angles.
     #[test]
     fn a_smear_written_within_its_columns_is_the_tap_by_tap_smear() {
-        let point = PsfImage {
-            origin: [0, 0],
-            width: 1,
-            height: 1,
-            channels: 1,
-            data: vec![1.0],
-        };
+        let point = point();
         for psf in [point, disk(3.0, 3)] {
             for (length, angle, bend) in [
                 (17.0, 0.0, 0.0),
@@ -1033,13 +1038,7 @@ mod tests {
     /// sagitta off the chord. Reversing the motion and the bend draws the same arc.
     #[test]
     fn a_bent_smear_lies_on_its_arc() {
-        let point = PsfImage {
-            origin: [0, 0],
-            width: 1,
-            height: 1,
-            channels: 1,
-            data: vec![1.0],
-        };
+        let point = point();
         let (len, bend) = (30.0f32, 12.0f32);
         let out = smear(&point, len, 0.0, bend).expect("smear");
         let total: f64 = out.data.iter().map(|&v| f64::from(v)).sum();
