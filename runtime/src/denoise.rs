@@ -553,6 +553,12 @@ pub fn excess_weight(spp: usize) -> f32 {
     spp / (spp + EXCESS_HALF_WEIGHT_SPP)
 }
 
+/// The share of a group's own light below which the excess round it is not spread onto it:
+/// after a few passes a handful of capped samples' light is spread thin over most of the
+/// frame, and weighing every group for a lift far below what can be seen is most of the
+/// passes' time.
+pub const EXCESS_NEGLIGIBLE: f32 = 1e-3;
+
 /// One pass spreading `excess` (per group of `nodes`, in their order): each group's becomes
 /// the mean of the groups' at the 3 x 3 taps `step` pixels apart, weighted by the tent, their
 /// member counts and the guides alone (no noise test: the light is to be spread, not kept).
@@ -571,12 +577,14 @@ fn spread_excess(
                 return mine;
             }
             let (cx, cy) = (me.at.q[0].floor() as i64, me.at.q[1].floor() as i64);
-            // Most groups, in the first passes, have no excess round them: nothing to weigh.
+            // Most groups have no excess round them worth weighing: none, or so little against
+            // their own light that spreading it could not move it by EXCESS_NEGLIGIBLE.
             let cells = || tent_taps(cx, cy, step, (w, h));
+            let negligible = EXCESS_NEGLIGIBLE * me.luminance.max(0.0);
             let any = cells().any(|(cell, _)| {
                 excess[target_starts[cell]..target_starts[cell + 1]]
                     .iter()
-                    .any(|e| e.iter().any(|&v| v > 0.0))
+                    .any(|e| e.iter().any(|&v| v > negligible))
             });
             if !any {
                 return mine;
@@ -1129,6 +1137,43 @@ mod tests {
             "denoised mean {mean} against the converged {converged}"
         );
         assert!(f64::from(brightest) < 1.5 * converged, "brightest {brightest}");
+    }
+
+    /// A spreading pass weighs a group only where the excess round it could lift its light by
+    /// [`EXCESS_NEGLIGIBLE`] or more: a thinner excess stays where it is, a visible one is
+    /// spread onto the groups the tent reaches.
+    #[test]
+    fn an_excess_far_below_the_surfaces_light_is_not_spread() {
+        let w = 9;
+        let nodes: Vec<WideningNode> = (0..w)
+            .map(|x| WideningNode {
+                at: Member {
+                    q: [x as f32 + 0.5, 0.5],
+                    depth: 2.0,
+                    normal: [0.0, 0.0, -1.0],
+                    albedo: [0.5; 3],
+                    illumination: [1.0; 3],
+                },
+                count: 1.0,
+                noise: 0.1,
+                luminance: 1.0,
+                lit: true,
+            })
+            .collect();
+        let target_starts: Vec<usize> = (0..=w).collect();
+        let spread = |amount: f32| {
+            let mut excess = vec![[0.0f32; 3]; w];
+            excess[4] = [amount; 3];
+            spread_excess(&nodes, &excess, &target_starts, (w, 1), 2)
+        };
+        let thin = spread(0.5 * EXCESS_NEGLIGIBLE);
+        assert_eq!(thin[4], [0.5 * EXCESS_NEGLIGIBLE; 3]);
+        assert!(thin.iter().enumerate().all(|(x, e)| x == 4 || *e == [0.0; 3]), "{thin:?}");
+        let visible = spread(0.5);
+        for x in [2, 6] {
+            assert!(visible[x][0] > 0.1, "group {x}: {:?}", visible[x]);
+        }
+        assert!(visible[4][0] < 0.5, "the centre kept {:?}", visible[4]);
     }
 
     /// Samples moved far outside the frame (a huge motion label) keep their colour and do not
