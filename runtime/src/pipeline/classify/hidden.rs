@@ -20,8 +20,10 @@ use rayon::prelude::*;
 /// taken to continue as it is: each background pixel next to such an occluder is repeated into
 /// the occluder along that direction (left, right, up, down), as far as the larger of the two
 /// blurs reaches along it, under the occluder (which hides the copies wherever it is opaque).
-/// A hidden pixel filled from several sides gets the mean of them, and every hidden pixel the
-/// mean of the filled pixels of its 3 x 3 window: each walk repeats one pixel, so neighbouring
+/// A hidden pixel filled from several sides gets their mean weighted inversely by each walk's
+/// distance from the pixel it repeats ([`walk_weight`]), so that walks from opposite sides of
+/// an occluder blend linearly across it; then every hidden pixel takes the mean of the filled
+/// pixels of its 3 x 3 window: each walk repeats one pixel, so neighbouring
 /// walks that start on differently lit or textured pixels (along a curved silhouette, across
 /// the rows of a texture) would leave stripes and steps one pixel apart, seen through the
 /// smear; what lies behind is not known, and a smooth continuation of it shows less than an
@@ -114,32 +116,29 @@ pub(super) fn hidden_background(
         })
         .flatten_iter()
         .collect();
-    let mut fills = vec![0u16; (w * h) as usize];
+    if walks.is_empty() {
+        return Vec::new();
+    }
+    // Each hidden pixel's total walk weight: zero where no walk reaches.
+    let mut fills = vec![0.0f32; (w * h) as usize];
     for &(b, d, first, steps) in &walks {
         let (bx, by) = ((b as i32) % w, (b as i32) / w);
         for k in first..=steps {
             let q = ((by + d.1 * k) * w + bx + d.0 * k) as usize;
-            fills[q] = fills[q].saturating_add(1);
+            fills[q] += walk_weight(k);
         }
-    }
-    if walks.is_empty() {
-        return Vec::new();
     }
     let color = smoothed_fill_colors(g, &walks, &fills, (w, h));
     let mut out = Vec::new();
-    for (b, d, _, steps) in walks {
+    for (b, d, first, steps) in walks {
         let base = own(b);
         let (bx, by) = ((b as i32) % w, (b as i32) / w);
-        for k in 1..=steps {
-            let (qx, qy) = (bx + d.0 * k, by + d.1 * k);
-            let q = (qy * w + qx) as usize;
-            if fills[q] == 0 {
-                continue;
-            }
+        for k in first..=steps {
+            let q = ((by + d.1 * k) * w + bx + d.0 * k) as usize;
             out.push(Fragment {
                 x: base.x + d.0 * k,
                 y: base.y + d.1 * k,
-                weight: 1.0 / f32::from(fills[q]),
+                weight: walk_weight(k) / fills[q],
                 color: color[q],
                 ..base
             });
@@ -148,13 +147,23 @@ pub(super) fn hidden_background(
     out
 }
 
-/// Each filled pixel's colour (premultiplied RGBA): the mean of the walks reaching it, then
-/// the mean of that over the filled pixels of its 3 x 3 window. `fills[q]` counts the walks
-/// reaching pixel `q`; pixels no walk fills stay zero.
+/// The weight of a walk's copy `k` pixels from the background pixel it repeats, where walks
+/// meet: `1 / k`. Two walks from opposite sides of an occluder, `a` and `b` pixels from their
+/// sources, then give `(b A + a B) / (a + b)`, the linear blend of the two sides across it; with
+/// equal weights every hidden pixel took the mean of the two, a flat band of one colour down
+/// the middle of a blurred bar.
+fn walk_weight(k: i32) -> f32 {
+    1.0 / k.max(1) as f32
+}
+
+/// Each filled pixel's colour (premultiplied RGBA): the walks reaching it weighted by
+/// [`walk_weight`], then the mean of that over the filled pixels of its 3 x 3 window.
+/// `fills[q]` is the sum of the weights of the walks reaching pixel `q`; pixels no walk fills
+/// stay zero.
 fn smoothed_fill_colors(
     g: &GBuffer,
     walks: &[(usize, (i32, i32), i32, i32)],
-    fills: &[u16],
+    fills: &[f32],
     (w, h): (i32, i32),
 ) -> Vec<[f32; 4]> {
     let mut walked = vec![[0.0f32; 4]; fills.len()];
@@ -163,7 +172,7 @@ fn smoothed_fill_colors(
         let c = g.color[b];
         for k in first..=steps {
             let q = ((by + d.1 * k) * w + bx + d.0 * k) as usize;
-            let share = 1.0 / f32::from(fills[q]);
+            let share = walk_weight(k) / fills[q];
             for (acc, v) in walked[q].iter_mut().zip(c) {
                 *acc += share * v;
             }
@@ -174,7 +183,7 @@ fn smoothed_fill_colors(
         .flat_map_iter(|y| {
             let walked = &walked;
             (0..w).map(move |x| {
-                if fills[(y * w + x) as usize] == 0 {
+                if fills[(y * w + x) as usize] == 0.0 {
                     return [0.0; 4];
                 }
                 let mut sum = [0.0f32; 4];
@@ -182,7 +191,7 @@ fn smoothed_fill_colors(
                 for yy in (y - 1).max(0)..=(y + 1).min(h - 1) {
                     for xx in (x - 1).max(0)..=(x + 1).min(w - 1) {
                         let q = (yy * w + xx) as usize;
-                        if fills[q] > 0 {
+                        if fills[q] > 0.0 {
                             for (acc, v) in sum.iter_mut().zip(walked[q]) {
                                 *acc += v;
                             }
@@ -199,6 +208,68 @@ fn smoothed_fill_colors(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A defocused bar over a wall that is dark on its left and light on its right: the wall
+    /// continued behind the bar blends linearly from one side to the other, where the mean of
+    /// the two sides would leave a flat band of one grey down the bar.
+    #[test]
+    fn the_continuation_blends_the_two_sides_of_a_bar() {
+        let (w, h) = (24usize, 12usize);
+        let bar = |x: usize| (8..16).contains(&x);
+        let (dark, light) = (0.2f32, 0.8f32);
+        let mut color = Vec::new();
+        let mut depth = Vec::new();
+        for _ in 0..h {
+            for x in 0..w {
+                let v = if bar(x) {
+                    0.5
+                } else if x < 8 {
+                    dark
+                } else {
+                    light
+                };
+                color.push([v, v, v, 1.0]);
+                depth.push(if bar(x) { 0.5 } else { 3.0 });
+            }
+        }
+        let g = GBuffer::from_planes(w, h, color, Some(depth.clone()), None).expect("frame");
+        let own = |i: usize| Fragment {
+            x: (i % w) as i32,
+            y: (i / w) as i32,
+            color: g.color[i],
+            weight: 1.0,
+            parallax: 1.0 / depth[i],
+            depth: depth[i],
+            motion: [0.0; 2],
+            bend: 0.0,
+            source: 0,
+        };
+        // The bar is blurred (CoC 12 px), the wall sharp: both sides walk across the bar.
+        let coc = |i: usize| if depth[i] < 1.0 { 12.0 } else { 0.0 };
+        let filled = hidden_background(
+            &g,
+            &vec![false; w * h],
+            &coc,
+            &|i| depth[i],
+            &|i, _| coc(i),
+            8.0,
+            &own,
+        );
+        let y = h / 2;
+        let mut level = vec![[0.0f32; 2]; w];
+        for f in filled.iter().filter(|f| f.y as usize == y) {
+            level[f.x as usize][0] += f.weight * f.color[0];
+            level[f.x as usize][1] += f.weight;
+        }
+        for x in 9..15 {
+            let [sum, weight] = level[x];
+            assert!((weight - 1.0).abs() < 1e-5, "column {x}: weight {weight}");
+            // Pixel x lies x - 7 px from the dark side's last pixel and 16 - x from the light's.
+            let (a, b) = ((x - 7) as f32, (16 - x) as f32);
+            let linear = (b * dark + a * light) / (a + b);
+            assert!((sum - linear).abs() < 0.03, "column {x}: {sum} against {linear}");
+        }
+    }
 
     /// A wall whose rows alternate between two greys, beside a nearer, blurrier occluder (a
     /// moving box): the wall continued behind the box is smooth across the rows, where each
