@@ -261,8 +261,7 @@ mod tests {
             level[f.x as usize][0] += f.weight * f.color[0];
             level[f.x as usize][1] += f.weight;
         }
-        for x in 9..15 {
-            let [sum, weight] = level[x];
+        for (x, &[sum, weight]) in level.iter().enumerate().take(15).skip(9) {
             assert!((weight - 1.0).abs() < 1e-5, "column {x}: weight {weight}");
             // Pixel x lies x - 7 px from the dark side's last pixel and 16 - x from the light's.
             let (a, b) = ((x - 7) as f32, (16 - x) as f32);
