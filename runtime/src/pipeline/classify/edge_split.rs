@@ -18,15 +18,18 @@ pub(super) struct EdgeSplit {
     pub(super) background_color: [f32; 4],
 }
 
-/// Splits the pixel at `(x, y)` when a neighbour whose CoC differs by more than a pixel lies
-/// nearer the viewer and its colour explains part of this pixel's: the pixel's colour `c` is
+/// Splits the pixel at `(x, y)` when a neighbour sharing an edge with it whose CoC differs by
+/// more than a pixel lies nearer the viewer and its colour explains part of this pixel's: the pixel's colour `c` is
 /// taken as `alpha f + (1 - alpha) b`, with `b` the background seen on the far side of the
 /// pixel and `alpha` the projection of `c` onto the segment from `b` to the foreground's
 /// colour. The foreground part carries `c - (1 - alpha) b` and the background part `b`, so the
 /// two add up to `c` and none of the foreground's light is blurred as background (a bright
-/// emitter's anti-aliased rim would otherwise glow with the background's blur). Neighbours two
-/// pixels away count too when they are brighter than `hdr_threshold`: a renderer's pixel
-/// filter spreads an HDR highlight's light that far. `coc_at(i)` is pixel `i`'s signed CoC
+/// emitter's anti-aliased rim would otherwise glow with the background's blur). Diagonal
+/// neighbours, and those two pixels away, count only when they are brighter than
+/// `hdr_threshold`: a renderer's pixel filter spreads an HDR highlight's light that far, but an
+/// ordinary edge's anti-aliasing reaches only the pixels it cuts, and a pixel touching a
+/// foreground only at a corner is most often background whose texture (a checker's other
+/// colour) the projection would take for the foreground's. `coc_at(i)` is pixel `i`'s signed CoC
 /// (pixels) and `depth_at(i)` its depth; `bright_near` is [`bright_near`] of the frame.
 pub(super) fn edge_split(
     g: &GBuffer,
@@ -45,7 +48,7 @@ pub(super) fn edge_split(
     let i = index(xi, yi)?;
     let d = depth_at(i);
     let bright = |c: [f32; 4]| c[..3].iter().any(|&v| v > hdr_threshold);
-    // The nearest neighbour in the 3x3 window, or a bright one in the 5x5 window.
+    // The nearest neighbour of the four sharing an edge, or a bright one in the 5x5 window.
     let mut best: Option<(usize, i32, i32, f32)> = None;
     // Without a bright pixel in the 5x5 window the outer ring holds no candidate: only the
     // 3x3 window is walked, in the same order.
@@ -58,8 +61,9 @@ pub(super) fn edge_split(
             let Some(j) = index(xi + dx, yi + dy) else {
                 continue;
             };
+            let sharing_an_edge = dx == 0 || dy == 0;
             let outer = dx.abs() == 2 || dy.abs() == 2;
-            if outer && !bright(g.color[j]) {
+            if (outer || !sharing_an_edge) && !bright(g.color[j]) {
                 continue;
             }
             let dj = depth_at(j);
@@ -210,6 +214,41 @@ mod tests {
                 assert_eq!(near[y * g.width + x], expected, "pixel ({x}, {y})");
             }
         }
+    }
+
+    /// A light square of a checker touching a nearer, sharper foreground only at a corner is
+    /// not split, although its colour lies between the dark square beyond it and the
+    /// foreground's; beside the foreground's edge, an anti-aliased pixel still is.
+    #[test]
+    fn a_pixel_touching_the_foreground_at_a_corner_is_not_split() {
+        let (w, h) = (9, 9);
+        let foreground = |x: usize, y: usize| x >= 5 && y >= 5;
+        let mut color = Vec::new();
+        let mut depth = Vec::new();
+        for y in 0..h {
+            for x in 0..w {
+                let c = if foreground(x, y) {
+                    [0.3, 0.6, 0.3, 1.0]
+                } else if (x, y) == (4, 6) {
+                    // Half the foreground over the light wall.
+                    [0.45, 0.6, 0.45, 1.0]
+                } else if x <= 3 && y <= 3 {
+                    [0.1, 0.1, 0.1, 1.0]
+                } else {
+                    [0.6, 0.6, 0.6, 1.0]
+                };
+                color.push(c);
+                depth.push(if foreground(x, y) { 1.0 } else { 4.0 });
+            }
+        }
+        let g = GBuffer::from_planes(w, h, color, Some(depth.clone()), None).expect("frame");
+        let coc_at = |i: usize| 6.0 * (depth[i] - 2.0) / depth[i];
+        let depth_at = |i: usize| depth[i];
+        let near = bright_near(&g, 8.0);
+        // (4, 4): light, its only nearer neighbour the diagonal (5, 5), dark squares beyond.
+        assert_eq!(edge_split(&g, 4, 4, &coc_at, &depth_at, 8.0, &near), None);
+        let rim = edge_split(&g, 4, 6, &coc_at, &depth_at, 8.0, &near).expect("rim split");
+        assert!((rim.alpha - 0.5).abs() < 0.05, "rim coverage {}", rim.alpha);
     }
 
     /// Walking the 3x3 window where no bright pixel is near splits every pixel as the full
