@@ -29,14 +29,20 @@ pub(super) struct EdgeSplit {
 /// `hdr_threshold`: a renderer's pixel filter spreads an HDR highlight's light that far, but an
 /// ordinary edge's anti-aliasing reaches only the pixels it cuts, and a pixel touching a
 /// foreground only at a corner is most often background whose texture (a checker's other
-/// colour) the projection would take for the foreground's. `coc_at(i)` is pixel `i`'s signed CoC
-/// (pixels) and `depth_at(i)` its depth; `bright_near` is [`bright_near`] of the frame.
+/// colour) the projection would take for the foreground's. A moving HDR foreground's rim is
+/// split also where the blurs are alike, when its path over the shutter crosses the pixel
+/// ([`crossing_motion`]): drawn whole with the background's motion, that share of its light
+/// would stay where the light starts, a still glow at one end of its streak. `coc_at(i)` is
+/// pixel `i`'s signed CoC (pixels), `depth_at(i)` its depth and `motion_at(i)` its motion over
+/// the shutter (pixels); `bright_near` is [`bright_near`] of the frame.
+#[allow(clippy::too_many_arguments)]
 pub(super) fn edge_split(
     g: &GBuffer,
     x: usize,
     y: usize,
     coc_at: &impl Fn(usize) -> f32,
     depth_at: &impl Fn(usize) -> f32,
+    motion_at: &impl Fn(usize) -> [f32; 2],
     hdr_threshold: f32,
     bright_near: &[bool],
 ) -> Option<EdgeSplit> {
@@ -74,7 +80,12 @@ pub(super) fn edge_split(
     }
     let (j, dx, dy, dj) = best?;
     let (coc_j, coc_i) = (coc_at(j), coc_at(i));
-    let coc_gap = (coc_j - coc_i).abs();
+    // The two parts' difference in blur: their CoCs', and for a moving light half its motion
+    // relative to the pixel where its path crosses the pixel.
+    let mut coc_gap = (coc_j - coc_i).abs();
+    if bright(g.color[j]) {
+        coc_gap += 0.5 * crossing_motion((xi, yi), (d, dj), motion_at(j), motion_at(i), &index, depth_at);
+    }
     // Only where the depth step is visible as a difference in blur (or, for a pinhole with
     // motion, a large relative depth step).
     if coc_gap < 1.0 && !(coc_i == 0.0 && dj < 0.8 * d) {
@@ -135,6 +146,41 @@ pub(super) fn edge_split(
         foreground_color,
         background_color: cb,
     })
+}
+
+/// The length of a foreground's motion relative to the pixel at `(x, y)` (pixels over the
+/// shutter) where its path crosses the pixel, else 0: the foreground's depth is looked for at
+/// eight points along the relative motion, an eighth to a half of it either side (nearer than
+/// halfway between the pixel's depth and the foreground's, `depths`). A leading or trailing
+/// edge's path crosses the pixels beside it; a rim moving along itself (a spinning disc's, a
+/// streak's top and bottom) does not, since a convex silhouette's tangent stays outside it, and
+/// such a rim drawn still stays where the reference has it.
+fn crossing_motion(
+    (x, y): (i32, i32),
+    (depth, foreground_depth): (f32, f32),
+    foreground_motion: [f32; 2],
+    motion: [f32; 2],
+    index: &impl Fn(i32, i32) -> Option<usize>,
+    depth_at: &impl Fn(usize) -> f32,
+) -> f32 {
+    let relative = [foreground_motion[0] - motion[0], foreground_motion[1] - motion[1]];
+    let length = relative[0].hypot(relative[1]);
+    if !(length > 0.0 && length.is_finite()) {
+        return 0.0;
+    }
+    let halfway = 0.5 * (depth + foreground_depth);
+    let crosses = [-0.5f32, -0.375, -0.25, -0.125, 0.125, 0.25, 0.375, 0.5]
+        .iter()
+        .any(|&t| {
+            let px = (x as f32 + t * relative[0]).round() as i32;
+            let py = (y as f32 + t * relative[1]).round() as i32;
+            index(px, py).is_some_and(|q| depth_at(q) < halfway)
+        });
+    if crosses {
+        length
+    } else {
+        0.0
+    }
 }
 
 /// Per pixel of `g`, whether its 5x5 window holds a pixel brighter than `hdr_threshold` in
@@ -244,11 +290,52 @@ mod tests {
         let g = GBuffer::from_planes(w, h, color, Some(depth.clone()), None).expect("frame");
         let coc_at = |i: usize| 6.0 * (depth[i] - 2.0) / depth[i];
         let depth_at = |i: usize| depth[i];
+        let still = |_: usize| [0.0f32; 2];
         let near = bright_near(&g, 8.0);
         // (4, 4): light, its only nearer neighbour the diagonal (5, 5), dark squares beyond.
-        assert_eq!(edge_split(&g, 4, 4, &coc_at, &depth_at, 8.0, &near), None);
-        let rim = edge_split(&g, 4, 6, &coc_at, &depth_at, 8.0, &near).expect("rim split");
+        assert_eq!(edge_split(&g, 4, 4, &coc_at, &depth_at, &still, 8.0, &near), None);
+        let rim = edge_split(&g, 4, 6, &coc_at, &depth_at, &still, 8.0, &near).expect("rim split");
         assert!((rim.alpha - 0.5).abs() < 0.05, "rim coverage {}", rim.alpha);
+    }
+
+    /// A light (40 times white) moving 8 px along x over a wall, both nearly in focus (CoCs
+    /// 0.2 px apart): its anti-aliased leading edge, which the light's path crosses, is split
+    /// off with the light's motion; its top rim, which the light moves along, and the same
+    /// frame standing still are left whole.
+    #[test]
+    fn a_moving_lights_leading_rim_moves_with_it() {
+        let (w, h) = (20, 9);
+        let light = |x: usize, y: usize| (6..10).contains(&x) && (3..6).contains(&y);
+        let mut color = Vec::new();
+        let mut depth = Vec::new();
+        for y in 0..h {
+            for x in 0..w {
+                let wall = [0.2, 0.2, 0.2, 1.0];
+                let c = if light(x, y) {
+                    [40.0, 40.0, 40.0, 1.0]
+                } else if (x == 10 && (3..6).contains(&y)) || (y == 2 && (6..10).contains(&x)) {
+                    // Half covered by the light.
+                    [20.1, 20.1, 20.1, 1.0]
+                } else {
+                    wall
+                };
+                color.push(c);
+                depth.push(if light(x, y) { 1.0 } else { 1.2 });
+            }
+        }
+        let g = GBuffer::from_planes(w, h, color, Some(depth.clone()), None).expect("frame");
+        let coc_at = |i: usize| if depth[i] < 1.1 { 0.3 } else { 0.5 };
+        let depth_at = |i: usize| depth[i];
+        let moving = |i: usize| if depth[i] < 1.1 { [8.0f32, 0.0] } else { [0.0; 2] };
+        let still = |_: usize| [0.0f32; 2];
+        let near = bright_near(&g, 8.0);
+        let split = |x, y, motion: &dyn Fn(usize) -> [f32; 2]| {
+            edge_split(&g, x, y, &coc_at, &depth_at, &motion, 8.0, &near)
+        };
+        let leading = split(10, 4, &moving).expect("the leading rim is split");
+        assert!((leading.alpha - 0.5).abs() < 0.05, "coverage {}", leading.alpha);
+        assert_eq!(split(8, 2, &moving), None, "the top rim moves along itself");
+        assert_eq!(split(10, 4, &still), None, "a still light's rim at the wall's blur");
     }
 
     /// Walking the 3x3 window where no bright pixel is near splits every pixel as the full
@@ -260,13 +347,14 @@ mod tests {
         // A CoC growing with the distance from a focus at depth 2.
         let coc_at = |i: usize| 6.0 * (depth[i] - 2.0) / depth[i];
         let depth_at = |i: usize| depth[i];
+        let still = |_: usize| [0.0f32; 2];
         let near = bright_near(&g, 8.0);
         let everywhere = vec![true; near.len()];
         let mut splits = 0;
         for y in 0..g.height {
             for x in 0..g.width {
-                let full = edge_split(&g, x, y, &coc_at, &depth_at, 8.0, &everywhere);
-                let short = edge_split(&g, x, y, &coc_at, &depth_at, 8.0, &near);
+                let full = edge_split(&g, x, y, &coc_at, &depth_at, &still, 8.0, &everywhere);
+                let short = edge_split(&g, x, y, &coc_at, &depth_at, &still, 8.0, &near);
                 assert_eq!(full, short, "pixel ({x}, {y})");
                 splits += usize::from(full.is_some());
             }

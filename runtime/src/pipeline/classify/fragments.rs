@@ -230,6 +230,7 @@ pub(super) fn pixel_fragments(
                         y,
                         &coc_at,
                         &depth_at,
+                        &motion_at,
                         options.hdr_dense_threshold,
                         &bright_near,
                     )
