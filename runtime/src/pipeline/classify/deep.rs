@@ -145,6 +145,7 @@ fn hidden_behind_deep(deep: &DeepImage, camera: &Camera, fragments: &[Fragment])
     super::hidden::hidden_background(
         &proxy,
         &several,
+        &[],
         &coc_at,
         &depth_at,
         &no_blur,

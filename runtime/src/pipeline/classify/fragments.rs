@@ -200,7 +200,7 @@ pub(super) fn pixel_fragments(
 
     // Fragments per pixel (up to two: edge split), a row per task, the rows joined in order:
     // the same fragments in the same order as one pass.
-    let rows: Vec<(Vec<Fragment>, Vec<usize>)> = (0..h)
+    let rows: Vec<(Vec<Fragment>, Vec<(usize, f32)>)> = (0..h)
         .into_par_iter()
         .map(|y| {
             let mut fragments: Vec<Fragment> = Vec::with_capacity(w);
@@ -239,7 +239,7 @@ pub(super) fn pixel_fragments(
                 };
                 match split {
                     Some(split) => {
-                        split_pixels.push(i);
+                        split_pixels.push((i, split.alpha));
                         let (j, o) = (split.foreground, split.background);
                         let dj = depth_at(j);
                         fragments.push(Fragment {
@@ -270,10 +270,13 @@ pub(super) fn pixel_fragments(
         })
         .collect();
     let mut was_split = vec![false; w * h];
+    // The share of each split pixel its foreground covers: the background hidden there.
+    let mut split_hidden = vec![0.0f32; w * h];
     for (_, split_pixels) in &rows {
         counts.edge_split += split_pixels.len();
-        for &i in split_pixels {
+        for &(i, alpha) in split_pixels {
             was_split[i] = true;
+            split_hidden[i] = alpha;
         }
     }
 
@@ -287,6 +290,7 @@ pub(super) fn pixel_fragments(
         let filled = hidden_background(
             gbuffer,
             &was_split,
+            &split_hidden,
             &coc_at,
             &depth_at,
             &blur_along,

@@ -34,10 +34,15 @@ use rayon::prelude::*;
 /// coverage, which hides little. `coc_at(i)` is pixel `i`'s signed CoC (pixels),
 /// `depth_at(i)` its depth, `blur_along(i, d)` its blur reach along axis direction `d`
 /// (pixels: its CoC radius plus half its motion over the shutter projected on `d`) and
-/// `own(i)` its own fragment.
+/// `own(i)` its own fragment. A pixel of `was_split` (an edge split's, or one the caller draws
+/// otherwise) is not continued, and a walk may start past one; `split_hidden[i]` is the share
+/// of such a pixel its foreground covers (empty: none), which a walk stepping over it fills
+/// too, so that the background's layer has no gap of that share along the silhouette.
+#[allow(clippy::too_many_arguments)]
 pub(super) fn hidden_background(
     g: &GBuffer,
     was_split: &[bool],
+    split_hidden: &[f32],
     coc_at: &(impl Fn(usize) -> f32 + Sync),
     depth_at: &(impl Fn(usize) -> f32 + Sync),
     blur_along: &(impl Fn(usize, (i32, i32)) -> f32 + Sync),
@@ -119,26 +124,42 @@ pub(super) fn hidden_background(
     if walks.is_empty() {
         return Vec::new();
     }
+    // A walk that starts past a split pixel fills that pixel's hidden share too.
+    let hidden_share = |q: usize| split_hidden.get(q).copied().unwrap_or(0.0);
+    let walks: Vec<Walk> = walks
+        .into_iter()
+        .map(|(b, d, first, steps)| {
+            let (bx, by) = ((b as i32) % w, (b as i32) / w);
+            let stepped_over = ((by + d.1) * w + bx + d.0) as usize;
+            let start = if first == 2 && hidden_share(stepped_over) > 0.0 {
+                1
+            } else {
+                first
+            };
+            (b, d, start, first, steps)
+        })
+        .collect();
     // Each hidden pixel's total walk weight: zero where no walk reaches.
     let mut fills = vec![0.0f32; (w * h) as usize];
-    for &(b, d, first, steps) in &walks {
+    for &(b, d, start, _, steps) in &walks {
         let (bx, by) = ((b as i32) % w, (b as i32) / w);
-        for k in first..=steps {
+        for k in start..=steps {
             let q = ((by + d.1 * k) * w + bx + d.0 * k) as usize;
             fills[q] += walk_weight(k);
         }
     }
     let color = smoothed_fill_colors(g, &walks, &fills, (w, h));
     let mut out = Vec::new();
-    for (b, d, first, steps) in walks {
+    for (b, d, start, first, steps) in walks {
         let base = own(b);
         let (bx, by) = ((b as i32) % w, (b as i32) / w);
-        for k in first..=steps {
+        for k in start..=steps {
             let q = ((by + d.1 * k) * w + bx + d.0 * k) as usize;
+            let share = if k < first { hidden_share(q) } else { 1.0 };
             out.push(Fragment {
                 x: base.x + d.0 * k,
                 y: base.y + d.1 * k,
-                weight: walk_weight(k) / fills[q],
+                weight: share * walk_weight(k) / fills[q],
                 color: color[q],
                 ..base
             });
@@ -146,6 +167,10 @@ pub(super) fn hidden_background(
     }
     out
 }
+
+/// A walk of the continuation: the background pixel it repeats, its direction, the first step
+/// it fills (a split pixel it steps over included), its first hidden step and its last step.
+type Walk = (usize, (i32, i32), i32, i32, i32);
 
 /// The weight of a walk's copy `k` pixels from the background pixel it repeats, where walks
 /// meet: `1 / k`. Two walks from opposite sides of an occluder, `a` and `b` pixels from their
@@ -162,15 +187,15 @@ fn walk_weight(k: i32) -> f32 {
 /// stay zero.
 fn smoothed_fill_colors(
     g: &GBuffer,
-    walks: &[(usize, (i32, i32), i32, i32)],
+    walks: &[Walk],
     fills: &[f32],
     (w, h): (i32, i32),
 ) -> Vec<[f32; 4]> {
     let mut walked = vec![[0.0f32; 4]; fills.len()];
-    for &(b, d, first, steps) in walks {
+    for &(b, d, start, _, steps) in walks {
         let (bx, by) = ((b as i32) % w, (b as i32) / w);
         let c = g.color[b];
-        for k in first..=steps {
+        for k in start..=steps {
             let q = ((by + d.1 * k) * w + bx + d.0 * k) as usize;
             let share = walk_weight(k) / fills[q];
             for (acc, v) in walked[q].iter_mut().zip(c) {
@@ -249,6 +274,7 @@ mod tests {
         let filled = hidden_background(
             &g,
             &vec![false; w * h],
+            &[],
             &coc,
             &|i| depth[i],
             &|i, _| coc(i),
@@ -268,6 +294,55 @@ mod tests {
             let linear = (b * dark + a * light) / (a + b);
             assert!((sum - linear).abs() < 0.03, "column {x}: {sum} against {linear}");
         }
+    }
+
+    /// The anti-aliased pixel beside a blurred bar, split into the bar's share (0.4) and the
+    /// wall's, gets the wall continued over the share the bar hides: the wall's layer then has
+    /// no gap along the bar's silhouette (a thin line of the bar's colour through its blur).
+    #[test]
+    fn a_split_pixel_beside_an_occluder_is_filled_over_its_hidden_share() {
+        let (w, h) = (16usize, 5usize);
+        let bar = |x: usize| (6..10).contains(&x);
+        let rim = 5usize;
+        let mut color = Vec::new();
+        let mut depth = Vec::new();
+        for _ in 0..h {
+            for x in 0..w {
+                let v = if bar(x) { 0.9 } else { 0.3 };
+                color.push([v, v, v, 1.0]);
+                depth.push(if bar(x) { 0.5 } else { 3.0 });
+            }
+        }
+        let g = GBuffer::from_planes(w, h, color, Some(depth.clone()), None).expect("frame");
+        let own = |i: usize| Fragment {
+            x: (i % w) as i32,
+            y: (i / w) as i32,
+            color: g.color[i],
+            weight: 1.0,
+            parallax: 1.0 / depth[i],
+            depth: depth[i],
+            motion: [0.0; 2],
+            bend: 0.0,
+            source: 0,
+        };
+        let coc = |i: usize| if depth[i] < 1.0 { 12.0 } else { 0.0 };
+        let was_split: Vec<bool> = (0..w * h).map(|i| i % w == rim).collect();
+        let split_hidden: Vec<f32> = was_split.iter().map(|&s| if s { 0.4 } else { 0.0 }).collect();
+        let filled = hidden_background(
+            &g,
+            &was_split,
+            &split_hidden,
+            &coc,
+            &|i| depth[i],
+            &|i, _| coc(i),
+            8.0,
+            &own,
+        );
+        let weight_at = |x: i32| -> f32 {
+            filled.iter().filter(|f| f.y == 2 && f.x == x).map(|f| f.weight).sum()
+        };
+        assert!((weight_at(rim as i32) - 0.4).abs() < 1e-5, "rim {}", weight_at(rim as i32));
+        assert!((weight_at(7) - 1.0).abs() < 1e-5, "behind the bar {}", weight_at(7));
     }
 
     /// A wall whose rows alternate between two greys, beside a nearer, blurrier occluder (a
@@ -310,6 +385,7 @@ mod tests {
         let filled = hidden_background(
             &g,
             &vec![false; w * h],
+            &[],
             &|_| 0.0,
             &|i| depth[i],
             &blur_along,
