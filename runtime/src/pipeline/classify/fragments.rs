@@ -200,7 +200,7 @@ pub(super) fn pixel_fragments(
 
     // Fragments per pixel (up to two: edge split), a row per task, the rows joined in order:
     // the same fragments in the same order as one pass.
-    let rows: Vec<(Vec<Fragment>, Vec<(usize, f32)>)> = (0..h)
+    let rows: Vec<(Vec<Fragment>, Vec<SplitPixel>)> = (0..h)
         .into_par_iter()
         .map(|y| {
             let mut fragments: Vec<Fragment> = Vec::with_capacity(w);
@@ -319,6 +319,9 @@ pub(super) fn pixel_fragments(
         .collect();
     joined_with_room(&pieces)
 }
+
+/// An edge-split pixel: its index and the share of it its foreground covers.
+type SplitPixel = (usize, f32);
 
 /// `pieces` joined in order, copied on every thread, in a list with room for a quarter more
 /// (the continuations across depth layers) that is not touched until it is used: the fragments
