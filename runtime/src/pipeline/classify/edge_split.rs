@@ -19,12 +19,12 @@ pub(super) struct EdgeSplit {
 }
 
 /// Splits the pixel at `(x, y)` when a neighbour sharing an edge with it whose CoC differs by
-/// more than a pixel lies nearer the viewer and its colour explains part of this pixel's: the pixel's colour `c` is
-/// taken as `alpha f + (1 - alpha) b`, with `b` the background seen on the far side of the
-/// pixel and `alpha` the projection of `c` onto the segment from `b` to the foreground's
-/// colour. The foreground part carries `c - (1 - alpha) b` and the background part `b`, so the
-/// two add up to `c` and none of the foreground's light is blurred as background (a bright
-/// emitter's anti-aliased rim would otherwise glow with the background's blur). Diagonal
+/// more than a pixel lies nearer the viewer and its colour explains part of this pixel's: the
+/// pixel's colour `c` is taken as `alpha f + (1 - alpha) b`, with `b` the background seen on
+/// the far side of the pixel and `alpha` the projection of `c` onto the segment from `b` to the
+/// foreground's colour. The foreground part carries `c - (1 - alpha) b` and the background part
+/// `b`, so the two add up to `c` and none of the foreground's light is blurred as background (a
+/// bright emitter's anti-aliased rim would otherwise glow with the background's blur). Diagonal
 /// neighbours, and those two pixels away, count only when they are brighter than
 /// `hdr_threshold`: a renderer's pixel filter spreads an HDR highlight's light that far, but an
 /// ordinary edge's anti-aliasing reaches only the pixels it cuts, and a pixel touching a
@@ -150,8 +150,9 @@ pub(super) fn edge_split(
 
 /// The length of a foreground's motion relative to the pixel at `(x, y)` (pixels over the
 /// shutter) where its path crosses the pixel, else 0: the foreground's depth is looked for at
-/// eight points along the relative motion, an eighth to a half of it either side (nearer than
-/// halfway between the pixel's depth and the foreground's, `depths`). A leading or trailing
+/// eight points along the relative motion, an eighth to a half of it either side, a point
+/// counting where it is nearer than halfway between the pixel's depth and the foreground's
+/// (`depth`, `foreground_depth`). A leading or trailing
 /// edge's path crosses the pixels beside it; a rim moving along itself (a spinning disc's, a
 /// streak's top and bottom) does not, since a convex silhouette's tangent stays outside it, and
 /// such a rim drawn still stays where the reference has it.
