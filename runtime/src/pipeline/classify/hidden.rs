@@ -23,12 +23,12 @@ use rayon::prelude::*;
 /// A hidden pixel filled from several sides gets their mean weighted inversely by each walk's
 /// distance from the pixel it repeats ([`walk_weight`]), so that walks from opposite sides of
 /// an occluder blend linearly across it; then every hidden pixel takes the mean of the filled
-/// pixels of its 3 x 3 window: each walk repeats one pixel, so neighbouring
-/// walks that start on differently lit or textured pixels (along a curved silhouette, across
-/// the rows of a texture) would leave stripes and steps one pixel apart, seen through the
-/// smear; what lies behind is not known, and a smooth continuation of it shows less than an
-/// invented pattern. A background brighter than
-/// `hdr_threshold` is not continued behind a blurrier occluder: a small emitter does not go on
+/// pixels of its 3 x 3 window: each walk repeats one pixel, so neighbouring walks that start
+/// on differently lit or textured pixels (along a curved silhouette, across the rows of a
+/// texture) would leave stripes and steps one pixel apart, seen through the smear; what lies
+/// behind is not known, and a smooth continuation of it shows less than an invented pattern.
+/// A background brighter than `hdr_threshold` is not continued behind a blurrier occluder: a
+/// small emitter does not go on
 /// behind what passes in front of it, and its copies, half hidden by the smear, would add
 /// light (29 % more on the comets example); nor behind an occluder of less than half
 /// coverage, which hides little. `coc_at(i)` is pixel `i`'s signed CoC (pixels),
