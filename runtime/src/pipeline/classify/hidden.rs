@@ -28,10 +28,9 @@ use rayon::prelude::*;
 /// texture) would leave stripes and steps one pixel apart, seen through the smear; what lies
 /// behind is not known, and a smooth continuation of it shows less than an invented pattern.
 /// A background brighter than `hdr_threshold` is not continued behind a blurrier occluder: a
-/// small emitter does not go on
-/// behind what passes in front of it, and its copies, half hidden by the smear, would add
-/// light (29 % more on the comets example); nor behind an occluder of less than half
-/// coverage, which hides little. `coc_at(i)` is pixel `i`'s signed CoC (pixels),
+/// small emitter does not go on behind what passes in front of it, and its copies, half hidden
+/// by the smear, would add light (29 % more on the comets example); nor behind an occluder of
+/// less than half coverage, which hides little. `coc_at(i)` is pixel `i`'s signed CoC (pixels),
 /// `depth_at(i)` its depth, `blur_along(i, d)` its blur reach along axis direction `d`
 /// (pixels: its CoC radius plus half its motion over the shutter projected on `d`) and
 /// `own(i)` its own fragment. A pixel of `was_split` (an edge split's, or one the caller draws
