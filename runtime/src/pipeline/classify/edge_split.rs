@@ -129,7 +129,16 @@ pub(super) fn edge_split(
     if den <= (0.05 * scale).powi(2) || den <= 1e-12 {
         return None;
     }
-    let alpha = (num / den).clamp(0.0, 1.0);
+    let projection = num / den;
+    // The depth pass is sampled at the pixel's centre, and this pixel's is the background's:
+    // the foreground rarely covers more than three quarters of it. A colour that projects
+    // beyond that, up to twice as far as the foreground's own, is the background's texture (a
+    // light checker square with a dark one beyond it), not a mix; one far beyond both is a
+    // lone bright pixel (a noisy render's), whose light is drawn with the foreground as before.
+    if !bright(cf) && projection > MOST_COVERED_RIM && projection <= TEXTURE_PROJECTION {
+        return None;
+    }
+    let alpha = projection.clamp(0.0, 1.0);
     // Too little foreground light to matter: 2 % of the brighter of display white and the
     // background.
     let foreground_peak = cf[..3].iter().fold(0.0f32, |m, &v| m.max(v));
@@ -147,6 +156,16 @@ pub(super) fn edge_split(
         background_color: cb,
     })
 }
+
+/// The largest share of a pixel whose depth is the background's that a non-HDR foreground's
+/// anti-aliased edge is taken to cover: with the depth sampled at the pixel's centre, an edge
+/// covering more would have given the pixel the foreground's depth.
+const MOST_COVERED_RIM: f32 = 0.75;
+
+/// How far beyond the foreground's colour (as a multiple of the distance from the background's
+/// to it) a pixel's colour may project and still be read as the background's texture rather
+/// than a lone bright pixel ([`edge_split`]).
+const TEXTURE_PROJECTION: f32 = 2.0;
 
 /// The length of a foreground's motion relative to the pixel at `(x, y)` (pixels over the
 /// shutter) where its path crosses the pixel, else 0: the foreground's depth is looked for at
@@ -297,6 +316,44 @@ mod tests {
         assert_eq!(edge_split(&g, 4, 4, &coc_at, &depth_at, &still, 8.0, &near), None);
         let rim = edge_split(&g, 4, 6, &coc_at, &depth_at, &still, 8.0, &near).expect("rim split");
         assert!((rim.alpha - 0.5).abs() < 0.05, "rim coverage {}", rim.alpha);
+    }
+
+    /// A light checker square beside a green foreground, with a dark square beyond it: its
+    /// colour projects past the foreground's from the dark square's, which no pixel whose centre
+    /// lies on the wall shows as a mix, so it is left whole; a lone bright pixel there, far
+    /// beyond both, is still split off with the foreground.
+    #[test]
+    fn a_background_texture_beside_a_foreground_is_not_split() {
+        let (w, h) = (9, 5);
+        let foreground = |x: usize| x <= 3;
+        let colour_of = |x: usize, lone: bool| -> [f32; 4] {
+            if foreground(x) {
+                [0.3, 0.6, 0.3, 1.0]
+            } else if x == 4 {
+                if lone {
+                    [3.0, 3.0, 3.0, 1.0]
+                } else {
+                    [0.6, 0.6, 0.6, 1.0]
+                }
+            } else {
+                [0.1, 0.1, 0.1, 1.0]
+            }
+        };
+        let frame = |lone: bool| {
+            let color: Vec<[f32; 4]> = (0..w * h).map(|i| colour_of(i % w, lone)).collect();
+            let depth: Vec<f32> = (0..w * h).map(|i| if foreground(i % w) { 1.0 } else { 4.0 }).collect();
+            GBuffer::from_planes(w, h, color, Some(depth), None).expect("frame")
+        };
+        for (lone, split) in [(false, false), (true, true)] {
+            let g = frame(lone);
+            let depth = g.depth.clone().expect("depth");
+            let coc_at = |i: usize| 6.0 * (depth[i] - 2.0) / depth[i];
+            let depth_at = |i: usize| depth[i];
+            let still = |_: usize| [0.0f32; 2];
+            let near = bright_near(&g, 8.0);
+            let got = edge_split(&g, 4, 2, &coc_at, &depth_at, &still, 8.0, &near);
+            assert_eq!(got.is_some(), split, "lone bright pixel {lone}: {got:?}");
+        }
     }
 
     /// A light (40 times white) moving 8 px along x over a wall, both nearly in focus (CoCs
