@@ -233,6 +233,40 @@ fn smoothed_fill_colors(
 mod tests {
     use super::*;
 
+    /// A `w x h` frame of greys, `pixel(x, y)` giving each pixel's grey and depth; and the
+    /// depths.
+    fn grey_frame(
+        w: usize,
+        h: usize,
+        pixel: impl Fn(usize, usize) -> (f32, f32),
+    ) -> (GBuffer, Vec<f32>) {
+        let (mut color, mut depth) = (Vec::new(), Vec::new());
+        for y in 0..h {
+            for x in 0..w {
+                let (v, d) = pixel(x, y);
+                color.push([v, v, v, 1.0]);
+                depth.push(d);
+            }
+        }
+        let g = GBuffer::from_planes(w, h, color, Some(depth.clone()), None).expect("frame");
+        (g, depth)
+    }
+
+    /// Pixel `i`'s own still fragment in `g` (of depths `depth`).
+    fn own_fragment(g: &GBuffer, depth: &[f32], i: usize) -> Fragment {
+        Fragment {
+            x: (i % g.width) as i32,
+            y: (i / g.width) as i32,
+            color: g.color[i],
+            weight: 1.0,
+            parallax: 1.0 / depth[i],
+            depth: depth[i],
+            motion: [0.0; 2],
+            bend: 0.0,
+            source: 0,
+        }
+    }
+
     /// A defocused bar over a wall that is dark on its left and light on its right: the wall
     /// continued behind the bar blends linearly from one side to the other, where the mean of
     /// the two sides would leave a flat band of one grey down the bar.
@@ -241,33 +275,12 @@ mod tests {
         let (w, h) = (24usize, 12usize);
         let bar = |x: usize| (8..16).contains(&x);
         let (dark, light) = (0.2f32, 0.8f32);
-        let mut color = Vec::new();
-        let mut depth = Vec::new();
-        for _ in 0..h {
-            for x in 0..w {
-                let v = if bar(x) {
-                    0.5
-                } else if x < 8 {
-                    dark
-                } else {
-                    light
-                };
-                color.push([v, v, v, 1.0]);
-                depth.push(if bar(x) { 0.5 } else { 3.0 });
-            }
-        }
-        let g = GBuffer::from_planes(w, h, color, Some(depth.clone()), None).expect("frame");
-        let own = |i: usize| Fragment {
-            x: (i % w) as i32,
-            y: (i / w) as i32,
-            color: g.color[i],
-            weight: 1.0,
-            parallax: 1.0 / depth[i],
-            depth: depth[i],
-            motion: [0.0; 2],
-            bend: 0.0,
-            source: 0,
-        };
+        let (g, depth) = grey_frame(w, h, |x, _| match x {
+            x if bar(x) => (0.5, 0.5),
+            x if x < 8 => (dark, 3.0),
+            _ => (light, 3.0),
+        });
+        let own = |i: usize| own_fragment(&g, &depth, i);
         // The bar is blurred (CoC 12 px), the wall sharp: both sides walk across the bar.
         let coc = |i: usize| if depth[i] < 1.0 { 12.0 } else { 0.0 };
         let filled = hidden_background(
@@ -303,27 +316,8 @@ mod tests {
         let (w, h) = (16usize, 5usize);
         let bar = |x: usize| (6..10).contains(&x);
         let rim = 5usize;
-        let mut color = Vec::new();
-        let mut depth = Vec::new();
-        for _ in 0..h {
-            for x in 0..w {
-                let v = if bar(x) { 0.9 } else { 0.3 };
-                color.push([v, v, v, 1.0]);
-                depth.push(if bar(x) { 0.5 } else { 3.0 });
-            }
-        }
-        let g = GBuffer::from_planes(w, h, color, Some(depth.clone()), None).expect("frame");
-        let own = |i: usize| Fragment {
-            x: (i % w) as i32,
-            y: (i / w) as i32,
-            color: g.color[i],
-            weight: 1.0,
-            parallax: 1.0 / depth[i],
-            depth: depth[i],
-            motion: [0.0; 2],
-            bend: 0.0,
-            source: 0,
-        };
+        let (g, depth) = grey_frame(w, h, |x, _| if bar(x) { (0.9, 0.5) } else { (0.3, 3.0) });
+        let own = |i: usize| own_fragment(&g, &depth, i);
         let coc = |i: usize| if depth[i] < 1.0 { 12.0 } else { 0.0 };
         let was_split: Vec<bool> = (0..w * h).map(|i| i % w == rim).collect();
         let split_hidden: Vec<f32> = was_split.iter().map(|&s| if s { 0.4 } else { 0.0 }).collect();
@@ -352,27 +346,14 @@ mod tests {
         let (w, h) = (24usize, 16usize);
         let occluder = |x: usize, y: usize| x >= 12 && (4..12).contains(&y);
         let grey = |y: usize| if y.is_multiple_of(2) { 0.3 } else { 0.7 };
-        let mut color = Vec::new();
-        let mut depth = Vec::new();
-        for y in 0..h {
-            for x in 0..w {
-                let v = if occluder(x, y) { 0.9 } else { grey(y) };
-                color.push([v, v, v, 1.0]);
-                depth.push(if occluder(x, y) { 1.0 } else { 4.0 });
+        let (g, depth) = grey_frame(w, h, |x, y| {
+            if occluder(x, y) {
+                (0.9, 1.0)
+            } else {
+                (grey(y), 4.0)
             }
-        }
-        let g = GBuffer::from_planes(w, h, color, Some(depth.clone()), None).expect("frame");
-        let own = |i: usize| Fragment {
-            x: (i % w) as i32,
-            y: (i / w) as i32,
-            color: g.color[i],
-            weight: 1.0,
-            parallax: 1.0 / depth[i],
-            depth: depth[i],
-            motion: [0.0; 2],
-            bend: 0.0,
-            source: 0,
-        };
+        });
+        let own = |i: usize| own_fragment(&g, &depth, i);
         // The box is sharp and moves 16 px along x; the wall is sharp and still.
         let blur_along = |i: usize, d: (i32, i32)| {
             if depth[i] < 2.0 {
