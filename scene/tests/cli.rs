@@ -5,6 +5,15 @@ use std::process::Command;
 
 use scene::{GBuffer, RgbaImage, StochasticFrames};
 
+/// Fails the test with the command's error output unless it succeeded.
+fn assert_succeeded(output: &std::process::Output) {
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+}
+
 fn binary() -> Command {
     Command::new(env!("CARGO_BIN_EXE_spreadlet-scene"))
 }
@@ -28,11 +37,7 @@ fn renders_every_output_and_camera_json() {
         .arg(p("camera.json"))
         .output()
         .expect("run");
-    assert!(
-        output.status.success(),
-        "{}",
-        String::from_utf8_lossy(&output.stderr)
-    );
+    assert_succeeded(&output);
     let g = GBuffer::read_exr(&p("g.exr")).expect("gbuffer");
     assert_eq!((g.width, g.height), (20, 20));
     let s = StochasticFrames::read_exr(&p("s.exr")).expect("frames");
@@ -61,11 +66,7 @@ fn a_folder_named_like_a_builtin_scene_does_not_hide_it() {
         .args(["--gbuffer", "rotating/g.exr"])
         .output()
         .expect("run");
-    assert!(
-        output.status.success(),
-        "{}",
-        String::from_utf8_lossy(&output.stderr)
-    );
+    assert_succeeded(&output);
     assert!(dir.path().join("rotating/g.exr").exists());
 }
 

@@ -50,9 +50,10 @@ pub(super) fn hidden_background(
 ) -> Vec<Fragment> {
     let (w, h) = (g.width as i32, g.height as i32);
     const DIRECTIONS: [(i32, i32); 4] = [(1, 0), (-1, 0), (0, 1), (0, -1)];
-    // The walks: (background pixel, direction, first hidden step, last step), found row by
-    // row on every thread and joined in row order; then how many walks reach each pixel.
-    let walks: Vec<(usize, (i32, i32), i32, i32)> = (0..h)
+    // A walk that starts past a split pixel fills that pixel's hidden share too.
+    let hidden_share = |q: usize| split_hidden.get(q).copied().unwrap_or(0.0);
+    // The walks ([`Walk`]), found row by row on every thread and joined in row order.
+    let walks: Vec<Walk> = (0..h)
         .into_par_iter()
         .map(|y| {
             let mut walks = Vec::new();
@@ -112,7 +113,13 @@ pub(super) fn hidden_background(
                     }
                     let steps = (first..=reach).take_while(|&k| hidden(k)).last();
                     if let Some(steps) = steps {
-                        walks.push((b, d, first, steps));
+                        let stepped_over = ((y + d.1) * w + x + d.0) as usize;
+                        let start = if first == 2 && hidden_share(stepped_over) > 0.0 {
+                            1
+                        } else {
+                            first
+                        };
+                        walks.push((b, d, start, first, steps));
                     }
                 }
             }
@@ -123,31 +130,29 @@ pub(super) fn hidden_background(
     if walks.is_empty() {
         return Vec::new();
     }
-    // A walk that starts past a split pixel fills that pixel's hidden share too.
-    let hidden_share = |q: usize| split_hidden.get(q).copied().unwrap_or(0.0);
-    let walks: Vec<Walk> = walks
-        .into_iter()
-        .map(|(b, d, first, steps)| {
-            let (bx, by) = ((b as i32) % w, (b as i32) / w);
-            let stepped_over = ((by + d.1) * w + bx + d.0) as usize;
-            let start = if first == 2 && hidden_share(stepped_over) > 0.0 {
-                1
-            } else {
-                first
-            };
-            (b, d, start, first, steps)
-        })
-        .collect();
-    // Each hidden pixel's total walk weight: zero where no walk reaches.
+    // Each hidden pixel's total walk weight (zero where no walk reaches) and its walks' colours
+    // summed with those weights, in one pass.
     let mut fills = vec![0.0f32; (w * h) as usize];
+    let mut walked = vec![[0.0f32; 4]; (w * h) as usize];
     for &(b, d, start, _, steps) in &walks {
         let (bx, by) = ((b as i32) % w, (b as i32) / w);
+        let c = g.color[b];
         for k in start..=steps {
             let q = ((by + d.1 * k) * w + bx + d.0 * k) as usize;
-            fills[q] += walk_weight(k);
+            let weight = walk_weight(k);
+            fills[q] += weight;
+            for (acc, v) in walked[q].iter_mut().zip(c) {
+                *acc += weight * v;
+            }
         }
     }
-    let color = smoothed_fill_colors(g, &walks, &fills, (w, h));
+    // The walks' weighted mean colour of each filled pixel.
+    for (c, &f) in walked.iter_mut().zip(&fills) {
+        if f > 0.0 {
+            *c = c.map(|v| v / f);
+        }
+    }
+    let color = smoothed_fill_colors(&walked, &fills, (w, h));
     let mut out = Vec::new();
     for (b, d, start, first, steps) in walks {
         let base = own(b);
@@ -167,8 +172,9 @@ pub(super) fn hidden_background(
     out
 }
 
-/// A walk of the continuation: the background pixel it repeats, its direction, the first step
-/// it fills (a split pixel it steps over included), its first hidden step and its last step.
+/// A walk of the continuation: the background pixel it repeats, its direction (an axis), the
+/// first step it fills (a split pixel it steps over included), its first hidden step and its
+/// last step.
 type Walk = (usize, (i32, i32), i32, i32, i32);
 
 /// The weight of a walk's copy `k` pixels from the background pixel it repeats, where walks
@@ -180,32 +186,13 @@ fn walk_weight(k: i32) -> f32 {
     1.0 / k.max(1) as f32
 }
 
-/// Each filled pixel's colour (premultiplied RGBA): the walks reaching it weighted by
-/// [`walk_weight`], then the mean of that over the filled pixels of its 3 x 3 window.
-/// `fills[q]` is the sum of the weights of the walks reaching pixel `q`; pixels no walk fills
-/// stay zero.
-fn smoothed_fill_colors(
-    g: &GBuffer,
-    walks: &[Walk],
-    fills: &[f32],
-    (w, h): (i32, i32),
-) -> Vec<[f32; 4]> {
-    let mut walked = vec![[0.0f32; 4]; fills.len()];
-    for &(b, d, start, _, steps) in walks {
-        let (bx, by) = ((b as i32) % w, (b as i32) / w);
-        let c = g.color[b];
-        for k in start..=steps {
-            let q = ((by + d.1 * k) * w + bx + d.0 * k) as usize;
-            let share = walk_weight(k) / fills[q];
-            for (acc, v) in walked[q].iter_mut().zip(c) {
-                *acc += share * v;
-            }
-        }
-    }
+/// Each filled pixel's colour (premultiplied RGBA): the mean of `walked` (each filled pixel's
+/// walks' colours, weighted by their [`walk_weight`]s) over the filled pixels of its 3 x 3
+/// window. Pixels no walk fills (`fills[q] == 0`) stay zero.
+fn smoothed_fill_colors(walked: &[[f32; 4]], fills: &[f32], (w, h): (i32, i32)) -> Vec<[f32; 4]> {
     (0..h)
         .into_par_iter()
         .flat_map_iter(|y| {
-            let walked = &walked;
             (0..w).map(move |x| {
                 if fills[(y * w + x) as usize] == 0.0 {
                     return [0.0; 4];
