@@ -33,7 +33,6 @@
 //! at most 1/(2 reach) radians.
 
 use psf_db::PsfDatabase;
-use crate::pipeline::splat::floor_exact;
 
 /// Lengths up to this (px) are quantised in steps of [`FINE_LENGTH_STEP_PX`].
 const FINE_LENGTH_MAX_PX: f32 = 8.0;
@@ -546,31 +545,33 @@ pub fn smear_within(
             shifts.push([sx, sy]);
         }
     }
-    let mut kernel = vec![0f32; kw * kh];
+    // One row and one column of slack: a tap on a kernel pixel's far edge (a shift that is a
+    // whole number) gives its next pixel a weight of exactly 0, added there without a check.
+    let stride = kw + 1;
+    let mut padded = vec![0f32; stride * (kh + 1)];
+    // Per kernel row, the columns `[first, end)` its taps touched: outside them it is zero.
+    let mut kernel_columns = vec![[usize::MAX, 0usize]; kh + 1];
     for [sx, sy] in shifts {
-        let (ix, iy) = (floor_exact(sx), floor_exact(sy));
-        let (fx, fy) = (sx - ix, sy - iy);
-        let (ix, iy) = (ix as usize, iy as usize);
-        let weights = [
-            (0, 0, (1.0 - fx) * (1.0 - fy) * share),
-            (1, 0, fx * (1.0 - fy) * share),
-            (0, 1, (1.0 - fx) * fy * share),
-            (1, 1, fx * fy * share),
-        ];
-        for (ox, oy, w) in weights {
-            if w != 0.0 {
-                kernel[(iy + oy) * kw + ix + ox] += w;
-            }
+        // Shifts are at least 1 (the box grows a pixel beyond the path), so `as` floors.
+        let (ix, iy) = (sx as usize, sy as usize);
+        let (fx, fy) = (sx - ix as f32, sy - iy as f32);
+        let at = iy * stride + ix;
+        let Some(corner) = padded.get_mut(at..at + stride + 2) else {
+            continue;
+        };
+        corner[0] += (1.0 - fx) * (1.0 - fy) * share;
+        corner[1] += fx * (1.0 - fy) * share;
+        corner[stride] += (1.0 - fx) * fy * share;
+        corner[stride + 1] += fx * fy * share;
+        for row in &mut kernel_columns[iy..iy + 2] {
+            *row = [row[0].min(ix), row[1].max(ix + 2)];
         }
     }
-    // Per kernel row, the columns `[first, end)` outside which it is zero.
-    let kernel_columns: Vec<[usize; 2]> = kernel
-        .chunks_exact(kw)
-        .map(|row| match row.iter().position(|&v| v != 0.0) {
-            None => [0, 0],
-            Some(first) => [first, kw - row.iter().rev().position(|&v| v != 0.0).unwrap_or(0)],
-        })
-        .collect();
+    let kernel = padded;
+    kernel_columns.truncate(kh);
+    for row in &mut kernel_columns {
+        *row = if row[0] < row[1] { [row[0], row[1].min(kw)] } else { [0, 0] };
+    }
     // Each PSF row's span, and from them and the kernel's, the columns each output row can
     // reach; written with zeros first (a fresh page read before it is written is faulted
     // twice, each fault flushing the other threads' TLBs).
@@ -608,12 +609,26 @@ pub fn smear_within(
             *w = [0, 0];
         }
     }
+    // A single-pixel PSF (a sharp point's) is drawn as its kernel, row by row.
+    if psf.width == 1 && psf.height == 1 {
+        let value = &psf.data[..ch];
+        for (ky, k) in kernel_columns.iter().enumerate() {
+            let weights = &kernel[ky * stride + k[0]..ky * stride + k[1]];
+            let dst = &mut out[(ky * width + k[0]) * ch..(ky * width + k[1]) * ch];
+            for (d, &w) in dst.chunks_exact_mut(ch).zip(weights) {
+                for (d, s) in d.iter_mut().zip(value) {
+                    *d += w * s;
+                }
+            }
+        }
+        return;
+    }
     for (ky, k) in kernel_columns.iter().enumerate() {
         if k[0] >= k[1] {
             continue;
         }
         for kx in k[0]..k[1] {
-            let w = kernel[ky * kw + kx];
+            let w = kernel[ky * stride + kx];
             if w == 0.0 {
                 continue;
             }
@@ -790,12 +805,17 @@ mod tests {
 
     /// The smear written within the columns it names equals the tap-by-tap smear, holds all
     /// of its light in those columns, and leaves every other pixel of its box untouched: a
-    /// single lit pixel (an in-focus PSF) and a three-channel disk, straight and bent, at
-    /// several angles.
+    /// single lit pixel (an in-focus PSF), grey and coloured, and a three-channel disk,
+    /// straight and bent, at several angles.
     #[test]
     fn a_smear_written_within_its_columns_is_the_tap_by_tap_smear() {
         let point = point();
-        for psf in [point, disk(3.0, 3)] {
+        let coloured_point = PsfImage {
+            channels: 3,
+            data: vec![0.2, 0.3, 0.5],
+            ..point.clone()
+        };
+        for psf in [point, coloured_point, disk(3.0, 3)] {
             for (length, angle, bend) in [
                 (17.0, 0.0, 0.0),
                 (23.5, 0.7, 0.0),
