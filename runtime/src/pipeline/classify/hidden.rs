@@ -146,13 +146,9 @@ pub(super) fn hidden_background(
             }
         }
     }
-    // The walks' weighted mean colour of each filled pixel.
-    for (c, &f) in walked.iter_mut().zip(&fills) {
-        if f > 0.0 {
-            *c = c.map(|v| v / f);
-        }
-    }
-    let color = smoothed_fill_colors(&walked, &fills, (w, h));
+    // Only the filled pixels' colours are read, each once per walk through it: found where
+    // they are read rather than over the whole frame (a frame's worth of fresh memory).
+    let color = |q: usize| smoothed_fill_color(&walked, &fills, (w, h), q);
     let mut out = Vec::new();
     for (b, d, start, first, steps) in walks {
         let base = own(b);
@@ -164,7 +160,7 @@ pub(super) fn hidden_background(
                 x: base.x + d.0 * k,
                 y: base.y + d.1 * k,
                 weight: share * walk_weight(k) / fills[q],
-                color: color[q],
+                color: color(q),
                 ..base
             });
         }
@@ -186,34 +182,26 @@ fn walk_weight(k: i32) -> f32 {
     1.0 / k.max(1) as f32
 }
 
-/// Each filled pixel's colour (premultiplied RGBA): the mean of `walked` (each filled pixel's
-/// walks' colours, weighted by their [`walk_weight`]s) over the filled pixels of its 3 x 3
-/// window. Pixels no walk fills (`fills[q] == 0`) stay zero.
-fn smoothed_fill_colors(walked: &[[f32; 4]], fills: &[f32], (w, h): (i32, i32)) -> Vec<[f32; 4]> {
-    (0..h)
-        .into_par_iter()
-        .flat_map_iter(|y| {
-            (0..w).map(move |x| {
-                if fills[(y * w + x) as usize] == 0.0 {
-                    return [0.0; 4];
+/// Filled pixel `q`'s colour (premultiplied RGBA): over the filled pixels of its 3 x 3
+/// window, the mean of each one's walks' colours, weighted by their [`walk_weight`]s
+/// (`walked`: the weighted sums; `fills`: the weights' sums, zero where no walk fills).
+fn smoothed_fill_color(walked: &[[f32; 4]], fills: &[f32], (w, h): (i32, i32), q: usize) -> [f32; 4] {
+    let (x, y) = (q as i32 % w, q as i32 / w);
+    let mut sum = [0.0f32; 4];
+    let mut n = 0.0f32;
+    for yy in (y - 1).max(0)..=(y + 1).min(h - 1) {
+        for xx in (x - 1).max(0)..=(x + 1).min(w - 1) {
+            let p = (yy * w + xx) as usize;
+            let f = fills[p];
+            if f > 0.0 {
+                for (acc, v) in sum.iter_mut().zip(walked[p]) {
+                    *acc += v / f;
                 }
-                let mut sum = [0.0f32; 4];
-                let mut n = 0.0f32;
-                for yy in (y - 1).max(0)..=(y + 1).min(h - 1) {
-                    for xx in (x - 1).max(0)..=(x + 1).min(w - 1) {
-                        let q = (yy * w + xx) as usize;
-                        if fills[q] > 0.0 {
-                            for (acc, v) in sum.iter_mut().zip(walked[q]) {
-                                *acc += v;
-                            }
-                            n += 1.0;
-                        }
-                    }
-                }
-                sum.map(|v| v / n)
-            })
-        })
-        .collect()
+                n += 1.0;
+            }
+        }
+    }
+    sum.map(|v| v / n)
 }
 
 #[cfg(test)]

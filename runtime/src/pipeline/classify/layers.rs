@@ -754,7 +754,7 @@ impl SmearedPsfs {
             unique_index.push(index);
         }
         let indexed: Vec<(SmearKey, Option<u32>)> = keys
-            .iter()
+            .par_iter()
             .map(|k| {
                 let i = unique
                     .binary_search(&drawn_as(k))
