@@ -67,6 +67,7 @@ internal_modules!(
     dbcache,
     dbset,
     denoise,
+    edge_field,
     error,
     #[cfg(feature = "gpu")]
     gpu,

@@ -21,6 +21,7 @@ use formats::StochasticFrames;
 
 use crate::camera::Camera;
 use crate::dbset::DbSet;
+use crate::edge_field::EdgeField;
 use crate::pipeline::classify::{
     classify_fragments, resolve_model, ClassifyError, DataWindow, Fragment,
 };
@@ -65,6 +66,10 @@ pub enum SamplePlacement {
 /// The footprint for one sample per pixel, pixels (the best of 0.4 to 0.8 on the built-in
 /// scenes at 256x256; `cargo run --release -p runtime --example recon_lab SCENE`).
 pub const FOOTPRINT_SIGMA_1SPP_PX: f32 = 0.6;
+
+/// A sample brighter than this in a channel (linear) is a light's, and keeps a round
+/// footprint where others are stretched along the image's edges ([`EdgeField`]).
+const BRIGHT_SAMPLE: f32 = 1.0;
 
 /// Standard deviation of the bilinear (tent) footprint, pixels: sqrt(1/6).
 const BILINEAR_SIGMA_PX: f32 = 0.408;
@@ -155,6 +160,8 @@ pub(crate) struct PlacedSamples<'a> {
     moved: Vec<Option<MovedSample>>,
     denoised: Option<Vec<[f32; 4]>>,
     placement: SamplePlacement,
+    /// Where samples get a footprint: the image's edges, along which it is stretched.
+    edges: Option<EdgeField>,
     /// Each sample's share of its pixel: 1 / spp.
     weight: f32,
     /// The shutter, frames.
@@ -181,11 +188,34 @@ impl<'a> PlacedSamples<'a> {
             .guides
             .as_ref()
             .map(|guides| crate::denoise::denoise_samples(frames, guides, &moved));
+        let edges = match placement {
+            SamplePlacement::Footprint { sigma_px } => {
+                let positions: Vec<Option<[f32; 2]>> =
+                    moved.iter().map(|m| m.map(|m| m.q)).collect();
+                let original: Vec<[f32; 4]>;
+                let colors: &[[f32; 4]] = match &denoised {
+                    Some(denoised) => denoised,
+                    None => {
+                        original = frames.samples.iter().map(|s| s.color).collect();
+                        &original
+                    }
+                };
+                Some(EdgeField::from_samples(
+                    frames.width,
+                    frames.height,
+                    &positions,
+                    colors,
+                    bounded_sigma(sigma_px),
+                ))
+            }
+            _ => None,
+        };
         PlacedSamples {
             frames,
             moved,
             denoised,
             placement,
+            edges,
             weight: 1.0 / frames.spp.max(1) as f32,
             shutter: camera.shutter_frames as f32,
             dropped,
@@ -211,9 +241,16 @@ impl<'a> PlacedSamples<'a> {
             _ => None,
         };
         match (self.placement, footprint) {
-            (_, Some(sigma_px)) => push_footprint(qx, qy, sigma_px, |x, y, share| {
-                tap(x as i32, y as i32, share)
-            }),
+            // A light's sample keeps a round footprint: stretched, its light would run past
+            // the ends of its own streak or rim.
+            (_, Some(sigma_px)) => match self.edges.as_ref().filter(|_| !self.is_bright(k)) {
+                Some(edges) => edges.push_steered(qx, qy, bounded_sigma(sigma_px), |x, y, share| {
+                    tap(x as i32, y as i32, share)
+                }),
+                None => push_footprint(qx, qy, sigma_px, |x, y, share| {
+                    tap(x as i32, y as i32, share)
+                }),
+            },
             (SamplePlacement::Nearest, None) => tap(qx.floor() as i32, qy.floor() as i32, 1.0),
             (_, None) => {
                 // Pixel (x, y) has its centre at (x + 0.5, y + 0.5).
@@ -233,6 +270,16 @@ impl<'a> PlacedSamples<'a> {
                 }
             }
         }
+    }
+
+    /// Whether sample `k`'s colour (denoised where it was) exceeds [`BRIGHT_SAMPLE`] in a
+    /// channel.
+    fn is_bright(&self, k: usize) -> bool {
+        let color = self
+            .denoised
+            .as_ref()
+            .map_or(self.frames.samples[k].color, |d| d[k]);
+        color[..3].iter().any(|&c| c > BRIGHT_SAMPLE)
     }
 
     /// The fragment of sample `k`'s `share` on pixel `(x, y)`.
@@ -271,17 +318,22 @@ pub fn sample_fragments(
     (fragments, placed.dropped)
 }
 
+/// A footprint's standard deviation as it is drawn, pixels: a fraction of a pixel to a few
+/// pixels (the clamp bounds the taps), [`FOOTPRINT_SIGMA_1SPP_PX`] for one that is not finite.
+fn bounded_sigma(sigma_px: f32) -> f32 {
+    if sigma_px.is_finite() {
+        sigma_px.clamp(0.1, MAX_FOOTPRINT_SIGMA_PX)
+    } else {
+        FOOTPRINT_SIGMA_1SPP_PX
+    }
+}
+
 /// Calls `push(x, y, share)` for each pixel `(x, y)` (column and row, as floats) under a
 /// normalised Gaussian footprint of `sigma_px` centred at continuous sensor position
 /// `(qx, qy)` (pixel centres at +0.5); the shares sum to 1. Taps under
 /// [`FOOTPRINT_TAP_CUTOFF`] of the peak are left out.
 fn push_footprint(qx: f32, qy: f32, sigma_px: f32, mut push: impl FnMut(f32, f32, f32)) {
-    // A footprint is a fraction of a pixel to a few pixels; the clamp bounds the loop.
-    let sigma_px = if sigma_px.is_finite() {
-        sigma_px.clamp(0.1, MAX_FOOTPRINT_SIGMA_PX)
-    } else {
-        FOOTPRINT_SIGMA_1SPP_PX
-    };
+    let sigma_px = bounded_sigma(sigma_px);
     let inv_two_var = 1.0 / (2.0 * sigma_px * sigma_px);
     let reach = sigma_px * (2.0 * (1.0 / FOOTPRINT_TAP_CUTOFF).ln()).sqrt();
     // Integer tap counts: far from the origin (a huge but finite motion label) `x + 1.0 == x`
