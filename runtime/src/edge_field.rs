@@ -24,6 +24,8 @@
 //! eigenvector of `lambda_1`) and takes `sigma (1 + STRETCH coherence)` along it: a flat region
 //! (coherence near 0) keeps the isotropic footprint, a straight edge (near 1) the longest.
 
+use rayon::prelude::*;
+
 /// How much longer than across it a footprint grows along a perfectly straight edge, minus
 /// one: `sigma_along = sigma (1 + STRETCH coherence)`. At 1 spp, 1 keeps SSIM, FLIP mean and
 /// p99 at least as good as round footprints on `studio`, `crossing`, `occluder` and `bokeh`;
@@ -74,23 +76,25 @@ impl EdgeField {
                 cells: Vec::new(),
             };
         }
+        // Each sample binned into its pixel, then the bins spread by the footprint's
+        // Gaussian: a scatter of one add per sample, the rest on every thread.
         let mut sum = vec![0.0f32; width * height];
         let mut weight = vec![0.0f32; width * height];
         for (q, c) in positions.iter().zip(colors) {
             let Some([qx, qy]) = *q else { continue };
             let l = 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2];
-            if !l.is_finite() {
+            if !(l.is_finite() && qx >= 0.0 && qy >= 0.0) {
                 continue;
             }
-            let tone = l.max(0.0) / (1.0 + l.max(0.0));
-            push_footprint(qx, qy, sigma_px, sigma_px, [1.0, 0.0], |x, y, share| {
-                if x >= 0.0 && y >= 0.0 && (x as usize) < width && (y as usize) < height {
-                    let i = y as usize * width + x as usize;
-                    sum[i] += share * tone;
-                    weight[i] += share;
-                }
-            });
+            let (x, y) = (qx as usize, qy as usize);
+            if x < width && y < height {
+                let tone = l.max(0.0) / (1.0 + l.max(0.0));
+                sum[y * width + x] += tone;
+                weight[y * width + x] += 1.0;
+            }
         }
+        gaussian_blur(&mut sum, width, height, sigma_px);
+        gaussian_blur(&mut weight, width, height, sigma_px);
         // Pixels no footprint reaches are unknown, not dark: a gradient that reads one is left
         // out (a hole between scattered samples is not an edge).
         let estimate: Vec<Option<f32>> = sum
@@ -104,35 +108,32 @@ impl EdgeField {
             estimate[y * width + x]
         };
         // Sobel gradient, and the tensor's three components per pixel.
-        let mut jxx = vec![0.0f32; width * height];
-        let mut jxy = vec![0.0f32; width * height];
-        let mut jyy = vec![0.0f32; width * height];
-        for y in 0..height as isize {
-            for x in 0..width as isize {
-                let mut window = [[0.0f32; 3]; 3];
-                let known = (0..3).all(|j| {
-                    (0..3).all(|i| match at(x + i as isize - 1, y + j as isize - 1) {
-                        Some(v) => {
-                            window[j][i] = v;
-                            true
+        let tensor: Vec<[f32; 3]> = (0..width * height)
+            .into_par_iter()
+            .map(|i| {
+                let (x, y) = ((i % width) as isize, (i / width) as isize);
+                let mut w = [[0.0f32; 3]; 3];
+                for (j, row) in w.iter_mut().enumerate() {
+                    for (k, v) in row.iter_mut().enumerate() {
+                        match at(x + k as isize - 1, y + j as isize - 1) {
+                            Some(known) => *v = known,
+                            None => return [0.0; 3],
                         }
-                        None => false,
-                    })
-                });
-                if !known {
-                    continue;
+                    }
                 }
-                let w = window;
                 let gx = (w[0][2] + 2.0 * w[1][2] + w[2][2]) - (w[0][0] + 2.0 * w[1][0] + w[2][0]);
                 let gy = (w[2][0] + 2.0 * w[2][1] + w[2][2]) - (w[0][0] + 2.0 * w[0][1] + w[0][2]);
-                let i = y as usize * width + x as usize;
-                (jxx[i], jxy[i], jyy[i]) = (gx * gx, gx * gy, gy * gy);
-            }
-        }
+                [gx * gx, gx * gy, gy * gy]
+            })
+            .collect();
+        let mut jxx: Vec<f32> = tensor.iter().map(|t| t[0]).collect();
+        let mut jxy: Vec<f32> = tensor.iter().map(|t| t[1]).collect();
+        let mut jyy: Vec<f32> = tensor.iter().map(|t| t[2]).collect();
         for plane in [&mut jxx, &mut jxy, &mut jyy] {
             gaussian_blur(plane, width, height, TENSOR_SIGMA_PX);
         }
         let cells = (0..width * height)
+            .into_par_iter()
             .map(|i| {
                 let (a, b, c) = (jxx[i], jxy[i], jyy[i]);
                 let half_trace = 0.5 * (a + c);
@@ -258,7 +259,7 @@ fn push_footprint(
 }
 
 /// `plane` (`width x height`, row-major) blurred by a Gaussian of `sigma_px`, separably, the
-/// border clamped.
+/// border clamped, each pass on every thread.
 fn gaussian_blur(plane: &mut [f32], width: usize, height: usize, sigma_px: f32) {
     let r = (3.0 * sigma_px).ceil() as isize;
     let kernel: Vec<f32> = (-r..=r)
@@ -267,20 +268,19 @@ fn gaussian_blur(plane: &mut [f32], width: usize, height: usize, sigma_px: f32) 
     let norm: f32 = kernel.iter().sum();
     let kernel: Vec<f32> = kernel.iter().map(|k| k / norm).collect();
     let mut rows = vec![0.0f32; plane.len()];
-    for y in 0..height {
-        for x in 0..width {
-            rows[y * width + x] = (-r..=r)
-                .zip(&kernel)
-                .map(|(d, k)| {
-                    let xx = (x as isize + d).clamp(0, width as isize - 1) as usize;
-                    k * plane[y * width + xx]
-                })
-                .sum();
-        }
-    }
-    for y in 0..height {
-        for x in 0..width {
-            plane[y * width + x] = (-r..=r)
+    rows.par_chunks_mut(width)
+        .zip(plane.par_chunks(width))
+        .for_each(|(out, row)| {
+            for (x, o) in out.iter_mut().enumerate() {
+                *o = (-r..=r)
+                    .zip(&kernel)
+                    .map(|(d, k)| k * row[(x as isize + d).clamp(0, width as isize - 1) as usize])
+                    .sum();
+            }
+        });
+    plane.par_chunks_mut(width).enumerate().for_each(|(y, out)| {
+        for (x, o) in out.iter_mut().enumerate() {
+            *o = (-r..=r)
                 .zip(&kernel)
                 .map(|(d, k)| {
                     let yy = (y as isize + d).clamp(0, height as isize - 1) as usize;
@@ -288,7 +288,7 @@ fn gaussian_blur(plane: &mut [f32], width: usize, height: usize, sigma_px: f32) 
                 })
                 .sum();
         }
-    }
+    });
 }
 
 #[cfg(test)]
