@@ -12,17 +12,19 @@
 //! edge as sharp across it as before (the "steering kernel" of Takeda, Farsiu and Milanfar
 //! 2007). The edge's direction and strength come from the structure tensor of a first
 //! estimate: the samples' tone-mapped luminance `l / (1 + l)` (so that an emitter does not
-//! outweigh every texture edge) spread by the isotropic footprint and normalised, its Sobel
-//! gradient `g`, and
+//! outweigh every texture edge) binned per pixel, spread by the footprint's Gaussian and
+//! normalised, its Sobel gradient `g`, and
 //!
 //! ```text
-//! J = G_s * (g g^T),    coherence = (lambda_1 - lambda_2) / (lambda_1 + lambda_2)
+//! J = G_s * (g g^T),
+//! coherence = (lambda_1 - lambda_2) / (lambda_1 + lambda_2) * lambda_1 / (lambda_1 + EDGE_CONTRAST^2)
 //! ```
 //!
 //! with `G_s` a Gaussian of [`TENSOR_SIGMA_PX`] and `lambda_1 >= lambda_2` the eigenvalues of
-//! `J`. The footprint keeps its standard deviation `sigma` across the edge (along the
-//! eigenvector of `lambda_1`) and takes `sigma (1 + STRETCH coherence)` along it: a flat region
-//! (coherence near 0) keeps the isotropic footprint, a straight edge (near 1) the longest.
+//! `J` (the second factor: a faint gradient is the estimate's noise, not an edge). The
+//! footprint keeps its standard deviation `sigma` across the edge (along the eigenvector of
+//! `lambda_1`) and takes `sigma (1 + STRETCH coherence)` along it: a flat region (coherence
+//! near 0) keeps the isotropic footprint, a strong straight edge (near 1) the longest.
 
 use rayon::prelude::*;
 
@@ -49,7 +51,7 @@ const TAP_CUTOFF: f32 = 1e-2;
 const MAX_TAPS_PER_AXIS: usize = 48;
 
 /// Per pixel, the direction across the local edge (unit, x right, y down) and the edge's
-/// coherence in `[0, 1]`.
+/// coherence weighed by its strength, in `[0, 1]` (see the module's documentation).
 pub struct EdgeField {
     width: usize,
     height: usize,
@@ -60,8 +62,8 @@ pub struct EdgeField {
 impl EdgeField {
     /// The field of the samples at continuous sensor positions `positions` (pixels, pixel
     /// centres at +0.5; `None`: not placed) with linear colours `colors`, on a `width x height`
-    /// grid, each spread by an isotropic Gaussian footprint of `sigma_px` for the first
-    /// estimate.
+    /// grid; the first estimate bins them per pixel and spreads the bins by a Gaussian of
+    /// `sigma_px`.
     pub fn from_samples(
         width: usize,
         height: usize,
@@ -95,8 +97,8 @@ impl EdgeField {
         }
         gaussian_blur(&mut sum, width, height, sigma_px);
         gaussian_blur(&mut weight, width, height, sigma_px);
-        // Pixels no footprint reaches are unknown, not dark: a gradient that reads one is left
-        // out (a hole between scattered samples is not an edge).
+        // Pixels no sample's spread reaches are unknown, not dark: a gradient that reads one
+        // is left out (a hole between scattered samples is not an edge).
         let estimate: Vec<Option<f32>> = sum
             .iter()
             .zip(&weight)
