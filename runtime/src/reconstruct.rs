@@ -14,8 +14,8 @@
 //! pixel share its weight (1 / spp). Each moved sample is spread over the pixels around `q0`
 //! ([`SamplePlacement`]: at low sample counts a Gaussian footprint, so that neighbouring
 //! samples overlap, stretched along the frame's edges by [`crate::edge_field`]), always with
-//! its own PSF. Layering, splatting, integration and compositing
-//! are the synthesis stages, unchanged; [`normalize_density`] then divides by the coverage.
+//! its own PSF. Layering, splatting, integration and compositing are the synthesis stages,
+//! unchanged; [`normalize_density`] then divides by the coverage.
 
 use rayon::prelude::*;
 use formats::StochasticFrames;
