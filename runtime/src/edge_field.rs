@@ -97,20 +97,20 @@ impl EdgeField {
         }
         gaussian_blur(&mut sum, width, height, sigma_px);
         gaussian_blur(&mut weight, width, height, sigma_px);
-        // Pixels no sample's spread reaches are unknown, not dark: a gradient that reads one
-        // is left out (a hole between scattered samples is not an edge).
-        let estimate: Vec<Option<f32>> = sum
-            .iter()
-            .zip(&weight)
-            .map(|(&s, &w)| (w > 0.0).then(|| s / w))
-            .collect();
+        // Pixels no sample's spread reaches are unknown (NaN), not dark: a gradient that reads
+        // one is left out (a hole between scattered samples is not an edge).
+        for (s, &w) in sum.iter_mut().zip(&weight) {
+            *s = if w > 0.0 { *s / w } else { f32::NAN };
+        }
+        drop(weight);
+        let estimate = sum;
         let at = |x: isize, y: isize| -> Option<f32> {
             let x = x.clamp(0, width as isize - 1) as usize;
             let y = y.clamp(0, height as isize - 1) as usize;
-            estimate[y * width + x]
+            Some(estimate[y * width + x]).filter(|v| !v.is_nan())
         };
         // Sobel gradient, and the tensor's three components per pixel.
-        let tensor: Vec<[f32; 3]> = (0..width * height)
+        let mut tensor: Vec<[f32; 3]> = (0..width * height)
             .into_par_iter()
             .map(|i| {
                 let (x, y) = ((i % width) as isize, (i / width) as isize);
@@ -128,16 +128,12 @@ impl EdgeField {
                 [gx * gx, gx * gy, gy * gy]
             })
             .collect();
-        let mut jxx: Vec<f32> = tensor.iter().map(|t| t[0]).collect();
-        let mut jxy: Vec<f32> = tensor.iter().map(|t| t[1]).collect();
-        let mut jyy: Vec<f32> = tensor.iter().map(|t| t[2]).collect();
-        for plane in [&mut jxx, &mut jxy, &mut jyy] {
-            gaussian_blur(plane, width, height, TENSOR_SIGMA_PX);
-        }
-        let cells = (0..width * height)
-            .into_par_iter()
-            .map(|i| {
-                let (a, b, c) = (jxx[i], jxy[i], jyy[i]);
+        drop(estimate);
+        gaussian_blur(&mut tensor, width, height, TENSOR_SIGMA_PX);
+        // Each pixel's tensor becomes its cell, in place.
+        tensor.par_iter_mut().for_each(|cell| {
+            let [a, b, c] = *cell;
+            *cell = (|| {
                 let half_trace = 0.5 * (a + c);
                 let root = (0.25 * (a - c) * (a - c) + b * b).sqrt();
                 let (l1, l2) = (half_trace + root, half_trace - root);
@@ -161,8 +157,9 @@ impl EdgeField {
                     return [1.0, 0.0, 0.0];
                 }
                 [vx / norm, vy / norm, coherence]
-            })
-            .collect();
+            })();
+        });
+        let cells = tensor;
         EdgeField {
             width,
             height,
@@ -260,35 +257,77 @@ fn push_footprint(
     }
 }
 
-/// `plane` (`width x height`, row-major) blurred by a Gaussian of `sigma_px`, separably, the
-/// border clamped, each pass on every thread.
-fn gaussian_blur(plane: &mut [f32], width: usize, height: usize, sigma_px: f32) {
+/// A value a Gaussian blurs channel by channel: a scalar, or a pixel of several channels.
+trait Channels: Copy + Default + Send + Sync {
+    /// Number of channels.
+    const N: usize;
+    /// Channel `c`.
+    fn get(&self, c: usize) -> f32;
+    /// Sets channel `c`.
+    fn set(&mut self, c: usize, v: f32);
+}
+
+impl Channels for f32 {
+    const N: usize = 1;
+    fn get(&self, _: usize) -> f32 {
+        *self
+    }
+    fn set(&mut self, _: usize, v: f32) {
+        *self = v;
+    }
+}
+
+impl Channels for [f32; 3] {
+    const N: usize = 3;
+    fn get(&self, c: usize) -> f32 {
+        self[c]
+    }
+    fn set(&mut self, c: usize, v: f32) {
+        self[c] = v;
+    }
+}
+
+/// `plane` (`width x height`, row-major) blurred by a Gaussian of `sigma_px`, separably, each
+/// channel on its own, the border clamped, each pass on every thread.
+fn gaussian_blur<T: Channels>(plane: &mut [T], width: usize, height: usize, sigma_px: f32) {
     let r = (3.0 * sigma_px).ceil() as isize;
     let kernel: Vec<f32> = (-r..=r)
         .map(|d| (-(d * d) as f32 / (2.0 * sigma_px * sigma_px)).exp())
         .collect();
     let norm: f32 = kernel.iter().sum();
     let kernel: Vec<f32> = kernel.iter().map(|k| k / norm).collect();
-    let mut rows = vec![0.0f32; plane.len()];
+    let mut rows = vec![T::default(); plane.len()];
     rows.par_chunks_mut(width)
         .zip(plane.par_chunks(width))
         .for_each(|(out, row)| {
             for (x, o) in out.iter_mut().enumerate() {
-                *o = (-r..=r)
-                    .zip(&kernel)
-                    .map(|(d, k)| k * row[(x as isize + d).clamp(0, width as isize - 1) as usize])
-                    .sum();
+                for c in 0..T::N {
+                    o.set(
+                        c,
+                        (-r..=r)
+                            .zip(&kernel)
+                            .map(|(d, k)| {
+                                k * row[(x as isize + d).clamp(0, width as isize - 1) as usize].get(c)
+                            })
+                            .sum(),
+                    );
+                }
             }
         });
     plane.par_chunks_mut(width).enumerate().for_each(|(y, out)| {
         for (x, o) in out.iter_mut().enumerate() {
-            *o = (-r..=r)
-                .zip(&kernel)
-                .map(|(d, k)| {
-                    let yy = (y as isize + d).clamp(0, height as isize - 1) as usize;
-                    k * rows[yy * width + x]
-                })
-                .sum();
+            for c in 0..T::N {
+                o.set(
+                    c,
+                    (-r..=r)
+                        .zip(&kernel)
+                        .map(|(d, k)| {
+                            let yy = (y as isize + d).clamp(0, height as isize - 1) as usize;
+                            k * rows[yy * width + x].get(c)
+                        })
+                        .sum(),
+                );
+            }
         }
     });
 }
