@@ -17,7 +17,8 @@
 //!
 //! ```text
 //! J = G_s * (g g^T),
-//! coherence = (lambda_1 - lambda_2) / (lambda_1 + lambda_2) * lambda_1 / (lambda_1 + EDGE_CONTRAST^2)
+//! coherence = (lambda_1 - lambda_2) / (lambda_1 + lambda_2)
+//!             * lambda_1 / (lambda_1 + EDGE_CONTRAST^2)
 //! ```
 //!
 //! with `G_s` a Gaussian of [`TENSOR_SIGMA_PX`] and `lambda_1 >= lambda_2` the eigenvalues of
@@ -27,6 +28,8 @@
 //! near 0) keeps the isotropic footprint, a strong straight edge (near 1) the longest.
 
 use rayon::prelude::*;
+
+use crate::reconstruct::{push_normalized, tap_span};
 
 /// How much longer than across it a footprint grows along a perfectly straight edge, minus
 /// one: `sigma_along = sigma (1 + STRETCH coherence)`. At 1 spp, 1 keeps SSIM, FLIP mean and
@@ -80,8 +83,8 @@ impl EdgeField {
         }
         // Each sample binned into its pixel, then the bins spread by the footprint's
         // Gaussian: a scatter of one add per sample, the rest on every thread.
-        let mut sum = vec![0.0f32; width * height];
-        let mut weight = vec![0.0f32; width * height];
+        // Per pixel, the tone-mapped luminance summed and the sample count.
+        let mut bins = vec![[0.0f32; 2]; width * height];
         for (q, c) in positions.iter().zip(colors) {
             let Some([qx, qy]) = *q else { continue };
             let l = 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2];
@@ -91,19 +94,19 @@ impl EdgeField {
             let (x, y) = (qx as usize, qy as usize);
             if x < width && y < height {
                 let tone = l.max(0.0) / (1.0 + l.max(0.0));
-                sum[y * width + x] += tone;
-                weight[y * width + x] += 1.0;
+                let bin = &mut bins[y * width + x];
+                bin[0] += tone;
+                bin[1] += 1.0;
             }
         }
-        gaussian_blur(&mut sum, width, height, sigma_px);
-        gaussian_blur(&mut weight, width, height, sigma_px);
+        gaussian_blur(&mut bins, width, height, sigma_px);
         // Pixels no sample's spread reaches are unknown (NaN), not dark: a gradient that reads
         // one is left out (a hole between scattered samples is not an edge).
-        for (s, &w) in sum.iter_mut().zip(&weight) {
-            *s = if w > 0.0 { *s / w } else { f32::NAN };
-        }
-        drop(weight);
-        let estimate = sum;
+        let estimate: Vec<f32> = bins
+            .iter()
+            .map(|&[s, w]| if w > 0.0 { s / w } else { f32::NAN })
+            .collect();
+        drop(bins);
         let at = |x: isize, y: isize| -> Option<f32> {
             let x = x.clamp(0, width as isize - 1) as usize;
             let y = y.clamp(0, height as isize - 1) as usize;
@@ -131,34 +134,9 @@ impl EdgeField {
         drop(estimate);
         gaussian_blur(&mut tensor, width, height, TENSOR_SIGMA_PX);
         // Each pixel's tensor becomes its cell, in place.
-        tensor.par_iter_mut().for_each(|cell| {
-            let [a, b, c] = *cell;
-            *cell = (|| {
-                let half_trace = 0.5 * (a + c);
-                let root = (0.25 * (a - c) * (a - c) + b * b).sqrt();
-                let (l1, l2) = (half_trace + root, half_trace - root);
-                if !(l1.is_finite() && l1 > 0.0) {
-                    return [1.0, 0.0, 0.0];
-                }
-                // A faint gradient is the estimate's own noise, not an edge: the coherence
-                // counts in proportion to the edge's strength against EDGE_CONTRAST.
-                let strength = l1 / (l1 + EDGE_CONTRAST * EDGE_CONTRAST);
-                let coherence = ((l1 - l2) / (l1 + l2)).clamp(0.0, 1.0) * strength;
-                // The eigenvector of the larger eigenvalue: across the edge.
-                let (vx, vy) = if b.abs() > 1e-12 * l1 {
-                    (l1 - c, b)
-                } else if a >= c {
-                    (1.0, 0.0)
-                } else {
-                    (0.0, 1.0)
-                };
-                let norm = (vx * vx + vy * vy).sqrt();
-                if norm.is_nan() || norm <= 0.0 {
-                    return [1.0, 0.0, 0.0];
-                }
-                [vx / norm, vy / norm, coherence]
-            })();
-        });
+        tensor
+            .par_iter_mut()
+            .for_each(|cell| *cell = cell_of(*cell));
         let cells = tensor;
         EdgeField {
             width,
@@ -180,22 +158,24 @@ impl EdgeField {
                 0
             }
         };
-        let [x, y, coherence] = self.cells[clamp(qy, self.height) * self.width + clamp(qx, self.width)];
+        let [x, y, coherence] =
+            self.cells[clamp(qy, self.height) * self.width + clamp(qx, self.width)];
         ([x, y], coherence)
     }
 
     /// Calls `push(x, y, share)` for each pixel under the footprint of standard deviation
     /// `sigma_px` across the edge at `(qx, qy)` and `sigma_px (1 + STRETCH coherence)` along
     /// it, centred there; the shares sum to 1.
-    pub fn push_steered(
-        &self,
-        qx: f32,
-        qy: f32,
-        sigma_px: f32,
-        push: impl FnMut(f32, f32, f32),
-    ) {
+    pub fn push_steered(&self, qx: f32, qy: f32, sigma_px: f32, push: impl FnMut(f32, f32, f32)) {
         let (across, coherence) = self.at(qx, qy);
-        push_footprint(qx, qy, sigma_px, sigma_px * (1.0 + STRETCH * coherence), across, push);
+        push_footprint(
+            qx,
+            qy,
+            sigma_px,
+            sigma_px * (1.0 + STRETCH * coherence),
+            across,
+            push,
+        );
     }
 }
 
@@ -209,24 +189,14 @@ fn push_footprint(
     sigma_across: f32,
     sigma_along: f32,
     across: [f32; 2],
-    mut push: impl FnMut(f32, f32, f32),
+    push: impl FnMut(f32, f32, f32),
 ) {
     let positive = |v: f32| v.is_finite() && v > 0.0;
     if !(qx.is_finite() && qy.is_finite() && positive(sigma_across) && positive(sigma_along)) {
         return;
     }
     let reach = sigma_across.max(sigma_along) * (2.0 * (1.0 / TAP_CUTOFF).ln()).sqrt();
-    // Integer tap counts: far from the origin `x + 1.0 == x` in f32.
-    let span = |q: f32| -> (f32, usize) {
-        let first = (q - 0.5 - reach).ceil();
-        let last = (q - 0.5 + reach).floor();
-        let count = if last >= first {
-            ((last - first) as usize + 1).min(MAX_TAPS_PER_AXIS)
-        } else {
-            0
-        };
-        (first, count)
-    };
+    let span = |q: f32| tap_span(q, reach, MAX_TAPS_PER_AXIS);
     let ((x0, nx), (y0, ny)) = (span(qx), span(qy));
     let (inv_across, inv_along) = (
         1.0 / (2.0 * sigma_across * sigma_across),
@@ -243,93 +213,84 @@ fn push_footprint(
             0.0
         }
     };
-    let total: f32 = (0..ny).flat_map(|j| (0..nx).map(move |i| tap(i, j))).sum();
-    if total.is_nan() || total <= 0.0 {
-        return;
-    }
-    for j in 0..ny {
-        for i in 0..nx {
-            let w = tap(i, j);
-            if w > 0.0 {
-                push(x0 + i as f32, y0 + j as f32, w / total);
-            }
-        }
-    }
+    push_normalized((x0, nx), (y0, ny), tap, push);
 }
 
-/// A value a Gaussian blurs channel by channel: a scalar, or a pixel of several channels.
-trait Channels: Copy + Default + Send + Sync {
-    /// Number of channels.
-    const N: usize;
-    /// Channel `c`.
-    fn get(&self, c: usize) -> f32;
-    /// Sets channel `c`.
-    fn set(&mut self, c: usize, v: f32);
-}
-
-impl Channels for f32 {
-    const N: usize = 1;
-    fn get(&self, _: usize) -> f32 {
-        *self
+/// A pixel's smoothed structure tensor `[Jxx, Jxy, Jyy]` as its cell: the unit direction
+/// across the edge and the coherence weighed by the edge's strength (round, `[1, 0, 0]`,
+/// where there is no gradient).
+fn cell_of([a, b, c]: [f32; 3]) -> [f32; 3] {
+    let half_trace = 0.5 * (a + c);
+    let root = (0.25 * (a - c) * (a - c) + b * b).sqrt();
+    let (l1, l2) = (half_trace + root, half_trace - root);
+    if !(l1.is_finite() && l1 > 0.0) {
+        return [1.0, 0.0, 0.0];
     }
-    fn set(&mut self, _: usize, v: f32) {
-        *self = v;
+    // A faint gradient is the estimate's own noise, not an edge: the coherence
+    // counts in proportion to the edge's strength against EDGE_CONTRAST.
+    let strength = l1 / (l1 + EDGE_CONTRAST * EDGE_CONTRAST);
+    let coherence = ((l1 - l2) / (l1 + l2)).clamp(0.0, 1.0) * strength;
+    // The eigenvector of the larger eigenvalue: across the edge.
+    let (vx, vy) = if b.abs() > 1e-12 * l1 {
+        (l1 - c, b)
+    } else if a >= c {
+        (1.0, 0.0)
+    } else {
+        (0.0, 1.0)
+    };
+    let norm = (vx * vx + vy * vy).sqrt();
+    if norm.is_nan() || norm <= 0.0 {
+        return [1.0, 0.0, 0.0];
     }
-}
-
-impl Channels for [f32; 3] {
-    const N: usize = 3;
-    fn get(&self, c: usize) -> f32 {
-        self[c]
-    }
-    fn set(&mut self, c: usize, v: f32) {
-        self[c] = v;
-    }
+    [vx / norm, vy / norm, coherence]
 }
 
 /// `plane` (`width x height`, row-major) blurred by a Gaussian of `sigma_px`, separably, each
 /// channel on its own, the border clamped, each pass on every thread.
-fn gaussian_blur<T: Channels>(plane: &mut [T], width: usize, height: usize, sigma_px: f32) {
+fn gaussian_blur<const N: usize>(
+    plane: &mut [[f32; N]],
+    width: usize,
+    height: usize,
+    sigma_px: f32,
+) {
     let r = (3.0 * sigma_px).ceil() as isize;
     let kernel: Vec<f32> = (-r..=r)
         .map(|d| (-(d * d) as f32 / (2.0 * sigma_px * sigma_px)).exp())
         .collect();
     let norm: f32 = kernel.iter().sum();
     let kernel: Vec<f32> = kernel.iter().map(|k| k / norm).collect();
-    let mut rows = vec![T::default(); plane.len()];
+    let mut rows = vec![[0.0f32; N]; plane.len()];
     rows.par_chunks_mut(width)
         .zip(plane.par_chunks(width))
         .for_each(|(out, row)| {
             for (x, o) in out.iter_mut().enumerate() {
-                for c in 0..T::N {
-                    o.set(
-                        c,
-                        (-r..=r)
-                            .zip(&kernel)
-                            .map(|(d, k)| {
-                                k * row[(x as isize + d).clamp(0, width as isize - 1) as usize].get(c)
-                            })
-                            .sum(),
-                    );
+                for c in 0..N {
+                    o[c] = (-r..=r)
+                        .zip(&kernel)
+                        .map(|(d, k)| {
+                            let xx = (x as isize + d).clamp(0, width as isize - 1) as usize;
+                            k * row[xx][c]
+                        })
+                        .sum();
                 }
             }
         });
-    plane.par_chunks_mut(width).enumerate().for_each(|(y, out)| {
-        for (x, o) in out.iter_mut().enumerate() {
-            for c in 0..T::N {
-                o.set(
-                    c,
-                    (-r..=r)
+    plane
+        .par_chunks_mut(width)
+        .enumerate()
+        .for_each(|(y, out)| {
+            for (x, o) in out.iter_mut().enumerate() {
+                for c in 0..N {
+                    o[c] = (-r..=r)
                         .zip(&kernel)
                         .map(|(d, k)| {
                             let yy = (y as isize + d).clamp(0, height as isize - 1) as usize;
-                            k * rows[yy * width + x].get(c)
+                            k * rows[yy * width + x][c]
                         })
-                        .sum(),
-                );
+                        .sum();
+                }
             }
-        }
-    });
+        });
 }
 
 #[cfg(test)]
@@ -338,10 +299,17 @@ mod tests {
 
     /// Samples one per pixel at seeded random positions, coloured 1 above the line
     /// `y = y0 + slope x` and 0.05 below it.
-    fn edge_samples(n: usize, y0: f32, slope: f32, seed: u64) -> (Vec<Option<[f32; 2]>>, Vec<[f32; 4]>) {
+    fn edge_samples(
+        n: usize,
+        y0: f32,
+        slope: f32,
+        seed: u64,
+    ) -> (Vec<Option<[f32; 2]>>, Vec<[f32; 4]>) {
         let mut state = seed;
         let mut next = || {
-            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
             ((state >> 40) as f32) / (1u64 << 24) as f32
         };
         let mut positions = Vec::new();
@@ -349,7 +317,10 @@ mod tests {
         for y in 0..n {
             for x in 0..n {
                 // A lens offset of up to a pixel each way: no longer one sample per pixel.
-                let q = [x as f32 + 0.5 + 2.0 * next() - 1.0, y as f32 + 0.5 + 2.0 * next() - 1.0];
+                let q = [
+                    x as f32 + 0.5 + 2.0 * next() - 1.0,
+                    y as f32 + 0.5 + 2.0 * next() - 1.0,
+                ];
                 let v = if q[1] < y0 + slope * q[0] { 1.0 } else { 0.05 };
                 positions.push(Some(q));
                 colors.push([v, v, v, 1.0]);
@@ -379,7 +350,10 @@ mod tests {
                 None => push_footprint(qx, qy, 0.6, 0.6, [1.0, 0.0], &mut add),
             }
         }
-        sum.iter().zip(&weight).map(|(s, w)| s / w.max(1e-6)).collect()
+        sum.iter()
+            .zip(&weight)
+            .map(|(s, w)| s / w.max(1e-6))
+            .collect()
     }
 
     /// Root mean square of the columns' edge positions (where each column's value crosses
@@ -393,7 +367,8 @@ mod tests {
             let col: Vec<f32> = (0..n).map(|y| image[y * n + x]).collect();
             let truth = y0 + slope * (x as f32 + 0.5);
             let from = (truth as usize).saturating_sub(6);
-            let Some(k) = (from..(from + 12).min(n - 1)).find(|&k| col[k] >= mid && col[k + 1] < mid)
+            let Some(k) =
+                (from..(from + 12).min(n - 1)).find(|&k| col[k] >= mid && col[k + 1] < mid)
             else {
                 continue;
             };
@@ -425,7 +400,11 @@ mod tests {
     /// The shares of a steered footprint sum to one and keep its centre, at any coherence.
     #[test]
     fn a_steered_footprint_keeps_weight_and_position() {
-        for (sigma_along, across) in [(0.6f32, [1.0f32, 0.0f32]), (2.4, [0.6, 0.8]), (1.5, [0.0, 1.0])] {
+        for (sigma_along, across) in [
+            (0.6f32, [1.0f32, 0.0f32]),
+            (2.4, [0.6, 0.8]),
+            (1.5, [0.0, 1.0]),
+        ] {
             let (mut total, mut mx, mut my) = (0.0f32, 0.0f32, 0.0f32);
             push_footprint(10.3, 20.7, 0.6, sigma_along, across, |x, y, s| {
                 total += s;
@@ -433,7 +412,10 @@ mod tests {
                 my += s * (y + 0.5);
             });
             assert!((total - 1.0).abs() < 1e-5, "{total}");
-            assert!((mx - 10.3).abs() < 0.05 && (my - 20.7).abs() < 0.05, "({mx}, {my})");
+            assert!(
+                (mx - 10.3).abs() < 0.05 && (my - 20.7).abs() < 0.05,
+                "({mx}, {my})"
+            );
         }
     }
 
@@ -441,8 +423,9 @@ mod tests {
     #[test]
     fn a_flat_frame_keeps_round_footprints() {
         let n = 16;
-        let positions: Vec<Option<[f32; 2]>> =
-            (0..n * n).map(|i| Some([(i % n) as f32 + 0.5, (i / n) as f32 + 0.5])).collect();
+        let positions: Vec<Option<[f32; 2]>> = (0..n * n)
+            .map(|i| Some([(i % n) as f32 + 0.5, (i / n) as f32 + 0.5]))
+            .collect();
         let colors = vec![[0.4f32, 0.4, 0.4, 1.0]; n * n];
         let field = EdgeField::from_samples(n, n, &positions, &colors, 0.6);
         let (_, coherence) = field.at(8.0, 8.0);

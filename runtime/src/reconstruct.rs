@@ -17,8 +17,8 @@
 //! its own PSF. Layering, splatting, integration and compositing are the synthesis stages,
 //! unchanged; [`normalize_density`] then divides by the coverage.
 
-use rayon::prelude::*;
 use formats::StochasticFrames;
+use rayon::prelude::*;
 
 use crate::camera::Camera;
 use crate::dbset::DbSet;
@@ -245,9 +245,11 @@ impl<'a> PlacedSamples<'a> {
             // A light's sample keeps a round footprint: stretched, its light would run past
             // the ends of its own streak or rim.
             (_, Some(sigma_px)) => match self.edges.as_ref().filter(|_| !self.is_bright(k)) {
-                Some(edges) => edges.push_steered(qx, qy, bounded_sigma(sigma_px), |x, y, share| {
-                    tap(x as i32, y as i32, share)
-                }),
+                Some(edges) => {
+                    edges.push_steered(qx, qy, bounded_sigma(sigma_px), |x, y, share| {
+                        tap(x as i32, y as i32, share)
+                    })
+                }
                 None => push_footprint(qx, qy, sigma_px, |x, y, share| {
                     tap(x as i32, y as i32, share)
                 }),
@@ -314,7 +316,9 @@ pub fn sample_fragments(
     let placed = PlacedSamples::new(frames, camera, effects, placement);
     let mut fragments = Vec::new();
     for k in 0..placed.len() {
-        placed.for_each_tap(k, |x, y, share| fragments.push(placed.fragment(k, x, y, share)));
+        placed.for_each_tap(k, |x, y, share| {
+            fragments.push(placed.fragment(k, x, y, share))
+        });
     }
     (fragments, placed.dropped)
 }
@@ -333,22 +337,11 @@ fn bounded_sigma(sigma_px: f32) -> f32 {
 /// normalised Gaussian footprint of `sigma_px` centred at continuous sensor position
 /// `(qx, qy)` (pixel centres at +0.5); the shares sum to 1. Taps under
 /// [`FOOTPRINT_TAP_CUTOFF`] of the peak are left out.
-fn push_footprint(qx: f32, qy: f32, sigma_px: f32, mut push: impl FnMut(f32, f32, f32)) {
+fn push_footprint(qx: f32, qy: f32, sigma_px: f32, push: impl FnMut(f32, f32, f32)) {
     let sigma_px = bounded_sigma(sigma_px);
     let inv_two_var = 1.0 / (2.0 * sigma_px * sigma_px);
     let reach = sigma_px * (2.0 * (1.0 / FOOTPRINT_TAP_CUTOFF).ln()).sqrt();
-    // Integer tap counts: far from the origin (a huge but finite motion label) `x + 1.0 == x`
-    // in f32, and a float loop would never end.
-    let span = |q: f32| -> (f32, usize) {
-        let first = (q - 0.5 - reach).ceil();
-        let last = (q - 0.5 + reach).floor();
-        let count = if last >= first {
-            ((last - first) as usize + 1).min(MAX_FOOTPRINT_TAPS_PER_AXIS)
-        } else {
-            0
-        };
-        (first, count)
-    };
+    let span = |q: f32| tap_span(q, reach, MAX_FOOTPRINT_TAPS_PER_AXIS);
     let ((x0, nx), (y0, ny)) = (span(qx), span(qy));
     // The Gaussian is separable: one exponential per column and per row, not per tap.
     let axis_weights = |first: f32, count: usize, q: f32| {
@@ -368,7 +361,37 @@ fn push_footprint(qx: f32, qy: f32, sigma_px: f32, mut push: impl FnMut(f32, f32
             0.0
         }
     };
-    let total: f32 = (0..ny).flat_map(|j| (0..nx).map(move |i| tap(i, j))).sum();
+    push_normalized((x0, nx), (y0, ny), tap, push);
+}
+
+/// The first pixel (column or row, as a float) and the number of pixels whose centres lie
+/// within `reach` of continuous position `q` (pixel centres at +0.5), at most `most`. Integer
+/// counts: far from the origin (a huge but finite motion label) `x + 1.0 == x` in f32, and a
+/// float loop would never end.
+pub(crate) fn tap_span(q: f32, reach: f32, most: usize) -> (f32, usize) {
+    let first = (q - 0.5 - reach).ceil();
+    let last = (q - 0.5 + reach).floor();
+    let count = if last >= first {
+        ((last - first) as usize + 1).min(most)
+    } else {
+        0
+    };
+    (first, count)
+}
+
+/// Calls `push(x, y, share)` for each tap `(i, j)` of the box of columns `x0 .. x0 + nx` and
+/// rows `y0 .. y0 + ny` whose weight `tap(i, j)` is positive, with the weights normalised to
+/// sum to 1; nothing where they sum to zero or NaN.
+pub(crate) fn push_normalized(
+    (x0, nx): (f32, usize),
+    (y0, ny): (f32, usize),
+    tap: impl Fn(usize, usize) -> f32,
+    mut push: impl FnMut(f32, f32, f32),
+) {
+    let total: f32 = (0..ny)
+        .flat_map(|j| (0..nx).map(move |i| (i, j)))
+        .map(|(i, j)| tap(i, j))
+        .sum();
     if total.is_nan() || total <= 0.0 {
         return;
     }
@@ -573,11 +596,8 @@ mod tests {
         let pixels: std::collections::HashSet<(i32, i32)> =
             fragments.iter().map(|f| (f.x, f.y)).collect();
         assert_eq!(merged.len(), pixels.len());
-        let light = |fs: &[Fragment]| -> f64 {
-            fs.iter()
-                .map(|f| f64::from(f.color[2] * f.weight))
-                .sum()
-        };
+        let light =
+            |fs: &[Fragment]| -> f64 { fs.iter().map(|f| f64::from(f.color[2] * f.weight)).sum() };
         assert!((light(&merged) / light(&fragments) - 1.0).abs() < 1e-5);
     }
 
