@@ -537,8 +537,11 @@ pub fn smear_within(
         let k64 = f64::from(kappa);
         let (step_sin, step_cos) = (k64 * spacing).sin_cos();
         let (mut sin, mut cos) = (k64 * (0.5 * spacing - 0.5 * f64::from(length))).sin_cos();
+        // The radius, multiplied rather than divided by per tap: two divisions a tap were the
+        // loop's critical path.
+        let radius = 1.0 / k64;
         for _ in 0..taps {
-            let (along, across) = ((sin / k64) as f32, ((1.0 - cos) / k64) as f32);
+            let (along, across) = ((sin * radius) as f32, ((1.0 - cos) * radius) as f32);
             (sin, cos) = (sin * step_cos + cos * step_sin, cos * step_cos - sin * step_sin);
             let sx = along * dx - across * dy + grow_x as f32;
             let sy = along * dy + across * dx + grow_y as f32;
@@ -552,8 +555,9 @@ pub fn smear_within(
     // Per kernel row, the columns `[first, end)` its taps touched: outside them it is zero.
     let mut kernel_columns = vec![[usize::MAX, 0usize]; kh + 1];
     for [sx, sy] in shifts {
-        // Shifts are at least 1 (the box grows a pixel beyond the path), so `as` floors.
-        let (ix, iy) = (sx as usize, sy as usize);
+        // Shifts are at least 1 (the box grows a pixel beyond the path), so `as` floors; through
+        // i32, a single conversion instruction where one to u64 takes a dozen.
+        let (ix, iy) = (sx as i32 as usize, sy as i32 as usize);
         let (fx, fy) = (sx - ix as f32, sy - iy as f32);
         let at = iy * stride + ix;
         let Some(corner) = padded.get_mut(at..at + stride + 2) else {
@@ -599,9 +603,13 @@ pub fn smear_within(
             }
         }
     }
+    // A single-pixel PSF reaches exactly its kernel's columns, each written once below.
+    let single_pixel = psf.width == 1 && psf.height == 1;
     for ((row, r), w) in out.chunks_exact_mut(width * ch).zip(&reach).zip(written.iter_mut()) {
         if r[0] < r[1] {
-            row[r[0] * ch..r[1] * ch].fill(0.0);
+            if !single_pixel {
+                row[r[0] * ch..r[1] * ch].fill(0.0);
+            }
             // A box wider than the format's u16 widths cannot be stored: its columns saturate.
             let column = |c: usize| u16::try_from(c).unwrap_or(u16::MAX);
             *w = [column(r[0]), column(r[1])];
@@ -610,14 +618,14 @@ pub fn smear_within(
         }
     }
     // A single-pixel PSF (a sharp point's) is drawn as its kernel, row by row.
-    if psf.width == 1 && psf.height == 1 {
+    if single_pixel {
         let value = &psf.data[..ch];
         for (ky, k) in kernel_columns.iter().enumerate() {
             let weights = &kernel[ky * stride + k[0]..ky * stride + k[1]];
             let dst = &mut out[(ky * width + k[0]) * ch..(ky * width + k[1]) * ch];
             for (d, &w) in dst.chunks_exact_mut(ch).zip(weights) {
                 for (d, s) in d.iter_mut().zip(value) {
-                    *d += w * s;
+                    *d = w * s;
                 }
             }
         }
