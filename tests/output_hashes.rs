@@ -118,6 +118,22 @@ fn cpu_outputs_match_their_recorded_hashes() {
     spreadlet("reconstruct", &[&frames], &dir.join("cam.json"), &out, &[]);
     got.insert("bokeh/stochastic-input".into(), hash_file(&frames));
     got.insert("bokeh/reconstruct".into(), hash_file(&out));
+    // And from 4 spp, where samples are split over pixels rather than given footprints.
+    let frames_4spp = dir.join("frames-4spp.exr");
+    render_inputs_128(
+        &dir,
+        "bokeh",
+        &["--stochastic", &s(&frames_4spp), "--spp", "4"],
+    );
+    let out_4spp = dir.join("out-4spp.exr");
+    spreadlet(
+        "reconstruct",
+        &[&frames_4spp],
+        &dir.join("cam.json"),
+        &out_4spp,
+        &[],
+    );
+    got.insert("bokeh/reconstruct-4spp".into(), hash_file(&out_4spp));
 
     if let Some(examples) = shared_examples() {
         for example in ["comets", "fence"] {
