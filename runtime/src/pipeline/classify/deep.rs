@@ -130,12 +130,12 @@ fn hidden_behind_deep(deep: &DeepImage, camera: &Camera, fragments: &[Fragment])
     // would give a fragment of no weight.
     let own = |i: usize| match farthest[i] {
         Some(k) => Fragment {
-            source: u32::MAX,
+            source: super::hidden::HIDDEN_SOURCE,
             ..fragments[k]
         },
         None => Fragment {
             weight: 0.0,
-            source: u32::MAX,
+            source: super::hidden::HIDDEN_SOURCE,
             ..fragments[0]
         },
     };

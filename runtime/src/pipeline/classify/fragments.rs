@@ -304,9 +304,22 @@ pub(super) fn pixel_fragments(
                 depth: depth_at(i),
                 motion: motion_at(i),
                 bend: bend_at(i),
-                source: 0,
+                source: super::hidden::HIDDEN_SOURCE,
             },
         );
+        // Behind a split pixel the continued background is its hidden share, beside the
+        // pixel's own background part rather than behind it: that part must not hide it.
+        let mut filled = filled;
+        for f in &mut filled {
+            let (x, y) = (f.x + overscan.left as i32, f.y + overscan.top as i32);
+            let split = x >= 0
+                && y >= 0
+                && (x as usize) < w
+                && was_split.get(y as usize * w + x as usize) == Some(&true);
+            if split {
+                f.source = 0;
+            }
+        }
         counts.hidden_filled += filled.len();
         filled
     } else {

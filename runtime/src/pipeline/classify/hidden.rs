@@ -5,6 +5,12 @@ use super::Fragment;
 use crate::gbuffer::GBuffer;
 use rayon::prelude::*;
 
+/// The [`Fragment::source`] of the background continued behind an occluder: where it falls
+/// into the occluder's own depth layer, the occluder's fragments in its pixel hide it there
+/// as compositing would across layers (`layers::occlusion_within_layers`); a source of its own
+/// that no input surface has.
+pub(super) const HIDDEN_SOURCE: u32 = u32::MAX;
+
 /// The background hidden behind the silhouette of a nearer occluder that is sharper or
 /// blurrier than it, continued from the visible background next to it.
 ///

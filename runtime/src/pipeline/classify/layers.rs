@@ -56,12 +56,17 @@ pub fn classify_fragments(
         }
     };
 
-    let first_source = fragments.first().map_or(0, |f| f.source);
+    // One input surface per pixel (the background continued behind occluders aside).
+    let input_source = |f: &&Fragment| f.source != super::hidden::HIDDEN_SOURCE;
+    let first_source = fragments.iter().find(input_source).map_or(0, |f| f.source);
     // Through a real lens a pixel's PSF changes over the field too: not continued.
     let continue_layers = options.continue_layers
         && matches!(model, Some(PsfModel::ThinLens | PsfModel::LensMotion))
         && n_layers > 1
-        && fragments.iter().all(|f| f.source == first_source);
+        && fragments
+            .iter()
+            .filter(input_source)
+            .all(|f| f.source == first_source);
     if continue_layers {
         let layer_of = |f: &Fragment| {
             (layer_coord(f.parallax).floor() as usize).min(n_layers - 1)
@@ -990,8 +995,33 @@ pub(super) fn occlusion_within_layers(
         return None;
     }
     let mut kept = vec![[1.0f32; 2]; fragments.len()];
-    // Fragments by pixel, each pixel's in input order (a stable sort).
-    let mut order: Vec<u32> = (0..fragments.len() as u32).collect();
+    // Only pixels holding a fragment of another source than the first can have one occlude
+    // another: on a flat frame those are the few along its silhouettes that the background
+    // is continued behind, and sorting every fragment by pixel cost more than the rest of
+    // the frame's classification.
+    let (x0, y0) = fragments
+        .iter()
+        .fold((i32::MAX, i32::MAX), |(x, y), f| (x.min(f.x), y.min(f.y)));
+    let (x1, y1) = fragments
+        .iter()
+        .fold((i32::MIN, i32::MIN), |(x, y), f| (x.max(f.x), y.max(f.y)));
+    let width = (i64::from(x1) - i64::from(x0) + 1) as usize;
+    let height = (i64::from(y1) - i64::from(y0) + 1) as usize;
+    let cells = width.saturating_mul(height);
+    let mut order: Vec<u32> = if cells <= 4 * fragments.len() + (1 << 20) {
+        let cell = |f: &Fragment| (f.y - y0) as usize * width + (f.x - x0) as usize;
+        let mut mixed = vec![false; cells];
+        for f in fragments.iter().filter(|f| f.source != first_source) {
+            mixed[cell(f)] = true;
+        }
+        (0..fragments.len() as u32)
+            .filter(|&i| mixed[cell(&fragments[i as usize])])
+            .collect()
+    } else {
+        // Fragments scattered far beyond any frame: every one, rather than a map that large.
+        (0..fragments.len() as u32).collect()
+    };
+    // Those pixels' fragments by pixel, each pixel's in input order (a stable sort).
     order.sort_by_key(|&i| {
         let f = &fragments[i as usize];
         (f.y, f.x)
