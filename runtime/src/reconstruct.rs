@@ -69,8 +69,9 @@ pub enum SamplePlacement {
 /// scenes at 256x256; `cargo run --release -p runtime --example recon_lab SCENE`).
 pub const FOOTPRINT_SIGMA_1SPP_PX: f32 = 0.6;
 
-/// A sample brighter than this in a channel (linear) is a light's, and keeps a round
-/// footprint where others are stretched along the image's edges ([`EdgeField`]).
+/// A sample brighter than this in a channel (linear) is a light's: it gets the sharpened
+/// split ([`sharpened_share`]) where others get a footprint (stretched along the image's
+/// edges, [`EdgeField`]) or a bilinear split.
 const BRIGHT_SAMPLE: f32 = 1.0;
 
 /// Slope of the sharpened split ([`sharpened_share`]): 1 is bilinear, infinite the nearest
@@ -266,9 +267,10 @@ impl<'a> PlacedSamples<'a> {
             _ => None,
         };
         match (self.placement, footprint) {
-            // A light's sample keeps a round footprint: stretched, its light would run past
-            // the ends of its own streak or rim.
-            (_, Some(sigma_px)) => match self.edges.as_ref().filter(|_| !self.is_bright(k)) {
+            // A light's sample is split over its four pixels steeply instead (below): a
+            // footprint, round or stretched along an edge, widened its rim (and stretched, its
+            // light ran past the ends of its own streak).
+            (_, Some(sigma_px)) if !self.is_bright(k) => match self.edges.as_ref() {
                 Some(edges) => {
                     edges.push_steered(qx, qy, bounded_sigma(sigma_px), |x, y, share| {
                         tap(x as i32, y as i32, share)
@@ -278,13 +280,13 @@ impl<'a> PlacedSamples<'a> {
                     tap(x as i32, y as i32, share)
                 }),
             },
-            (SamplePlacement::Nearest, None) => tap(qx.floor() as i32, qy.floor() as i32, 1.0),
-            (_, None) => {
+            (SamplePlacement::Nearest, _) => tap(qx.floor() as i32, qy.floor() as i32, 1.0),
+            (_, _) => {
                 // Pixel (x, y) has its centre at (x + 0.5, y + 0.5).
                 let (fx, fy) = (qx - 0.5, qy - 0.5);
                 let (x0, y0) = (fx.floor(), fy.floor());
                 let (mut tx, mut ty) = (fx - x0, fy - y0);
-                if self.sharpens_split(k) {
+                if footprint.is_some() || self.sharpens_split(k) {
                     (tx, ty) = (sharpened_share(tx), sharpened_share(ty));
                 }
                 for (dx, dy, share) in [
@@ -302,9 +304,11 @@ impl<'a> PlacedSamples<'a> {
         }
     }
 
-    /// Whether sample `k`'s bilinear split is sharpened ([`sharpened_share`]): with the
-    /// bilinear placement (3 spp and more; at 1 and 2 the samples are too sparse for it), for
-    /// a light's sample, and for every sample from [`SHARPEN_EVERY_SAMPLE_SPP`].
+    /// Whether sample `k`'s bilinear split is sharpened ([`sharpened_share`]) with the
+    /// bilinear placement (3 spp and more): for a light's sample, and for every sample from
+    /// [`SHARPEN_EVERY_SAMPLE_SPP`]. (At 1 and 2 spp a light's sample that would get a
+    /// footprint is split sharpened too; one drawn with its own PSF keeps the plain split,
+    /// which did better on the `bokeh` scene's highlights.)
     fn sharpens_split(&self, k: usize) -> bool {
         self.placement == SamplePlacement::Bilinear
             && (self.frames.spp >= SHARPEN_EVERY_SAMPLE_SPP || self.is_bright(k))
@@ -627,6 +631,31 @@ mod tests {
         assert_eq!(taps(4, 0.5), vec![(5, 7), (5, 8), (6, 7), (6, 8)]);
         assert_eq!(taps(8, 0.5).len(), 4);
         assert_eq!(taps(16, 0.5), vec![(5, 7)]);
+    }
+
+    /// At 1 spp an in-focus sample gets a footprint over the pixels round it, but a light's
+    /// gets the sharpened split: 0.2 px from its pixel's centre, that pixel alone.
+    #[test]
+    fn a_lights_in_focus_sample_at_1_spp_is_split_not_spread() {
+        let cam = camera();
+        let taps = |color: f32| {
+            let mut frames = StochasticFrames::new(16, 16, 1, vec![Sample::default(); 256]);
+            frames.samples[7 * 16 + 5] = Sample {
+                color: [color, color, color, 1.0],
+                depth: 1.0,
+                jitter: [0.2, 0.2],
+                ..Sample::default()
+            };
+            let effects = effects_of(&cam, &frames);
+            let placement = SamplePlacement::for_spp(1);
+            assert!(matches!(placement, SamplePlacement::Footprint { .. }));
+            let (fragments, _) = sample_fragments(&frames, &cam, effects, placement);
+            let total: f32 = fragments.iter().map(|f| f.weight).sum();
+            assert!((total - 1.0).abs() < 1e-5, "{total}");
+            fragments.len()
+        };
+        assert_eq!(taps(5.0), 1);
+        assert!(taps(0.5) >= 4, "a dim sample keeps its footprint");
     }
 
     /// A sample displaced by its lens offset and motion lands back on its pinhole pixel.
