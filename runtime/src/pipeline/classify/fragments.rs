@@ -287,7 +287,7 @@ pub(super) fn pixel_fragments(
             let m = motion_at(i);
             coc_at(i).abs() + 0.5 * (m[0] * d.0 as f32 + m[1] * d.1 as f32).abs()
         };
-        let filled = hidden_background(
+        let mut filled = hidden_background(
             gbuffer,
             &was_split,
             &split_hidden,
@@ -309,7 +309,6 @@ pub(super) fn pixel_fragments(
         );
         // Behind a split pixel the continued background is its hidden share, beside the
         // pixel's own background part rather than behind it: that part must not hide it.
-        let mut filled = filled;
         for f in &mut filled {
             let (x, y) = (f.x + overscan.left as i32, f.y + overscan.top as i32);
             let split = x >= 0

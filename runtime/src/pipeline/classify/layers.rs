@@ -999,12 +999,10 @@ pub(super) fn occlusion_within_layers(
     // another: on a flat frame those are the few along its silhouettes that the background
     // is continued behind, and sorting every fragment by pixel cost more than the rest of
     // the frame's classification.
-    let (x0, y0) = fragments
-        .iter()
-        .fold((i32::MAX, i32::MAX), |(x, y), f| (x.min(f.x), y.min(f.y)));
-    let (x1, y1) = fragments
-        .iter()
-        .fold((i32::MIN, i32::MIN), |(x, y), f| (x.max(f.x), y.max(f.y)));
+    let (x0, y0, x1, y1) = fragments.iter().fold(
+        (i32::MAX, i32::MAX, i32::MIN, i32::MIN),
+        |(x0, y0, x1, y1), f| (x0.min(f.x), y0.min(f.y), x1.max(f.x), y1.max(f.y)),
+    );
     let width = (i64::from(x1) - i64::from(x0) + 1) as usize;
     let height = (i64::from(y1) - i64::from(y0) + 1) as usize;
     let cells = width.saturating_mul(height);
