@@ -309,7 +309,7 @@ pub(super) fn pixel_fragments(
         );
         // Behind a split pixel the continued background is its hidden share, beside the
         // pixel's own background part rather than behind it: that part must not hide it.
-        for f in &mut filled {
+        for f in filled.iter_mut().filter(|f| f.source == super::hidden::HIDDEN_SOURCE) {
             let (x, y) = (f.x + overscan.left as i32, f.y + overscan.top as i32);
             let split = x >= 0
                 && y >= 0
@@ -319,7 +319,10 @@ pub(super) fn pixel_fragments(
                 f.source = 0;
             }
         }
-        counts.hidden_filled += filled.len();
+        counts.hidden_filled += filled
+            .iter()
+            .filter(|f| f.source != super::hidden::VEIL_SOURCE)
+            .count();
         filled
     } else {
         Vec::new()

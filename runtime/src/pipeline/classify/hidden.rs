@@ -5,11 +5,40 @@ use super::Fragment;
 use crate::gbuffer::GBuffer;
 use rayon::prelude::*;
 
-/// The [`Fragment::source`] of the background continued behind an occluder: where it falls
-/// into the occluder's own depth layer, the occluder's fragments in its pixel hide it there
-/// as compositing would across layers (`layers::occlusion_within_layers`); a source of its own
+/// The [`Fragment::source`] of the background continued behind an occluder: where it would
+/// fall into the occluder's own depth layer it goes behind it (`layers::FillCeilings`), or,
+/// behind the farthest layer, the occluder's fragments in its pixel hide it there as
+/// compositing would across layers (`layers::occlusion_within_layers`); a source of its own
 /// that no input surface has.
 pub(super) const HIDDEN_SOURCE: u32 = u32::MAX;
+
+/// The [`Fragment::source`] of a veil: a fragment that is never drawn (weight 0), laid on a
+/// background pixel beside a blurrier occluder, with the occluder's depth, motion and blur and,
+/// as its alpha, the share of the pixel the occluder's smear or defocus covers there. Where the
+/// background falls into the occluder's own depth layer, `layers::occlusion_within_layers`
+/// hides that share of it there, as compositing does across layers: within a layer splats add
+/// and compositing divides by coverage, so the smear would otherwise be mixed into the
+/// background, fainter than over it, and step at the silhouette.
+pub(super) const VEIL_SOURCE: u32 = u32::MAX - 1;
+
+/// The share of a pixel whose centre lies `s` px outside a straight edge of an occluder that
+/// the occluder covers once blurred: `coc` px of defocus radius and `half_motion` px of motion
+/// (half its length over the shutter) across the edge. A box shutter ramps it linearly from
+/// one half at the edge to zero `half_motion` px out; a disc of radius `coc` covers the
+/// circular segment beyond the edge, `(acos u - u sqrt(1 - u^2)) / pi` at `u = s / coc`.
+/// Both together: the larger one's shape over their summed reach.
+pub(super) fn edge_coverage(s: f32, coc: f32, half_motion: f32) -> f32 {
+    let reach = coc + half_motion;
+    if s >= reach || reach <= 0.0 {
+        return 0.0;
+    }
+    let u = (s / reach).max(0.0);
+    if half_motion >= coc {
+        0.5 * (1.0 - u)
+    } else {
+        (u.acos() - u * (1.0 - u * u).sqrt()) / std::f32::consts::PI
+    }
+}
 
 /// The background hidden behind the silhouette of a nearer occluder that is sharper or
 /// blurrier than it, continued from the visible background next to it.
@@ -136,6 +165,36 @@ pub(super) fn hidden_background(
     if walks.is_empty() {
         return Vec::new();
     }
+    // Veils: outward from each walk's start, over the background a blurrier occluder's smear
+    // or defocus reaches, one per pixel (the most covered where several reach it).
+    let mut veils: Vec<(usize, f32, usize)> = Vec::new();
+    for &(b, d, _, first, _) in &walks {
+        let (bx, by) = ((b as i32) % w, (b as i32) / w);
+        let q = ((by + d.1 * first) * w + bx + d.0 * first) as usize;
+        let (coc_q, reach_q) = (coc_at(q).abs(), blur_along(q, d));
+        if reach_q <= blur_along(b, d) + 1.0 {
+            continue;
+        }
+        let half_motion = (reach_q - coc_q).max(0.0);
+        let occluder_depth = depth_at(q);
+        for j in 0.. {
+            let (px, py) = (bx - d.0 * j, by - d.1 * j);
+            if px < 0 || py < 0 || px >= w || py >= h {
+                break;
+            }
+            let p = (py * w + px) as usize;
+            if was_split[p] || g.color[p] == [0.0; 4] || depth_at(p) <= occluder_depth {
+                break;
+            }
+            let coverage = edge_coverage((j + first) as f32 - 0.5, coc_q, half_motion);
+            if coverage < 1e-3 {
+                break;
+            }
+            veils.push((p, coverage, q));
+        }
+    }
+    veils.sort_by(|a, b| a.0.cmp(&b.0).then(b.1.total_cmp(&a.1)).then(a.2.cmp(&b.2)));
+    veils.dedup_by_key(|v| v.0);
     // Each hidden pixel's total walk weight (zero where no walk reaches) and its walks' colours
     // summed with those weights, in one pass.
     let mut fills = vec![0.0f32; (w * h) as usize];
@@ -171,6 +230,17 @@ pub(super) fn hidden_background(
             });
         }
     }
+    out.extend(veils.into_iter().map(|(p, coverage, q)| {
+        let at = own(p);
+        Fragment {
+            x: at.x,
+            y: at.y,
+            color: [0.0, 0.0, 0.0, coverage],
+            weight: 0.0,
+            source: VEIL_SOURCE,
+            ..own(q)
+        }
+    }));
     out
 }
 
@@ -213,6 +283,22 @@ fn smoothed_fill_color(walked: &[[f32; 4]], fills: &[f32], (w, h): (i32, i32), q
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The blurred edge's coverage against its closed forms: a box shutter's linear ramp, a
+    /// disc's circular segment (one half at the edge, 0.1955 of the disc beyond a chord half
+    /// the radius out), nothing beyond the reach.
+    #[test]
+    fn edge_coverage_is_the_ramp_of_a_box_shutter_and_the_segment_of_a_disc() {
+        assert!((edge_coverage(0.0, 0.0, 10.0) - 0.5).abs() < 1e-6);
+        assert!((edge_coverage(5.0, 0.0, 10.0) - 0.25).abs() < 1e-6);
+        assert!((edge_coverage(0.0, 8.0, 0.0) - 0.5).abs() < 1e-6);
+        let segment = (0.5f32.acos() - 0.5 * 0.75f32.sqrt()) / std::f32::consts::PI;
+        assert!((segment - 0.1955).abs() < 1e-4, "{segment}");
+        assert!((edge_coverage(4.0, 8.0, 0.0) - segment).abs() < 1e-6);
+        assert_eq!(edge_coverage(10.0, 0.0, 10.0), 0.0);
+        assert_eq!(edge_coverage(12.0, 8.0, 3.0), 0.0);
+        assert_eq!(edge_coverage(1.0, 0.0, 0.0), 0.0);
+    }
 
     /// A `w x h` frame of greys, `pixel(x, y)` giving each pixel's grey and depth; and the
     /// depths.

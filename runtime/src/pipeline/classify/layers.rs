@@ -57,7 +57,9 @@ pub fn classify_fragments(
     };
 
     // One input surface per pixel (the background continued behind occluders aside).
-    let input_source = |f: &&Fragment| f.source != super::hidden::HIDDEN_SOURCE;
+    let input_source = |f: &&Fragment| {
+        f.source != super::hidden::HIDDEN_SOURCE && f.source != super::hidden::VEIL_SOURCE
+    };
     let first_source = fragments.iter().find(input_source).map_or(0, |f| f.source);
     // Through a real lens a pixel's PSF changes over the field too: not continued.
     let continue_layers = options.continue_layers
@@ -93,7 +95,7 @@ pub fn classify_fragments(
     // fragment is not split: its PSF barely differs between the two layers, and a surface
     // split across two layers lets what lies behind it show through (up to a quarter where
     // the weights are even).
-    let targets_of = |frag: &Fragment| {
+    let own_targets = |frag: &Fragment| {
         let coc = signed_coc(frag.depth).abs();
         let m = frag.motion;
         let motion_len = (m[0] * m[0] + m[1] * m[1]).sqrt();
@@ -102,6 +104,19 @@ pub fn classify_fragments(
         let continued = continue_layers && motion_len < 1.0;
         let band = options.soft_layers.filter(|_| !sharp && !continued);
         layer_targets(layer_coord(frag.parallax), n_layers, band)
+    };
+    // The background continued behind an occluder goes into a layer behind the occluder's
+    // farthest one, so that compositing lays the occluder's blurred or smeared edge over it
+    // instead of the two adding up in one layer.
+    let ceilings = FillCeilings::new(fragments, &own_targets);
+    let targets_of = |frag: &Fragment| {
+        let targets = own_targets(frag);
+        match ceilings.as_ref() {
+            Some(ceilings) if frag.source == super::hidden::HIDDEN_SOURCE => {
+                ceilings.lower(frag, targets)
+            }
+            _ => targets,
+        }
     };
     let transmission = occlusion_within_layers(fragments, n_layers, &targets_of);
     let flip_front = front_turns_the_aperture(dbs);
@@ -1052,7 +1067,12 @@ pub(super) fn occlusion_within_layers(
             for &(_, _, i) in run {
                 let frag = &fragments[i as usize];
                 let (targets, n) = targets_of(frag);
-                let alpha = frag.color[3].clamp(0.0, 1.0) * frag.weight.max(0.0);
+                // A veil is never drawn: its alpha is what it hides.
+                let alpha = if frag.source == super::hidden::VEIL_SOURCE {
+                    frag.color[3].clamp(0.0, 1.0)
+                } else {
+                    frag.color[3].clamp(0.0, 1.0) * frag.weight.max(0.0)
+                };
                 for (t, &(layer, lw)) in targets[..n].iter().enumerate() {
                     kept[i as usize][t] = through[layer];
                     coverage[layer] += alpha * lw;
@@ -1066,6 +1086,101 @@ pub(super) fn occlusion_within_layers(
         }
     }
     Some(kept)
+}
+
+/// Per pixel holding a continued background (`HIDDEN_SOURCE`), the farthest depth layer of
+/// the nearer fragments that hide it there.
+///
+/// Within a layer splats add and compositing divides by coverage, so a continuation sharing
+/// its occluder's layer is mixed into it; hiding it there instead (the occluder's coverage at
+/// the pixel is 1) lost what a moving or defocused occluder's edge reveals: a car's forward
+/// smear stopped in a hard edge where the road beside its wheels shares the car's layer. In a
+/// farther layer, compositing lays the occluder's ramp over it as it does for any background.
+pub(super) struct FillCeilings {
+    origin: (i32, i32),
+    width: usize,
+    /// Per cell: the nearest depth of a continuation there (infinite where there is none).
+    fill_depth: Vec<f32>,
+    /// Per cell: the farthest layer of a nearer fragment there (`u8::MAX`: none).
+    ceiling: Vec<u8>,
+}
+
+impl FillCeilings {
+    /// `None` when nothing is continued, or the fragments spread over a box too large to map.
+    pub(super) fn new(
+        fragments: &[Fragment],
+        targets_of: &dyn Fn(&Fragment) -> LayerTargets,
+    ) -> Option<Self> {
+        let hidden = |f: &Fragment| f.source == super::hidden::HIDDEN_SOURCE;
+        let (x0, y0, x1, y1) = fragments.iter().filter(|f| hidden(f)).fold(
+            (i32::MAX, i32::MAX, i32::MIN, i32::MIN),
+            |(x0, y0, x1, y1), f| (x0.min(f.x), y0.min(f.y), x1.max(f.x), y1.max(f.y)),
+        );
+        if x1 < x0 {
+            return None;
+        }
+        let width = (i64::from(x1) - i64::from(x0) + 1) as usize;
+        let height = (i64::from(y1) - i64::from(y0) + 1) as usize;
+        let cells = width.checked_mul(height)?;
+        if cells > 4 * fragments.len() + (1 << 20) {
+            return None;
+        }
+        let mut ceilings = FillCeilings {
+            origin: (x0, y0),
+            width,
+            fill_depth: vec![f32::INFINITY; cells],
+            ceiling: vec![u8::MAX; cells],
+        };
+        for f in fragments.iter().filter(|f| hidden(f)) {
+            let cell = ceilings.cell(f).unwrap_or(0);
+            ceilings.fill_depth[cell] = ceilings.fill_depth[cell].min(f.depth);
+        }
+        for f in fragments.iter().filter(|f| !hidden(f) && f.weight > 0.0) {
+            let Some(cell) = ceilings.cell(f) else {
+                continue;
+            };
+            if f.depth < ceilings.fill_depth[cell] {
+                let (targets, n) = targets_of(f);
+                let farthest = targets[..n].iter().map(|t| t.0).min().unwrap_or(0);
+                let farthest = farthest.min(usize::from(u8::MAX - 1)) as u8;
+                ceilings.ceiling[cell] = ceilings.ceiling[cell].min(farthest);
+            }
+        }
+        Some(ceilings)
+    }
+
+    fn cell(&self, f: &Fragment) -> Option<usize> {
+        let x = usize::try_from(i64::from(f.x) - i64::from(self.origin.0)).ok()?;
+        let y = usize::try_from(i64::from(f.y) - i64::from(self.origin.1)).ok()?;
+        (x < self.width && y * self.width + x < self.ceiling.len()).then_some(y * self.width + x)
+    }
+
+    /// `targets` of a continuation at `f`'s pixel, moved behind the layer of what hides it
+    /// there. Where that is the farthest layer, they stay (and `occlusion_within_layers`
+    /// hides the continuation under the occluder's coverage).
+    pub(super) fn lower(&self, f: &Fragment, targets: LayerTargets) -> LayerTargets {
+        let Some(cell) = self.cell(f) else {
+            return targets;
+        };
+        let ceiling = self.ceiling[cell];
+        if ceiling == u8::MAX || ceiling == 0 {
+            return targets;
+        }
+        let below = usize::from(ceiling) - 1;
+        let (mut layers, n) = targets;
+        if layers[..n].iter().all(|t| t.0 <= below) {
+            return targets;
+        }
+        for t in &mut layers[..n] {
+            t.0 = t.0.min(below);
+        }
+        if n == 2 && layers[0].0 == layers[1].0 {
+            layers[0].1 += layers[1].1;
+            layers[1] = (0, 0.0);
+            return (layers, 1);
+        }
+        (layers, n)
+    }
 }
 
 /// A fragment's depth layers and its weight in each: one or two (soft layers) of the pair.
