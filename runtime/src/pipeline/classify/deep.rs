@@ -185,6 +185,11 @@ pub(crate) fn classify_deep_with(
         counts.hidden_filled += filled.len();
         fragments.extend(filled);
     }
+    // A deep pixel's samples are not one surface per source: nothing to continue.
+    let options = &ClassifyOptions {
+        continue_layers: false,
+        ..options.clone()
+    };
     let o = deep.overscan;
     let data = DataWindow {
         x0: -(o.left as i32),

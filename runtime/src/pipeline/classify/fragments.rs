@@ -147,6 +147,9 @@ pub(super) fn check_passes(
 
 /// The fragments of every pixel of `gbuffer` (up to two per pixel with `edge_split`), and
 /// the background continued behind sharper occluders ([`ClassifyOptions::fill_hidden`]).
+/// With `render_layer` (one render layer of several, with transparency), veils over what the
+/// other layers hold beside its surfaces' blurred silhouettes.
+#[allow(clippy::too_many_arguments)]
 pub(super) fn pixel_fragments(
     gbuffer: &GBuffer,
     camera: &Camera,
@@ -154,6 +157,7 @@ pub(super) fn pixel_fragments(
     model: Option<PsfModel>,
     options: &ClassifyOptions,
     split_edges: bool,
+    render_layer: bool,
     counts: &mut PathCounts,
 ) -> Vec<Fragment> {
     let (w, h) = (gbuffer.width, gbuffer.height);
@@ -287,6 +291,17 @@ pub(super) fn pixel_fragments(
             let m = motion_at(i);
             coc_at(i).abs() + 0.5 * (m[0] * d.0 as f32 + m[1] * d.1 as f32).abs()
         };
+        let own = |i: usize| Fragment {
+            x: (i % w) as i32 - overscan.left as i32,
+            y: (i / w) as i32 - overscan.top as i32,
+            color: gbuffer.color[i],
+            weight: 1.0,
+            parallax: parallax_of(depth_at(i)),
+            depth: depth_at(i),
+            motion: motion_at(i),
+            bend: bend_at(i),
+            source: super::hidden::HIDDEN_SOURCE,
+        };
         let mut filled = hidden_background(
             gbuffer,
             &was_split,
@@ -295,18 +310,18 @@ pub(super) fn pixel_fragments(
             &depth_at,
             &blur_along,
             options.hdr_dense_threshold,
-            &|i| Fragment {
-                x: (i % w) as i32 - overscan.left as i32,
-                y: (i / w) as i32 - overscan.top as i32,
-                color: gbuffer.color[i],
-                weight: 1.0,
-                parallax: parallax_of(depth_at(i)),
-                depth: depth_at(i),
-                motion: motion_at(i),
-                bend: bend_at(i),
-                source: super::hidden::HIDDEN_SOURCE,
-            },
+            &own,
         );
+        // A render layer with transparency: what the other layers hold beside its surface is
+        // veiled where the surface's blur covers it.
+        if render_layer {
+            filled.extend(super::hidden::render_layer_veils(
+                gbuffer,
+                &coc_at,
+                &blur_along,
+                &own,
+            ));
+        }
         // Behind a split pixel the continued background is its hidden share, beside the
         // pixel's own background part rather than behind it: that part must not hide it.
         for f in filled.iter_mut().filter(|f| f.source == super::hidden::HIDDEN_SOURCE) {

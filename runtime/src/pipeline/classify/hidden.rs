@@ -6,7 +6,7 @@ use crate::gbuffer::GBuffer;
 use rayon::prelude::*;
 
 /// The [`Fragment::source`] of the background continued behind an occluder: where it would
-/// fall into the occluder's own depth layer it goes behind it (`layers::FillCeilings`), or,
+/// fall into the occluder's own depth layer it goes behind it (`layers::Ceilings`), or,
 /// behind the farthest layer, the occluder's fragments in its pixel hide it there as
 /// compositing would across layers (`layers::occlusion_within_layers`); a source of its own
 /// that no input surface has.
@@ -242,6 +242,79 @@ pub(super) fn hidden_background(
         }
     }));
     out
+}
+
+/// Veils ([`VEIL_SOURCE`]) beside the silhouette of a render layer's own surface, over the
+/// pixels the layer leaves uncovered (alpha under one half) that its blur reaches: what the
+/// other render layers hold there is what the surface's smear or defocus half covers, and
+/// where it shares the surface's depth layer it must be covered there, not added to.
+/// `coc_at`, `blur_along` and `own` as for [`hidden_background`].
+pub(super) fn render_layer_veils(
+    g: &GBuffer,
+    coc_at: &(impl Fn(usize) -> f32 + Sync),
+    blur_along: &(impl Fn(usize, (i32, i32)) -> f32 + Sync),
+    own: &(impl Fn(usize) -> Fragment + Sync),
+) -> Vec<Fragment> {
+    let (w, h) = (g.width as i32, g.height as i32);
+    const DIRECTIONS: [(i32, i32); 4] = [(1, 0), (-1, 0), (0, 1), (0, -1)];
+    let covered = |i: usize| g.color[i][3] >= 0.5;
+    let mut veils: Vec<(usize, f32, usize)> = (0..h)
+        .into_par_iter()
+        .map(|y| {
+            let mut veils = Vec::new();
+            for x in 0..w {
+                let b = (y * w + x) as usize;
+                if covered(b) {
+                    continue;
+                }
+                for d in DIRECTIONS {
+                    let (qx, qy) = (x + d.0, y + d.1);
+                    if qx < 0 || qy < 0 || qx >= w || qy >= h {
+                        continue;
+                    }
+                    let q = (qy * w + qx) as usize;
+                    if !covered(q) {
+                        continue;
+                    }
+                    let (coc_q, reach_q) = (coc_at(q).abs(), blur_along(q, d));
+                    let half_motion = (reach_q - coc_q).max(0.0);
+                    for j in 0.. {
+                        let (px, py) = (x - d.0 * j, y - d.1 * j);
+                        if px < 0 || py < 0 || px >= w || py >= h {
+                            break;
+                        }
+                        let p = (py * w + px) as usize;
+                        if covered(p) {
+                            break;
+                        }
+                        let coverage = edge_coverage(j as f32 + 0.5, coc_q, half_motion);
+                        if coverage < 1e-3 {
+                            break;
+                        }
+                        veils.push((p, coverage, q));
+                    }
+                }
+            }
+            veils
+        })
+        .flatten_iter()
+        .collect();
+    veils.sort_by(|a, b| a.0.cmp(&b.0).then(b.1.total_cmp(&a.1)).then(a.2.cmp(&b.2)));
+    veils.dedup_by_key(|v| v.0);
+    veils
+        .into_iter()
+        .map(|(p, coverage, q)| {
+            let at = own(p);
+            Fragment {
+                x: at.x,
+                y: at.y,
+                color: [0.0, 0.0, 0.0, coverage],
+                weight: 0.0,
+                source: VEIL_SOURCE,
+                ..own(q)
+            }
+        })
+        .collect()
 }
 
 /// A walk of the continuation: the background pixel it repeats, its direction (an axis), the

@@ -56,19 +56,15 @@ pub fn classify_fragments(
         }
     };
 
-    // One input surface per pixel (the background continued behind occluders aside).
+    // One input surface per pixel of each source (render layer), the background continued
+    // behind occluders and veils aside. Through a real lens a pixel's PSF changes over the
+    // field too: not continued.
     let input_source = |f: &&Fragment| {
         f.source != super::hidden::HIDDEN_SOURCE && f.source != super::hidden::VEIL_SOURCE
     };
-    let first_source = fragments.iter().find(input_source).map_or(0, |f| f.source);
-    // Through a real lens a pixel's PSF changes over the field too: not continued.
     let continue_layers = options.continue_layers
         && matches!(model, Some(PsfModel::ThinLens | PsfModel::LensMotion))
-        && n_layers > 1
-        && fragments
-            .iter()
-            .filter(input_source)
-            .all(|f| f.source == first_source);
+        && n_layers > 1;
     if continue_layers {
         let layer_of = |f: &Fragment| {
             (layer_coord(f.parallax).floor() as usize).min(n_layers - 1)
@@ -78,13 +74,27 @@ pub fn classify_fragments(
             let m = f.motion;
             coc + 0.5 * (m[0] * m[0] + m[1] * m[1]).sqrt()
         };
-        let continued = continue_across_layers(
-            &fragments,
-            (w, h),
-            &layer_of,
-            &blur_of,
-            options.hdr_dense_threshold,
-        );
+        let mut sources: Vec<u32> = fragments.iter().filter(input_source).map(|f| f.source).collect();
+        sources.sort_unstable();
+        sources.dedup();
+        let continued = if sources.len() <= 1 {
+            continue_across_layers(&fragments, (w, h), &layer_of, &blur_of, options.hdr_dense_threshold)
+        } else {
+            // Render layers: each one's surfaces on their own, what another layer holds in
+            // the same pixel being another surface.
+            let mut continued = Vec::new();
+            for source in sources {
+                let own: Vec<Fragment> = fragments.iter().filter(|f| f.source == source).copied().collect();
+                continued.extend(continue_across_layers(
+                    &own,
+                    (w, h),
+                    &layer_of,
+                    &blur_of,
+                    options.hdr_dense_threshold,
+                ));
+            }
+            continued
+        };
         // Appended in the room the fragments were made with: a copy would touch all of them
         // (13 MB on a 512 px frame) again in fresh memory.
         fragments.extend(continued);
@@ -105,14 +115,15 @@ pub fn classify_fragments(
         let band = options.soft_layers.filter(|_| !sharp && !continued);
         layer_targets(layer_coord(frag.parallax), n_layers, band)
     };
-    // The background continued behind an occluder goes into a layer behind the occluder's
-    // farthest one, so that compositing lays the occluder's blurred or smeared edge over it
+    // A surface behind a nearer one in its pixel (another render layer, deep sample, or the
+    // background continued behind an occluder) goes into a layer behind the nearer one's
+    // farthest, so that compositing lays the nearer surface's blurred or smeared edge over it
     // instead of the two adding up in one layer.
-    let ceilings = FillCeilings::new(fragments, &own_targets);
+    let ceilings = Ceilings::new(fragments, &own_targets);
     let targets_of = |frag: &Fragment| {
         let targets = own_targets(frag);
         match ceilings.as_ref() {
-            Some(ceilings) if frag.source == super::hidden::HIDDEN_SOURCE => {
+            Some(ceilings) if frag.source != super::hidden::VEIL_SOURCE => {
                 ceilings.lower(frag, targets)
             }
             _ => targets,
@@ -1088,34 +1099,43 @@ pub(super) fn occlusion_within_layers(
     Some(kept)
 }
 
-/// Per pixel holding a continued background (`HIDDEN_SOURCE`), the farthest depth layer of
-/// the nearer fragments that hide it there.
+/// Per pixel holding fragments of several sources (a render layer over another, a deep
+/// image's samples, the background continued behind an occluder), its nearest source and
+/// that source's farthest depth layer there: the farther sources' fragments of the pixel go
+/// into the layers behind it ([`Ceilings::lower`]).
 ///
-/// Within a layer splats add and compositing divides by coverage, so a continuation sharing
-/// its occluder's layer is mixed into it; hiding it there instead (the occluder's coverage at
-/// the pixel is 1) lost what a moving or defocused occluder's edge reveals: a car's forward
-/// smear stopped in a hard edge where the road beside its wheels shares the car's layer. In a
-/// farther layer, compositing lays the occluder's ramp over it as it does for any background.
-pub(super) struct FillCeilings {
+/// Within a layer splats add and compositing divides by coverage, so a farther surface sharing
+/// the nearer one's layer is mixed into it; hiding it there instead (the nearer surface's
+/// coverage at the pixel is 1) lost what a moving or defocused surface's edge reveals: a car's
+/// forward smear stopped in a hard edge where the road beside its wheels shares the car's
+/// layer. In a farther layer, compositing lays the nearer surface's ramp over it as it does
+/// for any background.
+pub(super) struct Ceilings {
     origin: (i32, i32),
     width: usize,
-    /// Per cell: the nearest depth of a continuation there (infinite where there is none).
-    fill_depth: Vec<f32>,
-    /// Per cell: the farthest layer of a nearer fragment there (`u8::MAX`: none).
+    /// Per cell: the depth and source of its nearest fragment (infinite depth: none).
+    nearest: Vec<(f32, u32)>,
+    /// Per cell: the farthest layer of its nearest source (`u8::MAX`: none).
     ceiling: Vec<u8>,
 }
 
-impl FillCeilings {
-    /// `None` when nothing is continued, or the fragments spread over a box too large to map.
+impl Ceilings {
+    /// `None` when every fragment comes from one source, or the fragments of the other
+    /// sources spread over a box too large to map. Veils ([`super::hidden::VEIL_SOURCE`]) and
+    /// fragments of no weight neither set nor take a ceiling.
     pub(super) fn new(
         fragments: &[Fragment],
         targets_of: &dyn Fn(&Fragment) -> LayerTargets,
     ) -> Option<Self> {
-        let hidden = |f: &Fragment| f.source == super::hidden::HIDDEN_SOURCE;
-        let (x0, y0, x1, y1) = fragments.iter().filter(|f| hidden(f)).fold(
-            (i32::MAX, i32::MAX, i32::MIN, i32::MIN),
-            |(x0, y0, x1, y1), f| (x0.min(f.x), y0.min(f.y), x1.max(f.x), y1.max(f.y)),
-        );
+        let counts = |f: &Fragment| f.weight > 0.0 && f.source != super::hidden::VEIL_SOURCE;
+        let first_source = fragments.iter().find(|f| counts(f))?.source;
+        // Only a pixel holding a fragment of another source than the first has two.
+        let (x0, y0, x1, y1) = fragments
+            .iter()
+            .filter(|f| counts(f) && f.source != first_source)
+            .fold((i32::MAX, i32::MAX, i32::MIN, i32::MIN), |(x0, y0, x1, y1), f| {
+                (x0.min(f.x), y0.min(f.y), x1.max(f.x), y1.max(f.y))
+            });
         if x1 < x0 {
             return None;
         }
@@ -1125,21 +1145,25 @@ impl FillCeilings {
         if cells > 4 * fragments.len() + (1 << 20) {
             return None;
         }
-        let mut ceilings = FillCeilings {
+        let mut ceilings = Ceilings {
             origin: (x0, y0),
             width,
-            fill_depth: vec![f32::INFINITY; cells],
+            nearest: vec![(f32::INFINITY, 0); cells],
             ceiling: vec![u8::MAX; cells],
         };
-        for f in fragments.iter().filter(|f| hidden(f)) {
-            let cell = ceilings.cell(f).unwrap_or(0);
-            ceilings.fill_depth[cell] = ceilings.fill_depth[cell].min(f.depth);
+        for f in fragments.iter().filter(|f| counts(f)) {
+            if let Some(cell) = ceilings.cell(f) {
+                let nearest = &mut ceilings.nearest[cell];
+                if f.depth < nearest.0 {
+                    *nearest = (f.depth, f.source);
+                }
+            }
         }
-        for f in fragments.iter().filter(|f| !hidden(f) && f.weight > 0.0) {
+        for f in fragments.iter().filter(|f| counts(f)) {
             let Some(cell) = ceilings.cell(f) else {
                 continue;
             };
-            if f.depth < ceilings.fill_depth[cell] {
+            if f.source == ceilings.nearest[cell].1 {
                 let (targets, n) = targets_of(f);
                 let farthest = targets[..n].iter().map(|t| t.0).min().unwrap_or(0);
                 let farthest = farthest.min(usize::from(u8::MAX - 1)) as u8;
@@ -1155,15 +1179,16 @@ impl FillCeilings {
         (x < self.width && y * self.width + x < self.ceiling.len()).then_some(y * self.width + x)
     }
 
-    /// `targets` of a continuation at `f`'s pixel, moved behind the layer of what hides it
-    /// there. Where that is the farthest layer, they stay (and `occlusion_within_layers`
-    /// hides the continuation under the occluder's coverage).
+    /// `targets` of `f`, moved behind the farthest layer of its pixel's nearest source when
+    /// `f` comes from another source and lies behind it. Where that is the farthest layer,
+    /// they stay (and `occlusion_within_layers` hides `f` under the nearer coverage there).
     pub(super) fn lower(&self, f: &Fragment, targets: LayerTargets) -> LayerTargets {
         let Some(cell) = self.cell(f) else {
             return targets;
         };
+        let (depth, source) = self.nearest[cell];
         let ceiling = self.ceiling[cell];
-        if ceiling == u8::MAX || ceiling == 0 {
+        if f.source == source || f.depth <= depth || ceiling == u8::MAX || ceiling == 0 {
             return targets;
         }
         let below = usize::from(ceiling) - 1;

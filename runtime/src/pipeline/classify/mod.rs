@@ -290,6 +290,7 @@ pub(crate) fn classify_with(
         model,
         options,
         options.edge_split,
+        false,
         &mut counts,
     );
     classify_fragments(
@@ -398,10 +399,14 @@ pub(crate) fn classify_layers_with(
                 model,
                 options,
                 options.edge_split && opaque,
+                !opaque,
                 &mut counts,
             )
             .into_iter()
-            .map(|f| Fragment { source, ..f }),
+            .map(|f| match f.source {
+                hidden::VEIL_SOURCE => f,
+                _ => Fragment { source, ..f },
+            }),
         );
     }
     classify_fragments(
