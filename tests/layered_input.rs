@@ -286,6 +286,21 @@ fn a_defocused_foreground_view_layer_is_as_good_as_the_flat_input() {
     );
 }
 
+/// A sphere spinning before a wall in its own view layer: soft-layered, it was split between
+/// two depth layers along its iso-depth circles, and the real wall of the other view layer
+/// showed through as rings (FLIP 0.0424 against the flat input's 0.0218); layered hard, as a
+/// fragment of several sources is, the two are level.
+#[test]
+fn a_spinning_sphere_in_its_own_view_layer_has_no_rings() {
+    let disc = Path::new(env!("CARGO_MANIFEST_DIR")).join("scene/scenes/hard/spinning-disc.json");
+    let dir = tempfile::tempdir().expect("temp dir");
+    let (s1, f1, s2, f2) = own_scene_scores(dir.path(), &p(&disc), "disc");
+    assert!(
+        s2 > s1 - 0.001 && f2 < 1.05 * f1,
+        "single {s1}/{f1}, layered {s2}/{f2}"
+    );
+}
+
 #[test]
 fn own_scenes_as_view_layers_beat_the_flat_input() {
     // The built-in `occluder`: three thin bars 0.35 m from an f/1.4 lens focused on a box at
@@ -309,16 +324,15 @@ fn own_scenes_as_view_layers_beat_the_flat_input() {
     );
     // A car with lamps crossing a road: the road behind the streak's ends is real with the
     // layers. The flat input continues the visible road behind the moving car, which comes
-    // close (FLIP 0.0176 without that, 0.0136 with it and its veils, layered 0.0143): the
-    // layers must stay ahead by SSIM and level by FLIP. What keeps the layers behind in FLIP
-    // is the moving car split between two depth layers (soft layering), through which the
-    // real road shows by up to a quarter where the split is even: its body comes out 3 %
-    // darker; the flat input has nothing behind the body to show.
+    // close (FLIP 0.0176 without that, 0.0136 with it and its veils, layered 0.0127): the
+    // layers must stay ahead by SSIM and level by FLIP. Soft-layered, the moving car was split
+    // between two depth layers, through which the real road showed (its body 3 % darker,
+    // layered 0.0143).
     let car = Path::new(env!("CARGO_MANIFEST_DIR")).join("scene/scenes/hard/car-on-road.json");
     let dir3 = tempfile::tempdir().expect("temp dir");
     let (s1, f1, s2, f2) = own_scene_scores(dir3.path(), &p(&car), "car,lamp front,lamp back");
     assert!(
-        s2 > s1 && f2 < 1.06 * f1,
+        s2 > s1 && f2 < 1.05 * f1,
         "single {s1}/{f1}, layered {s2}/{f2}"
     );
     let d = |n: &str| p(&dir.path().join(n));

@@ -62,6 +62,11 @@ pub fn classify_fragments(
     let input_source = |f: &&Fragment| {
         f.source != super::hidden::HIDDEN_SOURCE && f.source != super::hidden::VEIL_SOURCE
     };
+    let first_source = fragments.iter().find(input_source).map(|f| f.source);
+    let one_source = fragments
+        .iter()
+        .filter(input_source)
+        .all(|f| Some(f.source) == first_source);
     let continue_layers = options.continue_layers
         && matches!(model, Some(PsfModel::ThinLens | PsfModel::LensMotion))
         && n_layers > 1;
@@ -104,7 +109,10 @@ pub fn classify_fragments(
     // Layer weights: hard, or blended near the boundary between two layer centres. A sharp
     // fragment is not split: its PSF barely differs between the two layers, and a surface
     // split across two layers lets what lies behind it show through (up to a quarter where
-    // the weights are even).
+    // the weights are even). Nor is a fragment of several sources (render layers, deep
+    // samples): another source's surface lies behind most of it, and showed through as rings
+    // along a spinning sphere's iso-depth lines and a darker body on a moving car.
+    // A flat input has nothing behind its surfaces but near their silhouettes.
     let own_targets = |frag: &Fragment| {
         let coc = signed_coc(frag.depth).abs();
         let m = frag.motion;
@@ -112,7 +120,7 @@ pub fn classify_fragments(
         let sharp = coc.max(motion_len) < options.soft_layers_min_blur_px;
         // Continued across the layers instead, a still surface is layered hard.
         let continued = continue_layers && motion_len < 1.0;
-        let band = options.soft_layers.filter(|_| !sharp && !continued);
+        let band = options.soft_layers.filter(|_| !sharp && !continued && one_source);
         layer_targets(layer_coord(frag.parallax), n_layers, band)
     };
     // A surface behind a nearer one in its pixel (another render layer, deep sample, or the
