@@ -126,15 +126,19 @@ pub fn classify_fragments(
     // A surface behind a nearer one in its pixel (another render layer, deep sample, or the
     // background continued behind an occluder) goes into a layer behind the nearer one's
     // farthest, so that compositing lays the nearer surface's blurred or smeared edge over it
-    // instead of the two adding up in one layer.
+    // instead of the two adding up in one layer; and the nearer one is layered hard there, so
+    // that its two halves do not let it through (a spinning sphere's rim greyed by the wall
+    // continued behind it).
     let ceilings = Ceilings::new(fragments, &own_targets);
     let targets_of = |frag: &Fragment| {
-        let targets = own_targets(frag);
         match ceilings.as_ref() {
             Some(ceilings) if frag.source != super::hidden::VEIL_SOURCE => {
-                ceilings.lower(frag, targets)
+                if ceilings.covers_another(frag) {
+                    return layer_targets(layer_coord(frag.parallax), n_layers, None);
+                }
+                ceilings.lower(frag, own_targets(frag))
             }
-            _ => targets,
+            _ => own_targets(frag),
         }
     };
     let transmission = occlusion_within_layers(fragments, n_layers, &targets_of);
@@ -1125,6 +1129,8 @@ pub(super) struct Ceilings {
     nearest: Vec<(f32, u32)>,
     /// Per cell: the farthest layer of its nearest source (`u8::MAX`: none).
     ceiling: Vec<u8>,
+    /// Per cell: whether a fragment of another source than the nearest lies there.
+    mixed: Vec<bool>,
 }
 
 impl Ceilings {
@@ -1158,6 +1164,7 @@ impl Ceilings {
             width,
             nearest: vec![(f32::INFINITY, 0); cells],
             ceiling: vec![u8::MAX; cells],
+            mixed: vec![false; cells],
         };
         for f in fragments.iter().filter(|f| counts(f)) {
             if let Some(cell) = ceilings.cell(f) {
@@ -1176,9 +1183,18 @@ impl Ceilings {
                 let farthest = targets[..n].iter().map(|t| t.0).min().unwrap_or(0);
                 let farthest = farthest.min(usize::from(u8::MAX - 1)) as u8;
                 ceilings.ceiling[cell] = ceilings.ceiling[cell].min(farthest);
+            } else {
+                ceilings.mixed[cell] = true;
             }
         }
         Some(ceilings)
+    }
+
+    /// Whether `f` belongs to its pixel's nearest source and another source lies behind it
+    /// there.
+    pub(super) fn covers_another(&self, f: &Fragment) -> bool {
+        self.cell(f)
+            .is_some_and(|cell| self.mixed[cell] && self.nearest[cell].1 == f.source)
     }
 
     fn cell(&self, f: &Fragment) -> Option<usize> {
