@@ -18,7 +18,8 @@ pub(super) const HIDDEN_SOURCE: u32 = u32::MAX;
 /// background falls into the occluder's own depth layer, `layers::occlusion_within_layers`
 /// hides that share of it there, as compositing does across layers: within a layer splats add
 /// and compositing divides by coverage, so the smear would otherwise be mixed into the
-/// background, fainter than over it, and step at the silhouette.
+/// background, fainter than over it, and step at the silhouette. Its red channel holds the
+/// depth of the background it lies on (0 where another render layer holds it).
 pub(super) const VEIL_SOURCE: u32 = u32::MAX - 1;
 
 /// The share of a pixel whose centre lies `s` px outside a straight edge of an occluder that
@@ -167,33 +168,39 @@ pub(super) fn hidden_background(
     }
     // Veils: outward from each walk's start, over the background a blurrier occluder's smear
     // or defocus reaches, one per pixel (the most covered where several reach it).
-    let mut veils: Vec<(usize, f32, usize)> = Vec::new();
-    for &(b, d, _, first, _) in &walks {
-        let (bx, by) = ((b as i32) % w, (b as i32) / w);
-        let q = ((by + d.1 * first) * w + bx + d.0 * first) as usize;
-        let (coc_q, reach_q) = (coc_at(q).abs(), blur_along(q, d));
-        if reach_q <= blur_along(b, d) + 1.0 {
-            continue;
-        }
-        let half_motion = (reach_q - coc_q).max(0.0);
-        let occluder_depth = depth_at(q);
-        for j in 0.. {
-            let (px, py) = (bx - d.0 * j, by - d.1 * j);
-            if px < 0 || py < 0 || px >= w || py >= h {
-                break;
+    let mut veils: Vec<(usize, f32, usize)> = walks
+        .par_iter()
+        .flat_map_iter(|&(b, d, _, first, _)| {
+            let mut out = Vec::new();
+            let (bx, by) = ((b as i32) % w, (b as i32) / w);
+            let q = ((by + d.1 * first) * w + bx + d.0 * first) as usize;
+            let (coc_q, reach_q) = (coc_at(q).abs(), blur_along(q, d));
+            if reach_q <= blur_along(b, d) + 1.0 {
+                return out;
             }
-            let p = (py * w + px) as usize;
-            if was_split[p] || g.color[p] == [0.0; 4] || depth_at(p) <= occluder_depth {
-                break;
+            let half_motion = (reach_q - coc_q).max(0.0);
+            let occluder_depth = depth_at(q);
+            for j in 0.. {
+                let (px, py) = (bx - d.0 * j, by - d.1 * j);
+                if px < 0 || py < 0 || px >= w || py >= h {
+                    break;
+                }
+                let p = (py * w + px) as usize;
+                if was_split[p] || g.color[p] == [0.0; 4] || depth_at(p) <= occluder_depth {
+                    break;
+                }
+                let coverage = edge_coverage((j + first) as f32 - 0.5, coc_q, half_motion);
+                if coverage < 1e-3 {
+                    break;
+                }
+                out.push((p, coverage, q));
             }
-            let coverage = edge_coverage((j + first) as f32 - 0.5, coc_q, half_motion);
-            if coverage < 1e-3 {
-                break;
-            }
-            veils.push((p, coverage, q));
-        }
-    }
-    veils.sort_by(|a, b| a.0.cmp(&b.0).then(b.1.total_cmp(&a.1)).then(a.2.cmp(&b.2)));
+            out
+        })
+        .collect();
+    // A total order (pixel, the most covered first, occluder), so the unstable sort's result
+    // is the one order.
+    veils.par_sort_unstable_by(|a, b| a.0.cmp(&b.0).then(b.1.total_cmp(&a.1)).then(a.2.cmp(&b.2)));
     veils.dedup_by_key(|v| v.0);
     // Each hidden pixel's total walk weight (zero where no walk reaches) and its walks' colours
     // summed with those weights, in one pass.
@@ -235,7 +242,7 @@ pub(super) fn hidden_background(
         Fragment {
             x: at.x,
             y: at.y,
-            color: [0.0, 0.0, 0.0, coverage],
+            color: [depth_at(p), 0.0, 0.0, coverage],
             weight: 0.0,
             source: VEIL_SOURCE,
             ..own(q)

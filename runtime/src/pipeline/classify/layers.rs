@@ -104,6 +104,19 @@ pub fn classify_fragments(
         // (13 MB on a 512 px frame) again in fresh memory.
         fragments.extend(continued);
     }
+    // A veil matters only where its occluder and the background it lies on can share a depth
+    // layer (a soft split spans two neighbouring ones): beside a near, defocused post most of
+    // its veils lie on a background layers behind it, and sorting them cost a tenth of the
+    // frame's classification.
+    if fragments.iter().any(|f| f.source == super::hidden::VEIL_SOURCE) {
+        fragments.retain(|f| {
+            f.source != super::hidden::VEIL_SOURCE || f.color[0] <= 0.0 || {
+                let occluder = layer_coord(f.parallax).floor();
+                let background = layer_coord(1.0 / f.color[0]).floor();
+                (occluder - background).abs() <= 1.0
+            }
+        });
+    }
     let fragments = &fragments[..];
 
     // Layer weights: hard, or blended near the boundary between two layer centres. A sharp
@@ -1175,16 +1188,23 @@ impl Ceilings {
             }
         }
         for f in fragments.iter().filter(|f| counts(f)) {
+            if let Some(cell) = ceilings.cell(f) {
+                if f.source != ceilings.nearest[cell].1 {
+                    ceilings.mixed[cell] = true;
+                }
+            }
+        }
+        // Only the pixels holding two sources need their nearest source's layers: on a flat
+        // frame the few along its silhouettes.
+        for f in fragments.iter().filter(|f| counts(f)) {
             let Some(cell) = ceilings.cell(f) else {
                 continue;
             };
-            if f.source == ceilings.nearest[cell].1 {
+            if ceilings.mixed[cell] && f.source == ceilings.nearest[cell].1 {
                 let (targets, n) = targets_of(f);
                 let farthest = targets[..n].iter().map(|t| t.0).min().unwrap_or(0);
                 let farthest = farthest.min(usize::from(u8::MAX - 1)) as u8;
                 ceilings.ceiling[cell] = ceilings.ceiling[cell].min(farthest);
-            } else {
-                ceilings.mixed[cell] = true;
             }
         }
         Some(ceilings)
