@@ -141,3 +141,45 @@ fn the_background_continued_behind_an_occluder_stays_under_it_in_one_layer() {
     // sharper than the box's blur.
     assert!(row[39] > 0.15 && row[39] < 0.6, "row {:?}", &row[36..48]);
 }
+
+/// A sharp box (at the focus distance) over a wall blurred by less than a pixel (CoC 0.8 px,
+/// behind the focus plane): the wall's row beside the box keeps the wall's level. The wall
+/// spreads a share of that row onto the box, where the box hides it, and gets none back from
+/// behind the box unless the wall is continued there: the row came out 13 % dark, a line along
+/// the silhouette, when only an occluder sharper by a whole pixel had the wall continued.
+#[test]
+fn a_background_blurred_by_under_a_pixel_does_not_darken_beside_a_sharp_box() {
+    let db = test_db(PsfModel::ThinLens);
+    let dbs = DbSet::single(db.clone()).expect("set");
+    let (w, h) = (64usize, 64usize);
+    let cam = camera(w as u32, h as u32, true, 0.0);
+    let lens = cam.thin_lens().expect("lens");
+    // Behind the focus plane: signed r = k (1 - s/d) = +0.8  =>  d = s / (1 - 0.8/k).
+    let wall = (lens.focus_distance / (1.0 - 0.8 / lens.coc_scale_px)) as f32;
+    let sharp = lens.focus_distance as f32;
+    let inside = |x: usize, y: usize| (16..48).contains(&x) && (32..64).contains(&y);
+    let mut color = Vec::with_capacity(w * h);
+    let mut depth = Vec::with_capacity(w * h);
+    for y in 0..h {
+        for x in 0..w {
+            if inside(x, y) {
+                color.push([0.9, 0.3, 0.3, 1.0]);
+                depth.push(sharp);
+            } else {
+                color.push([0.2, 0.2, 0.2, 1.0]);
+                depth.push(wall);
+            }
+        }
+    }
+    let g = GBuffer::from_planes(w, h, color, Some(depth), None).expect("g-buffer");
+    let (image, _) = synthesize(&g, &cam, &dbs, &SynthOptions::default()).expect("synth");
+    // The wall's row just above the box's top edge (y = 31), away from the box's corners.
+    let worst = (20..44)
+        .map(|x| (image.pixels[31 * w + x][1] - 0.2).abs() / 0.2)
+        .fold(0.0f32, f32::max);
+    assert!(
+        worst < 0.03,
+        "the wall's row above the box is {:.1} % off",
+        100.0 * worst
+    );
+}

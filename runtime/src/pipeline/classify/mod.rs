@@ -404,7 +404,7 @@ pub(crate) fn classify_layers_with(
             )
             .into_iter()
             .map(|f| match f.source {
-                hidden::VEIL_SOURCE => f,
+                hidden::VEIL_SOURCE | hidden::HIDDEN_SOURCE => f,
                 _ => Fragment { source, ..f },
             }),
         );
