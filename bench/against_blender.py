@@ -1,8 +1,9 @@
 """spreadlet synth against Blender's compositor on the same inputs, timed side by side.
 
-For every input (both shared Blender examples, the built-in scenes rendered at 512 x 512, and
-the hard cases with motion: a car on a road, a spinning ball, a fast box, a slanted floor and a
-camera pan), each round runs the whole `spreadlet synth` process (EXR read, database load,
+For every input (both shared Blender examples, the built-in scenes rendered at 512 x 512 —
+`rain` through its double Gauss, which Blender's Defocus takes as the thin lens of the same focal
+length and f-number — and the hard cases with motion: a car on a road, a spinning ball, a fast
+box, a slanted floor, a camera pan and a rolling wheel), each round runs the whole `spreadlet synth` process (EXR read, database load,
 synthesis, EXR write) and then Blender's compositor on the same G-buffer
 (`bench/blender_compositor.py`: Vector Blur, then Defocus, calibrated to the lens): the
 Blender application (3.4 from Debian) and, with `--bpy`, current Blender as the `bpy` module
@@ -35,7 +36,7 @@ import time
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 HARD = os.path.join(ROOT, "scene", "scenes", "hard")
-SCENES = ["bokeh", "crossing", "occluder", "rotating", "physical"] + [
+SCENES = ["bokeh", "crossing", "occluder", "rotating", "physical", "studio", "rain"] + [
     os.path.join(HARD, f"{name}.json")
     for name in ("car-on-road", "spinning-disc", "fast-box", "slanted-floor", "camera-pan",
                  "rolling-wheel")]
