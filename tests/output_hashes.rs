@@ -109,31 +109,18 @@ fn cpu_outputs_match_their_recorded_hashes() {
     got.insert("crossing/layers-input".into(), hash_file(&layers));
     got.insert("crossing/layers-synth".into(), hash_file(&out));
 
-    // Stochastic frames: reconstruction from 1 spp.
+    // Stochastic frames: reconstruction from 1 spp, and from 4 spp, where samples are split
+    // over pixels rather than given footprints.
     let dir = tmp.path().join("bokeh-stochastic");
     std::fs::create_dir_all(&dir).expect("stochastic dir");
-    let frames = dir.join("frames.exr");
-    render_inputs_128(&dir, "bokeh", &["--stochastic", &s(&frames), "--spp", "1"]);
-    let out = dir.join("out.exr");
-    spreadlet("reconstruct", &[&frames], &dir.join("cam.json"), &out, &[]);
-    got.insert("bokeh/stochastic-input".into(), hash_file(&frames));
-    got.insert("bokeh/reconstruct".into(), hash_file(&out));
-    // And from 4 spp, where samples are split over pixels rather than given footprints.
-    let frames_4spp = dir.join("frames-4spp.exr");
-    render_inputs_128(
-        &dir,
-        "bokeh",
-        &["--stochastic", &s(&frames_4spp), "--spp", "4"],
-    );
-    let out_4spp = dir.join("out-4spp.exr");
-    spreadlet(
-        "reconstruct",
-        &[&frames_4spp],
-        &dir.join("cam.json"),
-        &out_4spp,
-        &[],
-    );
-    got.insert("bokeh/reconstruct-4spp".into(), hash_file(&out_4spp));
+    for (spp, tag) in [("1", ""), ("4", "-4spp")] {
+        let frames = dir.join(format!("frames{tag}.exr"));
+        render_inputs_128(&dir, "bokeh", &["--stochastic", &s(&frames), "--spp", spp]);
+        let out = dir.join(format!("out{tag}.exr"));
+        spreadlet("reconstruct", &[&frames], &dir.join("cam.json"), &out, &[]);
+        got.insert(format!("bokeh/stochastic-input{tag}"), hash_file(&frames));
+        got.insert(format!("bokeh/reconstruct{tag}"), hash_file(&out));
+    }
 
     if let Some(examples) = shared_examples() {
         for example in ["comets", "fence"] {

@@ -176,40 +176,27 @@ pub(super) fn hidden_background(
     }
     // Veils: outward from each walk's start, over the background a blurrier occluder's smear
     // or defocus reaches, one per pixel (the most covered where several reach it).
-    let mut veils: Vec<(usize, f32, usize)> = walks
+    let veils: Vec<Veil> = walks
         .par_iter()
         .flat_map_iter(|&(b, d, _, first, _)| {
             let mut out = Vec::new();
             let (bx, by) = ((b as i32) % w, (b as i32) / w);
             let q = ((by + d.1 * first) * w + bx + d.0 * first) as usize;
             let (coc_q, reach_q) = (coc_at(q).abs(), blur_along(q, d));
-            if reach_q <= blur_along(b, d) + 1.0 {
-                return out;
-            }
-            let half_motion = (reach_q - coc_q).max(0.0);
-            let occluder_depth = depth_at(q);
-            for j in 0.. {
-                let (px, py) = (bx - d.0 * j, by - d.1 * j);
-                if px < 0 || py < 0 || px >= w || py >= h {
-                    break;
-                }
-                let p = (py * w + px) as usize;
-                if was_split[p] || g.color[p] == [0.0; 4] || depth_at(p) <= occluder_depth {
-                    break;
-                }
-                let coverage = edge_coverage((j + first) as f32 - 0.5, coc_q, half_motion);
-                if coverage < 1e-3 {
-                    break;
-                }
-                out.push((p, coverage, q));
+            if reach_q > blur_along(b, d) + 1.0 {
+                let occluder_depth = depth_at(q);
+                let ends = |p: usize| {
+                    was_split[p] || g.color[p] == [0.0; 4] || depth_at(p) <= occluder_depth
+                };
+                let edge = EdgeBlur {
+                    coc: coc_q,
+                    half_motion: (reach_q - coc_q).max(0.0),
+                };
+                walk_veils((bx, by), d, first, q, edge, (w, h), &ends, &mut out);
             }
             out
         })
         .collect();
-    // A total order (pixel, the most covered first, occluder), so the unstable sort's result
-    // is the one order.
-    veils.par_sort_unstable_by(|a, b| a.0.cmp(&b.0).then(b.1.total_cmp(&a.1)).then(a.2.cmp(&b.2)));
-    veils.dedup_by_key(|v| v.0);
     // Each hidden pixel's total walk weight (zero where no walk reaches) and its walks' colours
     // summed with those weights, in one pass.
     let mut fills = vec![0.0f32; (w * h) as usize];
@@ -245,18 +232,80 @@ pub(super) fn hidden_background(
             });
         }
     }
-    out.extend(veils.into_iter().map(|(p, coverage, q)| {
-        let at = own(p);
-        Fragment {
-            x: at.x,
-            y: at.y,
-            color: [depth_at(p), 0.0, 0.0, coverage],
-            weight: 0.0,
-            source: VEIL_SOURCE,
-            ..own(q)
-        }
-    }));
+    out.extend(veil_fragments(veils, depth_at, own));
     out
+}
+
+/// A veil before it is a fragment: the pixel it lies on, the share of it covered, and the
+/// occluder's pixel.
+type Veil = (usize, f32, usize);
+
+/// An occluder's blur across its edge, px: its CoC radius and half its motion over the
+/// shutter along the walk's axis.
+#[derive(Clone, Copy)]
+struct EdgeBlur {
+    coc: f32,
+    half_motion: f32,
+}
+
+/// The veils of one walk outward from `start` (pixel `(x, y)`, the first background pixel
+/// beside the occluder at `q`) against direction `d`: the edge lies `first - 1/2` px beyond
+/// `start` along `d`. It goes on while the occluder's blurred edge covers a thousandth of a
+/// pixel or more, and stops at the frame's edge or at a pixel where `ends` says so.
+#[allow(clippy::too_many_arguments)]
+fn walk_veils(
+    (x, y): (i32, i32),
+    d: (i32, i32),
+    first: i32,
+    q: usize,
+    edge: EdgeBlur,
+    (w, h): (i32, i32),
+    ends: &dyn Fn(usize) -> bool,
+    out: &mut Vec<Veil>,
+) {
+    for j in 0.. {
+        let (px, py) = (x - d.0 * j, y - d.1 * j);
+        if px < 0 || py < 0 || px >= w || py >= h {
+            break;
+        }
+        let p = (py * w + px) as usize;
+        if ends(p) {
+            break;
+        }
+        let coverage = edge_coverage((j + first) as f32 - 0.5, edge.coc, edge.half_motion);
+        if coverage < 1e-3 {
+            break;
+        }
+        out.push((p, coverage, q));
+    }
+}
+
+/// `veils` as fragments ([`VEIL_SOURCE`]), one per pixel (the most covered where several lie
+/// on it), with their occluder's depth, motion and blur (`own`) and the depth of the
+/// background they lie on (`background_depth`) in red.
+fn veil_fragments(
+    mut veils: Vec<Veil>,
+    background_depth: &(impl Fn(usize) -> f32 + Sync),
+    own: &impl Fn(usize) -> Fragment,
+) -> Vec<Fragment> {
+    // A total order (pixel, the most covered first, occluder), so the unstable sort's result
+    // is the one order.
+    veils.par_sort_unstable_by(|a, b| a.0.cmp(&b.0).then(b.1.total_cmp(&a.1)).then(a.2.cmp(&b.2)));
+    veils.dedup_by_key(|v| v.0);
+    veils
+        .into_iter()
+        .map(|(p, coverage, q)| {
+            let at = own(p);
+            Fragment {
+                x: at.x,
+                y: at.y,
+                color: [background_depth(p), 0.0, 0.0, coverage],
+                weight: 0.0,
+                source: VEIL_SOURCE,
+                ..own(q)
+            }
+        })
+        .collect()
 }
 
 /// Veils ([`VEIL_SOURCE`]) beside the silhouette of a render layer's own surface, over the
@@ -273,7 +322,7 @@ pub(super) fn render_layer_veils(
     let (w, h) = (g.width as i32, g.height as i32);
     const DIRECTIONS: [(i32, i32); 4] = [(1, 0), (-1, 0), (0, 1), (0, -1)];
     let covered = |i: usize| g.color[i][3] >= 0.5;
-    let mut veils: Vec<(usize, f32, usize)> = (0..h)
+    let veils: Vec<Veil> = (0..h)
         .into_par_iter()
         .map(|y| {
             let mut veils = Vec::new();
@@ -292,44 +341,19 @@ pub(super) fn render_layer_veils(
                         continue;
                     }
                     let (coc_q, reach_q) = (coc_at(q).abs(), blur_along(q, d));
-                    let half_motion = (reach_q - coc_q).max(0.0);
-                    for j in 0.. {
-                        let (px, py) = (x - d.0 * j, y - d.1 * j);
-                        if px < 0 || py < 0 || px >= w || py >= h {
-                            break;
-                        }
-                        let p = (py * w + px) as usize;
-                        if covered(p) {
-                            break;
-                        }
-                        let coverage = edge_coverage(j as f32 + 0.5, coc_q, half_motion);
-                        if coverage < 1e-3 {
-                            break;
-                        }
-                        veils.push((p, coverage, q));
-                    }
+                    let edge = EdgeBlur {
+                        coc: coc_q,
+                        half_motion: (reach_q - coc_q).max(0.0),
+                    };
+                    walk_veils((x, y), d, 1, q, edge, (w, h), &covered, &mut veils);
                 }
             }
             veils
         })
         .flatten_iter()
         .collect();
-    veils.sort_by(|a, b| a.0.cmp(&b.0).then(b.1.total_cmp(&a.1)).then(a.2.cmp(&b.2)));
-    veils.dedup_by_key(|v| v.0);
-    veils
-        .into_iter()
-        .map(|(p, coverage, q)| {
-            let at = own(p);
-            Fragment {
-                x: at.x,
-                y: at.y,
-                color: [0.0, 0.0, 0.0, coverage],
-                weight: 0.0,
-                source: VEIL_SOURCE,
-                ..own(q)
-            }
-        })
-        .collect()
+    // What lies beside the layer's surface is another layer's: its depth is not known here.
+    veil_fragments(veils, &|_| 0.0, own)
 }
 
 /// A walk of the continuation: the background pixel it repeats, its direction (an axis), the

@@ -79,14 +79,15 @@ pub fn classify_fragments(
             let m = f.motion;
             coc + 0.5 * (m[0] * m[0] + m[1] * m[1]).sqrt()
         };
-        let mut sources: Vec<u32> = fragments.iter().filter(input_source).map(|f| f.source).collect();
-        sources.sort_unstable();
-        sources.dedup();
-        let continued = if sources.len() <= 1 {
+        let continued = if one_source {
             continue_across_layers(&fragments, (w, h), &layer_of, &blur_of, options.hdr_dense_threshold)
         } else {
             // Render layers: each one's surfaces on their own, what another layer holds in
             // the same pixel being another surface.
+            let mut sources: Vec<u32> =
+                fragments.iter().filter(input_source).map(|f| f.source).collect();
+            sources.sort_unstable();
+            sources.dedup();
             let mut continued = Vec::new();
             for source in sources {
                 let own: Vec<Fragment> = fragments.iter().filter(|f| f.source == source).copied().collect();
