@@ -34,6 +34,8 @@
 
 use psf_db::PsfDatabase;
 
+use crate::pipeline::splat::floor_exact;
+
 /// Lengths up to this (px) are quantised in steps of [`FINE_LENGTH_STEP_PX`].
 const FINE_LENGTH_MAX_PX: f32 = 8.0;
 /// Length step below [`FINE_LENGTH_MAX_PX`], px.
@@ -687,12 +689,22 @@ pub fn turn(psf: &PsfImage, angle: f32) -> PsfImage {
     let hi_y = corners.iter().map(|c| c.1).fold(f32::NEG_INFINITY, f32::max).ceil() as i32 + 1;
     let (width, height) = ((hi_x - lo_x + 1) as usize, (hi_y - lo_y + 1) as usize);
     let mut data = vec![0f32; width * height * ch];
-    let at = |x: i32, y: i32, c: usize| -> f32 {
-        let (u, v) = (x - psf.origin[0], y - psf.origin[1]);
-        if u < 0 || v < 0 || u >= psf.width as i32 || v >= psf.height as i32 {
-            0.0
+    // The PSF with a border of one zero pixel, so that every tap within a pixel of its box
+    // reads without a test; taps farther out read zero.
+    let (pw, ph) = (psf.width + 2, psf.height + 2);
+    let mut padded = vec![0f32; pw * ph * ch];
+    for v in 0..psf.height {
+        let src = &psf.data[v * psf.width * ch..(v + 1) * psf.width * ch];
+        padded[((v + 1) * pw + 1) * ch..((v + 1) * pw + 1 + psf.width) * ch].copy_from_slice(src);
+    }
+    let zeros = vec![0f32; ch];
+    let at = |x: i32, y: i32| -> &[f32] {
+        let (u, v) = (x - psf.origin[0] + 1, y - psf.origin[1] + 1);
+        if u < 0 || v < 0 || u >= pw as i32 || v >= ph as i32 {
+            &zeros
         } else {
-            psf.data[(v as usize * psf.width + u as usize) * ch + c]
+            let i = (v as usize * pw + u as usize) * ch;
+            &padded[i..i + ch]
         }
     };
     for j in 0..height {
@@ -700,15 +712,16 @@ pub fn turn(psf: &PsfImage, angle: f32) -> PsfImage {
             let (qx, qy) = ((lo_x + i as i32) as f32, (lo_y + j as i32) as f32);
             // The PSF point that turns onto this pixel.
             let (px, py) = (cos * qx + sin * qy, -sin * qx + cos * qy);
-            let (fx, fy) = (px.floor(), py.floor());
+            let (fx, fy) = (floor_exact(px), floor_exact(py));
             let (tx, ty) = (px - fx, py - fy);
             let (ix, iy) = (fx as i32, fy as i32);
-            for c in 0..ch {
-                let v = (1.0 - tx) * (1.0 - ty) * at(ix, iy, c)
-                    + tx * (1.0 - ty) * at(ix + 1, iy, c)
-                    + (1.0 - tx) * ty * at(ix, iy + 1, c)
-                    + tx * ty * at(ix + 1, iy + 1, c);
-                data[(j * width + i) * ch + c] = v;
+            let taps = [at(ix, iy), at(ix + 1, iy), at(ix, iy + 1), at(ix + 1, iy + 1)];
+            let out = &mut data[(j * width + i) * ch..(j * width + i + 1) * ch];
+            for (c, o) in out.iter_mut().enumerate() {
+                *o = (1.0 - tx) * (1.0 - ty) * taps[0][c]
+                    + tx * (1.0 - ty) * taps[1][c]
+                    + (1.0 - tx) * ty * taps[2][c]
+                    + tx * ty * taps[3][c];
             }
         }
     }

@@ -254,7 +254,7 @@ pub fn splat(
                         if next.is_some() {
                             i += 1;
                         }
-                        if is_identity(r) && db.channels() == 1 {
+                        if is_identity(r) {
                             splat_dense_upright(band, r, next, db);
                             continue;
                         }
@@ -514,12 +514,12 @@ fn splat_dense(band: &mut Band, r: &SplatRecord, db: &PsfDatabase, sampling: Rot
     });
 }
 
-/// One or two unturned dense records at one centre on a grey database (`r`, and `next` when
-/// the two are drawn together), row by row: each row is clipped to the band and to each PSF
-/// once, so the loop over pixels tests nothing but the PSFs' zeros. The sums, and their order,
-/// are those of [`splat_dense`] and [`splat_dense_pair`]: a pixel where only one PSF is
-/// non-zero adds that PSF's weighted value, one where both are adds their sum, one where both
-/// are zero adds nothing.
+/// One or two unturned dense records at one centre (`r`, and `next` when the two are drawn
+/// together), row by row: each row is clipped to the band and to each PSF once, so the loop
+/// over pixels tests nothing but the PSFs' zeros. The sums, and their order, are those of
+/// [`splat_dense`] and [`splat_dense_pair`]: a pixel where only one PSF is non-zero adds that
+/// PSF's weighted value, one where both are adds their sum, one where both are zero adds
+/// nothing.
 fn splat_dense_upright(
     band: &mut Band,
     r: &SplatRecord,
@@ -539,6 +539,10 @@ fn splat_dense_upright(
         if let Some(next) = next {
             splat_dense(band, next, db, RotationSampling::Nearest);
         }
+        return;
+    }
+    let ch = a.channels;
+    if b.as_ref().is_some_and(|(view, _)| view.channels != ch) {
         return;
     }
     let (cx, cy) = (r.center_x, r.center_y);
@@ -562,12 +566,13 @@ fn splat_dense_upright(
     }
     let width = band.width as usize;
     // The non-zero part of a PSF's row at band row y, as (first column in band coordinates,
-    // values): the zeros around it add nothing, and a streak's box is mostly zeros.
+    // pixels, their values channel-interleaved): the zeros around it add nothing, and a
+    // streak's box is mostly zeros.
     fn row_of<'v>(
         v: &psf_db::DenseView<'v>,
         s: (i32, i32, i32, i32),
         y: i32,
-    ) -> Option<(i32, &'v [f32])> {
+    ) -> Option<(i32, usize, &'v [f32])> {
         if y < s.1 || y >= s.3 {
             return None;
         }
@@ -576,27 +581,40 @@ fn splat_dense_upright(
         if first >= end {
             return None;
         }
-        let at = row * v.width;
-        Some((s.0 + first as i32, &v.data[at + first..at + end]))
+        let (at, ch) = (row * v.width, v.channels);
+        Some((s.0 + first as i32, end - first, &v.data[(at + first) * ch..(at + end) * ch]))
     }
     let ca = r.color;
+    let zero = |vals: &[f32]| vals.iter().all(|&x| x == 0.0);
     for y in uy0.max(band.y0)..uy1.min(band.y1) {
         let start = (y - band.y0) as usize * width;
         let row = &mut band.data[start..start + width];
         let ra = row_of(&a, sa, y);
         match &b {
             None => {
-                let Some((ax0, values)) = ra else { continue };
-                let (lo, hi) = (ax0.max(x_lo), (ax0 + values.len() as i32).min(x_hi));
+                let Some((ax0, n, values)) = ra else { continue };
+                let (lo, hi) = (ax0.max(x_lo), (ax0 + n as i32).min(x_hi));
                 if lo >= hi {
                     continue;
                 }
-                let values = &values[(lo - ax0) as usize..(hi - ax0) as usize];
-                for (px, &v) in row[lo as usize..hi as usize].iter_mut().zip(values) {
-                    if v != 0.0 {
-                        let value = ca.map(|c| c * v);
-                        for ch in 0..4 {
-                            px[ch] += value[ch];
+                let values = &values[(lo - ax0) as usize * ch..(hi - ax0) as usize * ch];
+                if ch == 1 {
+                    for (px, &v) in row[lo as usize..hi as usize].iter_mut().zip(values) {
+                        if v != 0.0 {
+                            let value = ca.map(|c| c * v);
+                            for k in 0..4 {
+                                px[k] += value[k];
+                            }
+                        }
+                    }
+                } else {
+                    let pixels = row[lo as usize..hi as usize].iter_mut();
+                    for (px, vals) in pixels.zip(values.chunks_exact(ch)) {
+                        if !zero(vals) {
+                            let value = weighted(ca, vals);
+                            for k in 0..4 {
+                                px[k] += value[k];
+                            }
                         }
                     }
                 }
@@ -606,34 +624,37 @@ fn splat_dense_upright(
                 // Only the columns where either row is non-zero.
                 let (x_lo, x_hi) = match (ra, rb) {
                     (None, None) => continue,
-                    (Some((x0, v)), None) | (None, Some((x0, v))) => (x0, x0 + v.len() as i32),
-                    (Some((a0, va)), Some((b0, vb))) => (
-                        a0.min(b0),
-                        (a0 + va.len() as i32).max(b0 + vb.len() as i32),
-                    ),
+                    (Some((x0, n, _)), None) | (None, Some((x0, n, _))) => (x0, x0 + n as i32),
+                    (Some((a0, na, _)), Some((b0, nb, _))) => {
+                        (a0.min(b0), (a0 + na as i32).max(b0 + nb as i32))
+                    }
                 };
                 let (x_lo, x_hi) = (x_lo.max(0), x_hi.min(band.width));
-                // A PSF's value at band column x, zero outside its box.
-                let at = |rv: Option<(i32, &[f32])>, x: i32| match rv {
-                    Some((x0, values)) if x >= x0 && x < x0 + values.len() as i32 => {
-                        values[(x - x0) as usize]
-                    }
-                    _ => 0.0,
-                };
-                for x in x_lo..x_hi {
-                    let (va, vb) = (at(ra, x), at(rb, x));
-                    let value = match (va != 0.0, vb != 0.0) {
-                        (true, true) => {
-                            let (p, q) = (ca.map(|c| c * va), cb.map(|c| c * vb));
-                            std::array::from_fn(|ch| p[ch] + q[ch])
+                // A PSF's values at band column x, `None` outside its box.
+                fn at(rv: Option<(i32, usize, &[f32])>, x: i32, ch: usize) -> Option<&[f32]> {
+                    match rv {
+                        Some((x0, n, values)) if x >= x0 && x < x0 + n as i32 => {
+                            let k = (x - x0) as usize * ch;
+                            Some(&values[k..k + ch])
                         }
-                        (true, false) => ca.map(|c| c * va),
-                        (false, true) => cb.map(|c| c * vb),
-                        (false, false) => continue,
+                        _ => None,
+                    }
+                }
+                for x in x_lo..x_hi {
+                    let va = at(ra, x, ch).filter(|v| !zero(v));
+                    let vb = at(rb, x, ch).filter(|v| !zero(v));
+                    let value = match (va, vb) {
+                        (Some(va), Some(vb)) => {
+                            let (p, q) = (weighted(ca, va), weighted(*cb, vb));
+                            std::array::from_fn(|k| p[k] + q[k])
+                        }
+                        (Some(va), None) => weighted(ca, va),
+                        (None, Some(vb)) => weighted(*cb, vb),
+                        (None, None) => continue,
                     };
                     let px = &mut row[x as usize];
-                    for ch in 0..4 {
-                        px[ch] += value[ch];
+                    for k in 0..4 {
+                        px[k] += value[k];
                     }
                 }
             }

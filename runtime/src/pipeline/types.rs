@@ -131,6 +131,10 @@ pub struct PathCounts {
     /// Fragments drawn at a reduced resolution (`Classified::coarse`): their blur is beyond the
     /// database's range, or above `ClassifyOptions::coarse_above_px` (also in the path counts).
     pub reduced: usize,
+    /// Dense records drawn upright from their PSF turned once per frame onto a quantised
+    /// radial direction that other records share ([`super::ClassifyOptions::shared_turns`];
+    /// also in `dense`).
+    pub turned: usize,
 }
 
 impl PathCounts {

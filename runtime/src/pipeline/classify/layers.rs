@@ -477,6 +477,13 @@ pub fn classify_fragments(
         });
     }
     classified.database = smeared.database;
+    if options.shared_turns && model == Some(PsfModel::PhysicalLens) {
+        let frame_db = classified.database.clone();
+        if let Some(base) = frame_db.as_deref().or(dbs.combined.as_ref()) {
+            let turned = super::turned::draw_shared_turns_upright(&mut classified, base)?;
+            classified.counts.turned += turned;
+        }
+    }
     Ok(classified)
 }
 

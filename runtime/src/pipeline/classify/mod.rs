@@ -34,6 +34,7 @@ mod frame_edges;
 mod hidden;
 mod layers;
 mod lookup;
+mod turned;
 
 use psf_db::PsfModel;
 
@@ -179,6 +180,11 @@ pub struct ClassifyOptions {
     /// stochastic samples, deep samples and several render layers, which are not one surface
     /// per pixel, nor pixels seen through a real lens (measured: no gain on `rain`).
     pub continue_layers: bool,
+    /// Through a real lens, draw the dense records that share a PSF and a quantised turn onto
+    /// their radial direction from that PSF turned once per frame, upright (one add per pixel
+    /// instead of four bilinear taps), the turn quantised so that the PSF's rim is at most
+    /// 1/8 px from the record's own turn (`turned`). Off: every record drawn at its own turn.
+    pub shared_turns: bool,
 }
 
 impl Default for ClassifyOptions {
@@ -198,6 +204,7 @@ impl Default for ClassifyOptions {
             reduced_resolution: true,
             coarse_above_px: f32::INFINITY,
             continue_layers: true,
+            shared_turns: true,
         }
     }
 }
