@@ -323,14 +323,30 @@ pub fn psf_image(db: &PsfDatabase, index: usize) -> Option<PsfImage> {
 /// Scales each channel of `after` (channel-interleaved, `ch` channels) to the sum it has in
 /// `before`; a channel with nothing left stays as it is.
 fn keep_channel_sums(before: &[f32], after: &mut [f32], ch: usize) {
-    let sum = |data: &[f32], c: usize| -> f64 {
-        data.iter().skip(c).step_by(ch).map(|&v| f64::from(v)).sum()
+    if ch == 0 {
+        return;
+    }
+    // Each channel summed in pixel order, all channels in one pass.
+    let sums = |data: &[f32]| -> Vec<f64> {
+        let mut sums = vec![0f64; ch];
+        for px in data.chunks_exact(ch) {
+            for (s, &v) in sums.iter_mut().zip(px) {
+                *s += f64::from(v);
+            }
+        }
+        sums
     };
-    for c in 0..ch {
-        let (was, is) = (sum(before, c), sum(after, c));
-        if is > 0.0 {
-            let scale = (was / is) as f32;
-            after.iter_mut().skip(c).step_by(ch).for_each(|v| *v *= scale);
+    let (was, is) = (sums(before), sums(after));
+    let scale: Vec<Option<f32>> = was
+        .iter()
+        .zip(&is)
+        .map(|(&was, &is)| (is > 0.0).then(|| (was / is) as f32))
+        .collect();
+    for px in after.chunks_exact_mut(ch) {
+        for (v, s) in px.iter_mut().zip(&scale) {
+            if let Some(s) = s {
+                *v *= s;
+            }
         }
     }
 }
@@ -707,8 +723,35 @@ pub fn turn(psf: &PsfImage, angle: f32) -> PsfImage {
             &padded[i..i + ch]
         }
     };
+    // Along an output row the PSF point moves linearly: only the columns whose point lies
+    // within a pixel of the PSF's box can read a non-zero tap (widened by a pixel against
+    // rounding); the rest stay zero.
+    let within = |base: f32, slope: f32, lo: f32, hi: f32| -> Option<(f32, f32)> {
+        if slope.abs() < 1e-6 {
+            return (base >= lo - 1.0 && base <= hi + 1.0)
+                .then_some((f32::NEG_INFINITY, f32::INFINITY));
+        }
+        let (a, b) = ((lo - base) / slope, (hi - base) / slope);
+        Some((a.min(b), a.max(b)))
+    };
+    let (box_x, box_y) = (psf.origin[0] as f32, psf.origin[1] as f32);
+    let (box_x1, box_y1) = (box_x + psf.width as f32, box_y + psf.height as f32);
     for j in 0..height {
-        for i in 0..width {
+        let qy = (lo_y + j as i32) as f32;
+        let qx0 = lo_x as f32;
+        let (Some(sx), Some(sy)) = (
+            within(cos * qx0 + sin * qy, cos, box_x - 1.0, box_x1),
+            within(-sin * qx0 + cos * qy, -sin, box_y - 1.0, box_y1),
+        ) else {
+            continue;
+        };
+        let (first, last) = (sx.0.max(sy.0).floor() - 1.0, sx.1.min(sy.1).ceil() + 1.0);
+        if first > last {
+            continue;
+        }
+        let i0 = first.clamp(0.0, width as f32) as usize;
+        let i1 = (last + 1.0).clamp(0.0, width as f32) as usize;
+        for i in i0..i1 {
             let (qx, qy) = ((lo_x + i as i32) as f32, (lo_y + j as i32) as f32);
             // The PSF point that turns onto this pixel.
             let (px, py) = (cos * qx + sin * qy, -sin * qx + cos * qy);

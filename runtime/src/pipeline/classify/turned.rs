@@ -87,20 +87,35 @@ pub(super) fn draw_shared_turns_upright(
         .par_iter()
         .map(|r| key_of(r, &steps))
         .collect();
-    let mut sorted: Vec<TurnKey> = keys.iter().copied().filter(|&k| k != NONE).collect();
-    if sorted.is_empty() {
+    // Neighbouring records mostly share a key (one cell, nearly one turn): each chunk's runs
+    // of one key counted first, then the runs sorted and merged.
+    let mut runs: Vec<(TurnKey, usize)> = keys
+        .par_chunks(4096)
+        .flat_map_iter(|chunk| {
+            let mut runs: Vec<(TurnKey, usize)> = Vec::new();
+            for &k in chunk.iter().filter(|&&k| k != NONE) {
+                match runs.last_mut() {
+                    Some((last, n)) if *last == k => *n += 1,
+                    _ => runs.push((k, 1)),
+                }
+            }
+            runs
+        })
+        .collect();
+    if runs.is_empty() {
         return Ok(0);
     }
-    sorted.par_sort_unstable();
+    runs.par_sort_unstable();
     // Each key with the records that use it; the most used first, then in key order, so that
     // the memory bound drops the same keys on every run.
     let mut shared: Vec<(usize, TurnKey)> = Vec::new();
-    for run in sorted.chunk_by(|a, b| a == b) {
-        if run.len() >= MIN_SHARED_RECORDS {
-            shared.push((run.len(), run[0]));
+    for run in runs.chunk_by(|a, b| a.0 == b.0) {
+        let n: usize = run.iter().map(|r| r.1).sum();
+        if n >= MIN_SHARED_RECORDS {
+            shared.push((n, run[0].0));
         }
     }
-    drop(sorted);
+    drop(runs);
     if shared.is_empty() {
         return Ok(0);
     }
@@ -159,25 +174,33 @@ pub(super) fn draw_shared_turns_upright(
     let database = extension
         .fill(|i, out| out.copy_from_slice(&drawn[i].data))
         .map_err(not_built)?;
+    // Records in chunks, each remembering the last key it looked up: neighbours share keys.
     let redirected = classified
         .records
-        .par_iter_mut()
-        .zip(&keys)
-        .map(|(r, &key)| {
-            if key == NONE {
-                return 0;
-            }
-            let Ok(k) = chosen.binary_search(&key) else {
-                return 0;
-            };
-            match index_of_key[k] {
-                Some(i) => {
+        .par_chunks_mut(4096)
+        .zip(keys.par_chunks(4096))
+        .map(|(records, keys)| {
+            let mut last: Option<(TurnKey, Option<u32>)> = None;
+            let mut redirected = 0;
+            for (r, &key) in records.iter_mut().zip(keys) {
+                if key == NONE {
+                    continue;
+                }
+                let index = match last {
+                    Some((k, index)) if k == key => index,
+                    _ => {
+                        let index = chosen.binary_search(&key).ok().and_then(|k| index_of_key[k]);
+                        last = Some((key, index));
+                        index
+                    }
+                };
+                if let Some(i) = index {
                     r.psf_index = i;
                     (r.rot_cos, r.rot_sin) = (1.0, 0.0);
-                    1
+                    redirected += 1;
                 }
-                None => 0,
             }
+            redirected
         })
         .sum();
     classified.database = Some(std::sync::Arc::new(database));
