@@ -262,23 +262,8 @@ fn one_pixel_reproduces_physical_lens_psfs() {
 #[test]
 fn records_drawn_from_shared_turns_match_their_own_turns() {
     let db = test_db(PsfModel::PhysicalLens);
-    let lens = db.header().lens.clone().expect("prescription");
-    let (w, h) = (lens.image_width_px as usize, 48usize);
-    let cam = Camera {
-        width: w as u32,
-        height: h as u32,
-        focal_length_mm: lens.focal_length_mm,
-        sensor_width_mm: lens.sensor_width_mm,
-        f_stop: Some(4.0),
-        focus_distance: Some(lens.focus_distance),
-        aperture_blades: 0,
-        aperture_rotation_deg: 0.0,
-        aperture_ratio: 1.0,
-        aperture_image: None,
-        lens: None,
-        shutter_frames: 0.0,
-        scene_unit_mm: lens.scene_unit_mm,
-    };
+    let cam = physical_camera(db, 48);
+    let (w, h) = (cam.width as usize, cam.height as usize);
     // A textured surface whose depth sweeps the database's inverse depths across the frame.
     let inv = db.space().dims()[0];
     let mut color = vec![[0.0f32; 4]; w * h];
@@ -324,6 +309,101 @@ fn records_drawn_from_shared_turns_match_their_own_turns() {
         "mean difference {relative:.4} of the level"
     );
     assert!(worst < 0.04, "largest difference {worst}");
+}
+
+/// A camera for the physical-lens test database: its lens, sensor and focus, `h` rows.
+fn physical_camera(db: &PsfDatabase, h: usize) -> Camera {
+    let lens = db.header().lens.clone().expect("prescription");
+    Camera {
+        width: lens.image_width_px,
+        height: h as u32,
+        focal_length_mm: lens.focal_length_mm,
+        sensor_width_mm: lens.sensor_width_mm,
+        f_stop: Some(4.0),
+        focus_distance: Some(lens.focus_distance),
+        aperture_blades: 0,
+        aperture_rotation_deg: 0.0,
+        aperture_ratio: 1.0,
+        aperture_image: None,
+        lens: None,
+        shutter_frames: 0.0,
+        scene_unit_mm: lens.scene_unit_mm,
+    }
+}
+
+/// A bright drop far off axis and far out of focus, over a dim backdrop seen through a real
+/// lens: the drop's cat's-eye bokeh is drawn with its PSF's residue clamped (the dense twin),
+/// so no pixel within 30 px of it is darker than 0.8 times the backdrop it lies on, let alone
+/// negative. Drawn from the sparse PSF instead (no twins), the drop, 1,500 times the
+/// backdrop, rings itself with specks the compositor clamps to black: the test sees them.
+#[test]
+fn a_bright_corner_drop_leaves_no_dark_specks() {
+    let db = test_db(PsfModel::PhysicalLens);
+    let h = 64usize;
+    let cam = physical_camera(db, h);
+    let w = cam.width as usize;
+    let inv = db.space().dims()[0];
+    let backdrop = 0.02f32;
+    // The drop sits where the database draws a sparse PSF, the one farthest off axis.
+    let lens = db.header().lens.clone().expect("prescription");
+    let ppm = f64::from(lens.image_width_px) / lens.sensor_width_mm;
+    let sparse_cell = (0..db.psf_count())
+        .filter(|&i| db.dense(i).is_none())
+        .filter_map(|i| db.space().cell_center(i as u32))
+        .max_by(|a, b| a[1].total_cmp(&b[1]))
+        .expect("a sparse PSF");
+    let near = 1.0 / sparse_cell[0];
+    let far = 1.0 / inv.min;
+    let (cx, cy) = (
+        (w as f64 / 2.0 + sparse_cell[1] * ppm).round() as usize,
+        h / 2,
+    );
+    assert!(cx + 2 < w, "the drop fits in the frame");
+    let mut color = vec![[backdrop, backdrop, backdrop, 1.0]; w * h];
+    let mut depth = vec![far as f32; w * h];
+    for y in cy - 1..=cy + 1 {
+        for x in cx - 1..=cx + 1 {
+            color[y * w + x] = [30.0, 30.0, 30.0, 1.0];
+            depth[y * w + x] = near as f32;
+        }
+    }
+    let g = GBuffer::from_planes(w, h, color, Some(depth), None).expect("g");
+    // The darkest channel over pixels within `radius` of the drop, and the records drawn dense
+    // twins.
+    let darkest = |hdr_dense_threshold: f32| {
+        let options = SynthOptions {
+            classify: ClassifyOptions {
+                hdr_dense_threshold,
+                ..ClassifyOptions::default()
+            },
+            ..SynthOptions::default()
+        };
+        let (out, stats) = synthesize(&g, &cam, &set(db), &options).expect("synth");
+        let radius = 30.0f32;
+        let mut darkest = f32::INFINITY;
+        for y in 0..h {
+            for x in 0..w {
+                let (dx, dy) = (x as f32 - cx as f32, y as f32 - cy as f32);
+                if dx * dx + dy * dy <= radius * radius {
+                    let p = out.pixels[y * w + x];
+                    darkest = darkest.min(p[0].min(p[1]).min(p[2]));
+                }
+            }
+        }
+        (darkest, stats.counts.hdr_dense)
+    };
+    let (clamped, twins) = darkest(ClassifyOptions::default().hdr_dense_threshold);
+    let (sparse, no_twins) = darkest(f32::INFINITY);
+    assert!(twins >= 9, "the drop's pixels are drawn as twins: {twins}");
+    assert_eq!(no_twins, 0);
+    assert!(
+        clamped >= 0.8 * backdrop,
+        "darkest pixel {clamped} around the drop, backdrop {backdrop}"
+    );
+    assert!(
+        sparse < 0.8 * backdrop,
+        "without twins the drop should ring dark specks: darkest {sparse}"
+    );
 }
 
 /// A test image: a smooth colourful pattern in the middle, black (but opaque) border wider
