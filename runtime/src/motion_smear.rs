@@ -688,83 +688,72 @@ pub fn smeared_psf(db: &PsfDatabase, key: SmearKey) -> Result<Option<PsfImage>, 
     smear(&turned, key.length_px(), key.angle_rad(), key.bend_px()).map(Some)
 }
 
-/// `psf` turned by `angle` radians about its centre (its +x onto `(cos, sin)`, y down), as
-/// the splat turns a record's PSF: each output pixel samples the PSF bilinearly at the point
-/// that turns onto it. Each channel keeps its sum.
+/// `psf` turned by `angle` radians about its centre (its +x onto `(cos, sin)`, y down): each
+/// output pixel samples the PSF at the point that turns onto it with the Catmull-Rom cubic
+/// (4 x 4 taps), its negative lobes clamped to zero, and each channel keeps its sum. Bilinear
+/// taps, as the splat turns a record's PSF, widen a PSF of 2 px RMS radius by about 5 %; the
+/// cubic by about 2 % (a far drop in a corner of `corner-drops`: +9 % -> +7 % against the
+/// reference, whose own pixel footprint and the cell's pre-filter make the rest).
 pub fn turn(psf: &PsfImage, angle: f32) -> PsfImage {
     let (sin, cos) = angle.sin_cos();
     let ch = psf.channels;
-    // The turned box: the four corners of the PSF's box (pixel centres +- 1/2) turned.
     let (x0, y0) = (psf.origin[0] as f32 - 0.5, psf.origin[1] as f32 - 0.5);
     let (x1, y1) = (x0 + psf.width as f32, y0 + psf.height as f32);
     let corners = [(x0, y0), (x1, y0), (x0, y1), (x1, y1)]
         .map(|(x, y)| (cos * x - sin * y, sin * x + cos * y));
-    let lo_x = corners.iter().map(|c| c.0).fold(f32::INFINITY, f32::min).floor() as i32 - 1;
-    let lo_y = corners.iter().map(|c| c.1).fold(f32::INFINITY, f32::min).floor() as i32 - 1;
-    let hi_x = corners.iter().map(|c| c.0).fold(f32::NEG_INFINITY, f32::max).ceil() as i32 + 1;
-    let hi_y = corners.iter().map(|c| c.1).fold(f32::NEG_INFINITY, f32::max).ceil() as i32 + 1;
+    let lo_x = corners.iter().map(|c| c.0).fold(f32::INFINITY, f32::min).floor() as i32 - 2;
+    let lo_y = corners.iter().map(|c| c.1).fold(f32::INFINITY, f32::min).floor() as i32 - 2;
+    let hi_x = corners.iter().map(|c| c.0).fold(f32::NEG_INFINITY, f32::max).ceil() as i32 + 2;
+    let hi_y = corners.iter().map(|c| c.1).fold(f32::NEG_INFINITY, f32::max).ceil() as i32 + 2;
     let (width, height) = ((hi_x - lo_x + 1) as usize, (hi_y - lo_y + 1) as usize);
     let mut data = vec![0f32; width * height * ch];
-    // The PSF with a border of one zero pixel, so that every tap within a pixel of its box
-    // reads without a test; taps farther out read zero.
-    let (pw, ph) = (psf.width + 2, psf.height + 2);
+    // The PSF with a border of three zero pixels: a point whose 4 x 4 taps do not all lie
+    // within it reads zeros only.
+    const BORDER: usize = 3;
+    let (pw, ph) = (psf.width + 2 * BORDER, psf.height + 2 * BORDER);
     let mut padded = vec![0f32; pw * ph * ch];
     for v in 0..psf.height {
-        let src = &psf.data[v * psf.width * ch..(v + 1) * psf.width * ch];
-        padded[((v + 1) * pw + 1) * ch..((v + 1) * pw + 1 + psf.width) * ch].copy_from_slice(src);
+        let at = ((v + BORDER) * pw + BORDER) * ch;
+        padded[at..at + psf.width * ch]
+            .copy_from_slice(&psf.data[v * psf.width * ch..(v + 1) * psf.width * ch]);
     }
-    let zeros = vec![0f32; ch];
-    let at = |x: i32, y: i32| -> &[f32] {
-        let (u, v) = (x - psf.origin[0] + 1, y - psf.origin[1] + 1);
-        if u < 0 || v < 0 || u >= pw as i32 || v >= ph as i32 {
-            &zeros
-        } else {
-            let i = (v as usize * pw + u as usize) * ch;
-            &padded[i..i + ch]
-        }
+    // Catmull-Rom weights of the four taps around a point `t` past the second.
+    let weights = |t: f32| -> [f32; 4] {
+        let (t2, t3) = (t * t, t * t * t);
+        [
+            0.5 * (-t3 + 2.0 * t2 - t),
+            0.5 * (3.0 * t3 - 5.0 * t2 + 2.0),
+            0.5 * (-3.0 * t3 + 4.0 * t2 + t),
+            0.5 * (t3 - t2),
+        ]
     };
-    // Along an output row the PSF point moves linearly: only the columns whose point lies
-    // within a pixel of the PSF's box can read a non-zero tap (widened by a pixel against
-    // rounding); the rest stay zero.
-    let within = |base: f32, slope: f32, lo: f32, hi: f32| -> Option<(f32, f32)> {
-        if slope.abs() < 1e-6 {
-            return (base >= lo - 1.0 && base <= hi + 1.0)
-                .then_some((f32::NEG_INFINITY, f32::INFINITY));
-        }
-        let (a, b) = ((lo - base) / slope, (hi - base) / slope);
-        Some((a.min(b), a.max(b)))
-    };
-    let (box_x, box_y) = (psf.origin[0] as f32, psf.origin[1] as f32);
-    let (box_x1, box_y1) = (box_x + psf.width as f32, box_y + psf.height as f32);
+    let (ox, oy) = (psf.origin[0] - BORDER as i32, psf.origin[1] - BORDER as i32);
+    let mut sum = vec![0f32; ch];
     for j in 0..height {
-        let qy = (lo_y + j as i32) as f32;
-        let qx0 = lo_x as f32;
-        let (Some(sx), Some(sy)) = (
-            within(cos * qx0 + sin * qy, cos, box_x - 1.0, box_x1),
-            within(-sin * qx0 + cos * qy, -sin, box_y - 1.0, box_y1),
-        ) else {
-            continue;
-        };
-        let (first, last) = (sx.0.max(sy.0).floor() - 1.0, sx.1.min(sy.1).ceil() + 1.0);
-        if first > last {
-            continue;
-        }
-        let i0 = first.clamp(0.0, width as f32) as usize;
-        let i1 = (last + 1.0).clamp(0.0, width as f32) as usize;
-        for i in i0..i1 {
+        for i in 0..width {
             let (qx, qy) = ((lo_x + i as i32) as f32, (lo_y + j as i32) as f32);
-            // The PSF point that turns onto this pixel.
             let (px, py) = (cos * qx + sin * qy, -sin * qx + cos * qy);
             let (fx, fy) = (floor_exact(px), floor_exact(py));
-            let (tx, ty) = (px - fx, py - fy);
-            let (ix, iy) = (fx as i32, fy as i32);
-            let taps = [at(ix, iy), at(ix + 1, iy), at(ix, iy + 1), at(ix + 1, iy + 1)];
+            let (u, v) = (fx as i32 - 1 - ox, fy as i32 - 1 - oy);
+            if u < 0 || v < 0 || u + 4 > pw as i32 || v + 4 > ph as i32 {
+                // Every tap of a point this far out reads the border's zeros or beyond.
+                continue;
+            }
+            let (wx, wy) = (weights(px - fx), weights(py - fy));
+            sum.iter_mut().for_each(|s| *s = 0.0);
+            for (b, wyb) in wy.iter().enumerate() {
+                let row = ((v as usize + b) * pw + u as usize) * ch;
+                for (a, wxa) in wx.iter().enumerate() {
+                    let w = wxa * wyb;
+                    let tap = &padded[row + a * ch..row + (a + 1) * ch];
+                    for (s, t) in sum.iter_mut().zip(tap) {
+                        *s += w * t;
+                    }
+                }
+            }
             let out = &mut data[(j * width + i) * ch..(j * width + i + 1) * ch];
-            for (c, o) in out.iter_mut().enumerate() {
-                *o = (1.0 - tx) * (1.0 - ty) * taps[0][c]
-                    + tx * (1.0 - ty) * taps[1][c]
-                    + (1.0 - tx) * ty * taps[2][c]
-                    + tx * ty * taps[3][c];
+            for (o, s) in out.iter_mut().zip(&sum) {
+                *o = s.max(0.0);
             }
         }
     }

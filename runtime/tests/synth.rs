@@ -258,7 +258,7 @@ fn one_pixel_reproduces_physical_lens_psfs() {
 /// Through a real lens most records of a frame share their PSF and, quantised, their turn
 /// onto the radial direction: drawn upright from that PSF turned once, the frame is what each
 /// record drawn at its own turn gives (the independent, slower path), to the quantisation's
-/// rim shift of at most 1/8 px.
+/// rim shift of at most 1/4 px and the cubic turn.
 #[test]
 fn records_drawn_from_shared_turns_match_their_own_turns() {
     let db = test_db(PsfModel::PhysicalLens);

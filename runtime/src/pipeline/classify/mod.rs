@@ -182,8 +182,8 @@ pub struct ClassifyOptions {
     pub continue_layers: bool,
     /// Through a real lens, draw the dense records that share a PSF and a quantised turn onto
     /// their radial direction from that PSF turned once per frame, upright (one add per pixel
-    /// instead of four bilinear taps), the turn quantised so that the PSF's rim is at most
-    /// 1/8 px from the record's own turn (`turned`). Off: every record drawn at its own turn.
+    /// instead of four bilinear taps, and turned with a sharper cubic), the turn quantised so
+    /// that the PSF's rim is at most 1/4 px from the record's own turn (`turned`). Off: every record drawn at its own turn.
     pub shared_turns: bool,
 }
 

@@ -8,9 +8,11 @@
 //! the centre turns about `1/r` radians from its neighbour.
 //!
 //! So each dense record's turn is quantised so that the PSF's rim moves at most
-//! [`RIM_STEP_PX`] between steps (at most half of it off the record's own turn), and each
-//! (PSF, turn step) that at least [`MIN_SHARED_RECORDS`] records use is turned once, by
-//! [`crate::motion_smear::turn`], and appended to the frame's database. Those records then
+//! [`RIM_STEP_PX`] between steps (at most half of it, a quarter pixel, off the record's own
+//! turn, as the smeared PSFs' turns are), and each (PSF, turn step) that at least
+//! [`MIN_SHARED_RECORDS`] records use is turned once, by [`crate::motion_smear::turn`] (a
+//! Catmull-Rom cubic, which widens a narrow PSF less than the splat's bilinear taps), and
+//! appended to the frame's database. Those records then
 //! draw it upright. A record whose key is not shared keeps its own exact turn and is drawn
 //! turned as before, so no record is quantised without it paying off.
 
@@ -24,7 +26,7 @@ use crate::pipeline::types::{psf_reach, Classified, SplatPath, SplatRecord};
 
 /// Largest move of a PSF's rim between neighbouring turn steps, px: a record drawn from its
 /// step's image has its rim at most half of this from where its own turn puts it.
-pub const RIM_STEP_PX: f32 = 0.25;
+pub const RIM_STEP_PX: f32 = 0.5;
 
 /// Records that must share a (PSF, turn step) for it to be turned once: turning costs about
 /// what drawing one record turned costs.
