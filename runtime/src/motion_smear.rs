@@ -740,6 +740,25 @@ pub fn turn(psf: &PsfImage, angle: f32) -> PsfImage {
                 continue;
             }
             let (wx, wy) = (weights(px - fx), weights(py - fy));
+            let out = &mut data[(j * width + i) * ch..(j * width + i + 1) * ch];
+            if ch == 3 {
+                // The RGB databases' case, with the channels in registers.
+                let mut acc = [0f32; 3];
+                for (b, wyb) in wy.iter().enumerate() {
+                    let row = ((v as usize + b) * pw + u as usize) * 3;
+                    let taps = &padded[row..row + 12];
+                    for (a, wxa) in wx.iter().enumerate() {
+                        let w = wxa * wyb;
+                        acc[0] += w * taps[3 * a];
+                        acc[1] += w * taps[3 * a + 1];
+                        acc[2] += w * taps[3 * a + 2];
+                    }
+                }
+                for (o, s) in out.iter_mut().zip(acc) {
+                    *o = s.max(0.0);
+                }
+                continue;
+            }
             sum.iter_mut().for_each(|s| *s = 0.0);
             for (b, wyb) in wy.iter().enumerate() {
                 let row = ((v as usize + b) * pw + u as usize) * ch;
@@ -751,7 +770,6 @@ pub fn turn(psf: &PsfImage, angle: f32) -> PsfImage {
                     }
                 }
             }
-            let out = &mut data[(j * width + i) * ch..(j * width + i + 1) * ch];
             for (o, s) in out.iter_mut().zip(&sum) {
                 *o = s.max(0.0);
             }

@@ -290,6 +290,13 @@ fn records_drawn_from_shared_turns_match_their_own_turns() {
     let (own, own_stats) = run(false);
     let (shared, shared_stats) = run(true);
     assert_eq!(own_stats.counts.turned, 0);
+    // A still pixel blends two cells along inverse depth: premixed, one record instead of two.
+    assert!(
+        shared_stats.counts.dense < own_stats.counts.dense,
+        "blended pairs premixed: {} dense records against {}",
+        shared_stats.counts.dense,
+        own_stats.counts.dense
+    );
     assert!(
         shared_stats.counts.turned * 2 > shared_stats.counts.dense,
         "most dense records share a turn: {:?}",

@@ -299,7 +299,11 @@ pub fn classify_fragments(
             .any(|&c| c * frag.weight > options.hdr_dense_threshold);
         // A bright fragment stands alone (a highlight's bokeh is one PSF, not an average over
         // a neighbourhood): it keeps the PSF of its own parameters.
-        let continuous = options.continuous_lookup && !bright;
+        // Through a real lens, though, a bright fragment blends too: its cell is a box over
+        // inverse depth, and the blend of the two nearest cells' PSFs has about the size of
+        // its own (a squared RMS radius is linear in the blend).
+        let continuous = options.continuous_lookup
+            && (!bright || model == Some(PsfModel::PhysicalLens));
         let Lookup {
             path,
             psf_index,

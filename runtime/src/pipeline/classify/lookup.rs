@@ -82,7 +82,9 @@ pub(super) fn lookup_psf(
                 rot_sin = dy / r;
             }
             // The physical-lens space is over inverse depth (1 / scene units).
-            let (idx, cl) = db.lookup([1.0 / frag.depth, r / pixels_per_mm]);
+            let s = [1.0 / frag.depth, r / pixels_per_mm];
+            let (idx, cl) = db.lookup(s);
+            blend = neighbour(db, s, 0, offset);
             (path_of(all, idx + offset), idx + offset, cl)
         }
         (Some(_), _, Some(all))

@@ -142,11 +142,11 @@ pub struct ClassifyOptions {
     /// smoothly instead of showing a line at each cell boundary: a fragment is splatted with
     /// its cell's PSF and with the PSF of the neighbouring cell it is nearer, weighted by the
     /// tent between the two cells' centres ([`psf_db::ParamSpace::neighbour_blend`]), along
-    /// the CoC for still pixels (thin lens) and along the motion length for moving ones
-    /// (lens-motion). A step in the PSF's size between neighbouring pixels leaves the light
-    /// they scatter short of one along the step, a dark line. Bright fragments (drawn with
-    /// their HDR twin) and physical-lens lookups take their one cell. Off: every fragment
-    /// its one cell, one record.
+    /// the CoC for still pixels (thin lens), along the motion length for moving ones
+    /// (lens-motion), and along inverse depth for still pixels through a real lens. A step in
+    /// the PSF's size between neighbouring pixels leaves the light they scatter short of one
+    /// along the step, a dark line. Bright fragments drawn with their HDR twin take their one
+    /// cell. Off: every fragment its one cell, one record.
     pub continuous_lookup: bool,
     /// Draw a moving fragment seen through the thin lens with its thin-lens PSF smeared
     /// along its own motion over the shutter ([`crate::motion_smear`], the factorisation the

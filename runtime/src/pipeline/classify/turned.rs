@@ -12,9 +12,15 @@
 //! turn, as the smeared PSFs' turns are), and each (PSF, turn step) that at least
 //! [`MIN_SHARED_RECORDS`] records use is turned once, by [`crate::motion_smear::turn`] (a
 //! Catmull-Rom cubic, which widens a narrow PSF less than the splat's bilinear taps), and
-//! appended to the frame's database. Those records then
-//! draw it upright. A record whose key is not shared keeps its own exact turn and is drawn
-//! turned as before, so no record is quantised without it paying off.
+//! appended to the frame's database. Those records then draw it upright. A record whose key is
+//! not shared keeps its own exact turn and is drawn turned as before, so no record is
+//! quantised without it paying off.
+//!
+//! A still pixel's lookup blends its cell's PSF with the neighbouring cell's along inverse
+//! depth (two records at one pixel whose colours are the same colour times their shares).
+//! Such a pair is premixed: the two PSFs turned, then mixed in the proportion of the
+//! records' weights (rounded to [`PAIR_SHARE_STEPS`]), and drawn as one upright record, where
+//! drawing the two would cost twice as much.
 
 use rayon::prelude::*;
 
@@ -36,6 +42,10 @@ pub const MIN_SHARED_RECORDS: usize = 2;
 /// beyond it, the keys used by fewest records are drawn turned as before.
 pub const MAX_FRAME_TURNED_PIXELS: usize = 16 << 20;
 
+/// Steps of a premixed pair's share over `[0, 1]`: a step moves the blend's size by 1/16 of
+/// what a cell spans (through the double Gauss at 512 px, 0.08 px of blur radius).
+pub const PAIR_SHARE_STEPS: u32 = 16;
+
 /// A dense PSF and a quantised turn of it, packed into one integer (the PSF's index in the
 /// high half, the turn step in the low) so that a frame's keys sort fast; `NONE` for a record
 /// drawn upright already.
@@ -46,12 +56,36 @@ fn psf_of(key: TurnKey) -> u32 {
     (key >> 32) as u32
 }
 
+/// Two dense PSFs (`lo < hi`), the share of `hi` in steps of [`PAIR_SHARE_STEPS`], and each
+/// one's turn step (over its own turn steps, as a single record of it would be turned).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+struct PairKey {
+    lo: u32,
+    hi: u32,
+    share_step: u32,
+    lo_step: u32,
+    hi_step: u32,
+}
+
+/// What a shared image is: one PSF turned, or two turned and mixed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+enum Shared {
+    Single(TurnKey),
+    Pair(PairKey),
+}
+
 /// Turn steps over a full turn for a PSF reaching `reach_px` from its centre: its rim moves
 /// at most [`RIM_STEP_PX`] per step.
 pub fn turn_steps(reach_px: f32) -> u32 {
     (std::f32::consts::TAU * reach_px.max(1.0) / RIM_STEP_PX)
         .ceil()
         .clamp(8.0, 4096.0) as u32
+}
+
+/// The turn step of `r`'s rotation over `n` steps.
+fn turn_step(r: &SplatRecord, n: u32) -> u32 {
+    let angle = r.rot_sin.atan2(r.rot_cos).rem_euclid(std::f32::consts::TAU);
+    ((angle / std::f32::consts::TAU * n as f32).round() as u32) % n
 }
 
 /// The key of a dense record turned by its rotation, or [`NONE`] when it is drawn upright
@@ -64,15 +98,81 @@ fn key_of(r: &SplatRecord, steps: &[u32]) -> TurnKey {
         Some(&n) if n > 0 => n,
         _ => return NONE,
     };
-    let angle = r.rot_sin.atan2(r.rot_cos).rem_euclid(std::f32::consts::TAU);
-    let step = ((angle / std::f32::consts::TAU * n as f32).round() as u32) % n;
-    (u64::from(r.psf_index) << 32) | u64::from(step)
+    (u64::from(r.psf_index) << 32) | u64::from(turn_step(r, n))
+}
+
+/// The pair key of records `a` and `b` (keys `ka`, `kb`), where they are one fragment's blend
+/// of two PSFs: both turned dense records at one pixel of one layer, with one rotation, other
+/// PSFs, positive weights, and colours that are one colour times their weights.
+fn pair_of(a: &SplatRecord, b: &SplatRecord, ka: TurnKey, kb: TurnKey, steps: &[u32]) -> Option<PairKey> {
+    let blend = ka != NONE
+        && kb != NONE
+        && a.layer == b.layer
+        && (a.center_x, a.center_y) == (b.center_x, b.center_y)
+        && a.rot_cos.to_bits() == b.rot_cos.to_bits()
+        && a.rot_sin.to_bits() == b.rot_sin.to_bits()
+        && a.psf_index != b.psf_index
+        && a.weight > 0.0
+        && b.weight > 0.0;
+    if !blend {
+        return None;
+    }
+    let same_colour = a.color.iter().zip(&b.color).all(|(&ca, &cb)| {
+        let (x, y) = (ca * b.weight, cb * a.weight);
+        (x - y).abs() <= 1e-6 * x.abs().max(y.abs())
+    });
+    if !same_colour {
+        return None;
+    }
+    let (lo, hi, w_hi) = if a.psf_index < b.psf_index {
+        (a.psf_index, b.psf_index, b.weight)
+    } else {
+        (b.psf_index, a.psf_index, a.weight)
+    };
+    let share = w_hi / (a.weight + b.weight);
+    let share_step = (share * PAIR_SHARE_STEPS as f32).round() as u32;
+    Some(PairKey {
+        lo,
+        hi,
+        share_step: share_step.min(PAIR_SHARE_STEPS),
+        lo_step: turn_step(a, steps[lo as usize]),
+        hi_step: turn_step(a, steps[hi as usize]),
+    })
+}
+
+/// `a` and `b` mixed over the union of their boxes: `(1 - s) a + s b`.
+fn mixed(a: &PsfImage, b: &PsfImage, s: f32) -> PsfImage {
+    let ch = a.channels;
+    let x0 = a.origin[0].min(b.origin[0]);
+    let y0 = a.origin[1].min(b.origin[1]);
+    let x1 = (a.origin[0] + a.width as i32).max(b.origin[0] + b.width as i32);
+    let y1 = (a.origin[1] + a.height as i32).max(b.origin[1] + b.height as i32);
+    let (width, height) = ((x1 - x0) as usize, (y1 - y0) as usize);
+    let mut data = vec![0f32; width * height * ch];
+    for (img, w) in [(a, 1.0 - s), (b, s)] {
+        for v in 0..img.height {
+            let row = ((v as i32 + img.origin[1] - y0) as usize * width
+                + (img.origin[0] - x0) as usize)
+                * ch;
+            let src = &img.data[v * img.width * ch..(v + 1) * img.width * ch];
+            for (d, &x) in data[row..row + img.width * ch].iter_mut().zip(src) {
+                *d += w * x;
+            }
+        }
+    }
+    PsfImage {
+        origin: [x0, y0],
+        width,
+        height,
+        channels: ch,
+        data,
+    }
 }
 
 /// Redirects the dense records of `classified` whose (PSF, turn step) is shared to that PSF
-/// turned once, drawn upright; `base` is the database the records index now. The frame's
-/// database becomes `base` followed by the turned images. Returns how many records were
-/// redirected.
+/// turned once, drawn upright, and premixes the shared blends of two PSFs into one upright
+/// record; `base` is the database the records index now. The frame's database becomes `base`
+/// followed by the turned images. Returns how many records are drawn from shared images.
 pub(super) fn draw_shared_turns_upright(
     classified: &mut Classified,
     base: &PsfDatabase,
@@ -84,55 +184,83 @@ pub(super) fn draw_shared_turns_upright(
             None => 0,
         })
         .collect();
-    let keys: Vec<TurnKey> = classified
-        .records
-        .par_iter()
-        .map(|r| key_of(r, &steps))
+    let records = &classified.records;
+    let keys: Vec<TurnKey> = records.par_iter().map(|r| key_of(r, &steps)).collect();
+    // Blended pairs, in order: each record with the next where the two are a blend (found in
+    // chunks on every thread), then taken from the left, a record in one pair at most.
+    const CHUNK: usize = 4096;
+    let candidates: Vec<(usize, PairKey)> = (0..records.len().saturating_sub(1))
+        .into_par_iter()
+        .step_by(CHUNK)
+        .flat_map_iter(|start| {
+            let end = (start + CHUNK).min(records.len() - 1);
+            (start..end).filter_map(|i| {
+                pair_of(&records[i], &records[i + 1], keys[i], keys[i + 1], &steps).map(|k| (i, k))
+            })
+        })
         .collect();
-    // Neighbouring records mostly share a key (one cell, nearly one turn): each chunk's runs
-    // of one key counted first, then the runs sorted and merged.
-    let mut runs: Vec<(TurnKey, usize)> = keys
+    let mut pairs: Vec<(usize, PairKey)> = Vec::with_capacity(candidates.len());
+    for (i, key) in candidates {
+        if pairs.last().is_none_or(|&(last, _)| last + 1 < i) {
+            pairs.push((i, key));
+        }
+    }
+    let mut in_pair = vec![false; records.len()];
+    for &(i, _) in &pairs {
+        in_pair[i] = true;
+        in_pair[i + 1] = true;
+    }
+    // Every shared image with the records that use it: singles in runs of neighbours first
+    // (neighbouring records mostly share a key), then sorted and merged.
+    let mut uses: Vec<(Shared, usize)> = keys
         .par_chunks(4096)
-        .flat_map_iter(|chunk| {
-            let mut runs: Vec<(TurnKey, usize)> = Vec::new();
-            for &k in chunk.iter().filter(|&&k| k != NONE) {
+        .zip(in_pair.par_chunks(4096))
+        .flat_map_iter(|(chunk, paired)| {
+            let mut runs: Vec<(Shared, usize)> = Vec::new();
+            for (&k, _) in chunk.iter().zip(paired).filter(|(&k, &p)| k != NONE && !p) {
                 match runs.last_mut() {
-                    Some((last, n)) if *last == k => *n += 1,
-                    _ => runs.push((k, 1)),
+                    Some((Shared::Single(last), n)) if *last == k => *n += 1,
+                    _ => runs.push((Shared::Single(k), 1)),
                 }
             }
             runs
         })
         .collect();
-    if runs.is_empty() {
+    uses.extend(pairs.iter().map(|&(_, key)| (Shared::Pair(key), 1)));
+    if uses.is_empty() {
         return Ok(0);
     }
-    runs.par_sort_unstable();
-    // Each key with the records that use it; the most used first, then in key order, so that
-    // the memory bound drops the same keys on every run.
-    let mut shared: Vec<(usize, TurnKey)> = Vec::new();
-    for run in runs.chunk_by(|a, b| a.0 == b.0) {
+    uses.par_sort_unstable();
+    // The most used first, then in key order, so that the memory bound drops the same images
+    // on every run.
+    let mut shared: Vec<(usize, Shared)> = Vec::new();
+    for run in uses.chunk_by(|a, b| a.0 == b.0) {
         let n: usize = run.iter().map(|r| r.1).sum();
         if n >= MIN_SHARED_RECORDS {
             shared.push((n, run[0].0));
         }
     }
-    drop(runs);
+    drop(uses);
     if shared.is_empty() {
         return Ok(0);
     }
     shared.sort_unstable_by(|a, b| b.0.cmp(&a.0).then(a.1.cmp(&b.1)));
+    // The turned box of a w x h image fits in a square of its diagonal, plus the taps'
+    // pixels either side.
+    let turned_pixels = |psf: u32| -> usize {
+        base.dense(psf as usize).map_or(0, |v| {
+            let diagonal = ((v.width * v.width + v.height * v.height) as f32).sqrt();
+            let side = diagonal.ceil() as usize + 5;
+            side * side
+        })
+    };
     let mut budget = MAX_FRAME_TURNED_PIXELS;
-    let mut chosen: Vec<TurnKey> = Vec::with_capacity(shared.len());
+    let mut chosen: Vec<Shared> = Vec::with_capacity(shared.len());
     for &(_, key) in &shared {
-        let Some(view) = base.dense(psf_of(key) as usize) else {
-            continue;
+        let pixels = match key {
+            Shared::Single(k) => turned_pixels(psf_of(k)),
+            Shared::Pair(p) => turned_pixels(p.lo).max(turned_pixels(p.hi)),
         };
-        // The turned box of a w x h image fits in a square of its diagonal, plus the taps'
-        // pixel either side.
-        let diagonal = ((view.width * view.width + view.height * view.height) as f32).sqrt();
-        let side = diagonal.ceil() as usize + 3;
-        let pixels = side * side;
         if pixels > budget {
             continue;
         }
@@ -140,21 +268,61 @@ pub(super) fn draw_shared_turns_upright(
         chosen.push(key);
     }
     chosen.sort_unstable();
-    // Each PSF's image once (many keys turn the same PSF), then each key's turn of it.
-    let mut psfs: Vec<u32> = chosen.iter().map(|&k| psf_of(k)).collect();
+    // Each PSF turned once per (turn step, steps) the chosen images need, in parallel.
+    let mut turns: Vec<(u32, u32, u32)> = chosen
+        .iter()
+        .flat_map(|key| match *key {
+            Shared::Single(k) => {
+                let psf = psf_of(k);
+                vec![(psf, k as u32, steps[psf as usize])]
+            }
+            Shared::Pair(p) => vec![
+                (p.lo, p.lo_step, steps[p.lo as usize]),
+                (p.hi, p.hi_step, steps[p.hi as usize]),
+            ],
+        })
+        .collect();
+    turns.sort_unstable();
+    turns.dedup();
+    let mut psfs: Vec<u32> = turns.iter().map(|t| t.0).collect();
     psfs.dedup();
     let upright: Vec<Option<PsfImage>> = psfs
         .par_iter()
         .map(|&i| psf_image(base, i as usize))
         .collect();
-    let images: Vec<Option<PsfImage>> = chosen
+    let turned: Vec<Option<PsfImage>> = turns
         .par_iter()
-        .map(|&key| {
-            let psf = psf_of(key);
+        .map(|&(psf, step, n)| {
             let at = psfs.binary_search(&psf).ok()?;
             let image = upright[at].as_ref()?;
-            let angle = crate::motion_smear::turn_rad(key as u32, steps[psf as usize]);
+            let angle = crate::motion_smear::turn_rad(step, n);
             Some(turn(image, angle)).filter(|img| img.width > 0 && img.height > 0)
+        })
+        .collect();
+    let turned_of = |psf: u32, step: u32, n: u32| -> Option<&PsfImage> {
+        let at = turns.binary_search(&(psf, step, n)).ok()?;
+        turned[at].as_ref()
+    };
+    // Singles are their turned image; pairs are mixed.
+    let mixes: Vec<Option<PsfImage>> = chosen
+        .par_iter()
+        .map(|key| match *key {
+            Shared::Single(_) => None,
+            Shared::Pair(p) => {
+                let a = turned_of(p.lo, p.lo_step, steps[p.lo as usize])?;
+                let b = turned_of(p.hi, p.hi_step, steps[p.hi as usize])?;
+                (a.channels == b.channels).then(|| {
+                    mixed(a, b, p.share_step as f32 / PAIR_SHARE_STEPS as f32)
+                })
+            }
+        })
+        .collect();
+    let images: Vec<Option<&PsfImage>> = chosen
+        .iter()
+        .zip(&mixes)
+        .map(|(key, mix)| match *key {
+            Shared::Single(k) => turned_of(psf_of(k), k as u32, steps[psf_of(k) as usize]),
+            Shared::Pair(_) => mix.as_ref(),
         })
         .collect();
     let boxes: Vec<_> = images
@@ -166,7 +334,7 @@ pub(super) fn draw_shared_turns_upright(
     let mut drawn: Vec<&PsfImage> = Vec::with_capacity(boxes.len());
     let first = base.psf_count() as u32;
     for img in &images {
-        index_of_key.push(img.as_ref().map(|img| {
+        index_of_key.push(img.map(|img| {
             drawn.push(img);
             first + drawn.len() as u32 - 1
         }));
@@ -176,22 +344,49 @@ pub(super) fn draw_shared_turns_upright(
     let database = extension
         .fill(|i, out| out.copy_from_slice(&drawn[i].data))
         .map_err(not_built)?;
+    let index_of = |key: Shared| -> Option<u32> {
+        let k = chosen.binary_search(&key).ok()?;
+        index_of_key[k]
+    };
+    // Premixed pairs: the first record draws both (their colours and weights summed), the
+    // second is dropped.
+    let pair_images: Vec<Option<u32>> = pairs
+        .par_iter()
+        .map(|&(_, key)| index_of(Shared::Pair(key)))
+        .collect();
+    let mut dropped = vec![false; classified.records.len()];
+    let mut drawn_shared = 0;
+    for (&(i, _), index) in pairs.iter().zip(pair_images) {
+        if let Some(index) = index {
+            let second = classified.records[i + 1];
+            let r = &mut classified.records[i];
+            r.psf_index = index;
+            (r.rot_cos, r.rot_sin) = (1.0, 0.0);
+            r.weight += second.weight;
+            for (c, s) in r.color.iter_mut().zip(second.color) {
+                *c += s;
+            }
+            dropped[i + 1] = true;
+            drawn_shared += 1;
+        }
+    }
     // Records in chunks, each remembering the last key it looked up: neighbours share keys.
-    let redirected = classified
+    drawn_shared += classified
         .records
         .par_chunks_mut(4096)
         .zip(keys.par_chunks(4096))
-        .map(|(records, keys)| {
+        .zip(in_pair.par_chunks(4096))
+        .map(|((records, keys), paired)| {
             let mut last: Option<(TurnKey, Option<u32>)> = None;
             let mut redirected = 0;
-            for (r, &key) in records.iter_mut().zip(keys) {
-                if key == NONE {
+            for ((r, &key), &p) in records.iter_mut().zip(keys).zip(paired) {
+                if key == NONE || p {
                     continue;
                 }
                 let index = match last {
                     Some((k, index)) if k == key => index,
                     _ => {
-                        let index = chosen.binary_search(&key).ok().and_then(|k| index_of_key[k]);
+                        let index = index_of(Shared::Single(key));
                         last = Some((key, index));
                         index
                     }
@@ -204,9 +399,64 @@ pub(super) fn draw_shared_turns_upright(
             }
             redirected
         })
-        .sum();
+        .sum::<usize>();
+    if dropped.iter().any(|&d| d) {
+        drop_records(classified, &dropped);
+    }
     classified.database = Some(std::sync::Arc::new(database));
-    Ok(redirected)
+    Ok(drawn_shared)
+}
+
+/// `classified` without the records `dropped` marks, each layer's place and path counts
+/// updated.
+fn drop_records(classified: &mut Classified, dropped: &[bool]) {
+    let records = &classified.records;
+    // Each layer's kept records counted, then written into one list on every thread.
+    let kept_per_layer: Vec<usize> = classified
+        .layers
+        .par_iter()
+        .map(|info| {
+            let range = info.first_record..info.first_record + info.record_count;
+            dropped[range].iter().filter(|&&d| !d).count()
+        })
+        .collect();
+    let total: usize = kept_per_layer.iter().sum();
+    let mut kept = vec![SplatRecord::default(); total];
+    let mut rest = kept.as_mut_slice();
+    let mut places = Vec::with_capacity(kept_per_layer.len());
+    for &n in &kept_per_layer {
+        let (place, tail) = std::mem::take(&mut rest).split_at_mut(n);
+        places.push(place);
+        rest = tail;
+    }
+    places
+        .into_par_iter()
+        .zip(classified.layers.par_iter())
+        .for_each(|(place, info)| {
+            let range = info.first_record..info.first_record + info.record_count;
+            let from = records[range.clone()].iter().zip(&dropped[range]);
+            for (to, (r, _)) in place.iter_mut().zip(from.filter(|(_, &d)| !d)) {
+                *to = *r;
+            }
+        });
+    let mut first_record = 0;
+    let counts = &mut classified.counts;
+    (counts.sparse, counts.dense, counts.copied) = (0, 0, 0);
+    for (info, &n) in classified.layers.iter_mut().zip(&kept_per_layer) {
+        *info = crate::pipeline::types::LayerInfo {
+            first_record,
+            record_count: n,
+            sparse: 0,
+            dense: 0,
+            copied: 0,
+            ..*info
+        };
+        info.count_paths(&kept[first_record..first_record + n]);
+        counts.add_layer(info);
+        first_record += n;
+    }
+    classified.records = kept;
+    classified.frame.record_count = classified.records.len() as u32;
 }
 
 #[cfg(test)]
