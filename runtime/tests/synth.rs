@@ -338,6 +338,75 @@ fn physical_camera(db: &PsfDatabase, h: usize) -> Camera {
     }
 }
 
+/// A uniform grey surface out of focus seen through a real lens stays even on the optical axis.
+/// Each pixel's PSF is turned onto its radial direction, so a pixel on the axis receives only
+/// its neighbours' PSFs along their radial direction, and a PSF that is not round (the first
+/// eccentricity box's stands for eccentricities up to the box's edge, where the cat's eye
+/// begins) left it short of light. Near the axis a pixel draws part of its PSF as the PSF's
+/// rotational average, round like the lens's own PSF there. Without the averages the test sees
+/// the dark spot.
+#[test]
+fn a_surface_through_a_real_lens_stays_even_on_the_axis() {
+    let db = test_db(PsfModel::PhysicalLens);
+    let cam = physical_camera(db, 64);
+    let (w, h) = (cam.width as usize, cam.height as usize);
+    let inv = db.space().dims()[0];
+    let level = 0.5f32;
+    let depth = (1.0 / (inv.min + 0.9 * (inv.max - inv.min))) as f32;
+    let g = GBuffer::from_planes(
+        w,
+        h,
+        vec![[level, level, level, 1.0]; w * h],
+        Some(vec![depth; w * h]),
+        None,
+    )
+    .expect("g");
+    let options = SynthOptions {
+        classify: ClassifyOptions {
+            layers: 1,
+            ..ClassifyOptions::default()
+        },
+        ..SynthOptions::default()
+    };
+    // The mean level within 3 px of the axis, and its largest departure there.
+    let on_axis = |dbs: &DbSet| {
+        let (out, _) = synthesize(&g, &cam, dbs, &options).expect("synth");
+        let (cx, cy) = (w as f32 / 2.0, h as f32 / 2.0);
+        let (mut sum, mut n, mut worst) = (0.0f64, 0usize, 0.0f32);
+        for y in 0..h {
+            for x in 0..w {
+                let (dx, dy) = (x as f32 + 0.5 - cx, y as f32 + 0.5 - cy);
+                if dx * dx + dy * dy <= 9.0 {
+                    let v = out.pixels[y * w + x][1] / level;
+                    sum += f64::from(v);
+                    n += 1;
+                    worst = worst.max((v - 1.0).abs());
+                }
+            }
+        }
+        (sum / n as f64, worst)
+    };
+    let dbs = set(db);
+    assert!(
+        dbs.axis_round
+            .iter()
+            .any(|&i| i != spreadlet::dbset::NO_TWIN),
+        "the first eccentricity box's PSFs have rotational averages"
+    );
+    let (mean, worst) = on_axis(&dbs);
+    let mut turned_only = set(db);
+    turned_only.axis_round.fill(spreadlet::dbset::NO_TWIN);
+    let (mean_turned, worst_turned) = on_axis(&turned_only);
+    assert!(
+        worst < 0.015,
+        "on the axis: mean {mean:.4}, worst {worst:.4} off the level"
+    );
+    assert!(
+        worst_turned > 2.0 * worst,
+        "turned only: mean {mean_turned:.4}, worst {worst_turned:.4} (with averages {worst:.4})"
+    );
+}
+
 /// A bright drop far off axis and far out of focus, over a dim backdrop seen through a real
 /// lens: the drop's cat's-eye bokeh is drawn with its PSF's residue clamped (the dense twin),
 /// so no pixel within 30 px of it is darker than 0.8 times the backdrop it lies on, let alone

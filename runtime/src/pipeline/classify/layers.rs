@@ -311,6 +311,7 @@ pub fn classify_fragments(
             mut rot_cos,
             mut rot_sin,
             blend,
+            round_share,
         } = lookup_psf(
             frag,
             coc,
@@ -333,7 +334,9 @@ pub fn classify_fragments(
         // A thin-lens smear replaces the lens-motion lookup, and its range with it.
         let lookup_clamped = clamped && !(thin_smear.is_some() && smear.is_some());
         counts.clamped += usize::from(lookup_clamped || smear.is_some_and(|(_, c)| c));
-        let (path, psf_index, blend) = match smear.and_then(|(k, _)| smeared.index_of(k)) {
+        let smeared_index = smear.and_then(|(k, _)| smeared.index_of(k));
+        let round_share = if smeared_index.is_some() { 0.0 } else { round_share };
+        let (path, psf_index, blend) = match smeared_index {
             Some(i) => {
                 // Built in the image's frame at the fragment's own motion: drawn unrotated,
                 // and not blended with a neighbouring cell.
@@ -380,8 +383,18 @@ pub fn classify_fragments(
                 Some(kept) => frag.weight * lw * kept[index][t],
                 None => frag.weight * lw,
             };
+            // Near the optical axis, part of a real lens's PSF is drawn as its rotational
+            // average, upright ([`DbSet::axis_round`]); the turned parts first, so that a blend's
+            // two stay neighbours.
+            let round_of = |psf: u32| {
+                dbs.axis_round
+                    .get(psf as usize)
+                    .copied()
+                    .filter(|&i| round_share > 0.0 && i != NO_TWIN)
+            };
             for &(path, psf_index, share) in &parts[..n_parts] {
-                let weight = weight * share;
+                let kept = if round_of(psf_index).is_some() { 1.0 - round_share } else { 1.0 };
+                let weight = weight * share * kept;
                 // Frame coordinates for now; shifted by the padding once it is known.
                 per_layer[layer].push(SplatRecord {
                     center_x: x,
@@ -394,6 +407,22 @@ pub fn classify_fragments(
                     path: path as u32,
                     color: color.map(|v| v * weight),
                 });
+            }
+            for &(_, psf_index, share) in &parts[..n_parts] {
+                if let Some(round) = round_of(psf_index) {
+                    let weight = weight * share * round_share;
+                    per_layer[layer].push(SplatRecord {
+                        center_x: x,
+                        center_y: y,
+                        psf_index: round,
+                        layer: layer as u32,
+                        rot_cos: 1.0,
+                        rot_sin: 0.0,
+                        weight,
+                        path: SplatPath::Dense as u32,
+                        color: color.map(|v| v * weight),
+                    });
+                }
             }
         }
     

@@ -18,6 +18,9 @@ pub(super) struct Lookup {
     pub(super) rot_sin: f32,
     /// The neighbouring cell the PSF is blended with, if any.
     pub(super) blend: Option<Blend>,
+    /// The share of the PSF drawn as its rotational average instead of turned (physical lens,
+    /// near the optical axis: [`axis_share`]), 0 elsewhere.
+    pub(super) round_share: f32,
 }
 
 /// The second PSF of a blended lookup ([`ClassifyOptions::continuous_lookup`]).
@@ -58,6 +61,7 @@ pub(super) fn lookup_psf(
     let (mut rot_cos, mut rot_sin) = (1.0f32, 0.0f32);
     let offset = dbs.main_offset;
     let mut blend = None;
+    let mut round_share = 0.0;
     // The blend with PSF `j` of the combined database at `share`.
     let blend_with = |(j, share): (u32, f32)| Blend {
         path: combined.map_or(SplatPath::Copy, |all| path_of(all, j)),
@@ -85,6 +89,7 @@ pub(super) fn lookup_psf(
             let s = [1.0 / frag.depth, r / pixels_per_mm];
             let (idx, cl) = db.lookup(s);
             blend = neighbour(db, s, 0, offset);
+            round_share = axis_share(db, idx, r, pixels_per_mm);
             (path_of(all, idx + offset), idx + offset, cl)
         }
         (Some(_), _, Some(all))
@@ -123,7 +128,26 @@ pub(super) fn lookup_psf(
         rot_cos,
         rot_sin,
         blend,
+        round_share,
     }
+}
+
+/// The share of a physical-lens PSF to draw as its rotational average
+/// ([`DbSet::axis_round`]) for a pixel `r_px` from the optical axis whose PSF is cell `idx` of
+/// `db`: `1 - r / r_c` within the centre `r_c` of the first eccentricity box, 0 beyond. The
+/// lens's PSF is round on the axis and turns lopsided with the eccentricity; the first box's
+/// PSF stands for all of it.
+pub(super) fn axis_share(db: &PsfDatabase, idx: u32, r_px: f32, pixels_per_mm: f32) -> f32 {
+    let space = db.space();
+    let first_box = space.cell_box(idx).is_some_and(|b| b.min[1] <= 0.0);
+    let Some(centre) = space.cell_center(idx).filter(|_| first_box) else {
+        return 0.0;
+    };
+    let r_c = centre[1] as f32 * pixels_per_mm;
+    if r_c <= 0.0 {
+        return 0.0;
+    }
+    (1.0 - r_px / r_c).max(0.0)
 }
 
 /// Whether the databases' aperture looks different turned half a turn (an odd number of
