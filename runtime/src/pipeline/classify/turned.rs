@@ -103,8 +103,9 @@ fn key_of(r: &SplatRecord, steps: &[u32]) -> TurnKey {
 
 /// The pair key of records `a` and `b` (keys `ka`, `kb`), where they are one fragment's blend
 /// of two PSFs: both turned dense records at one pixel of one layer, with one rotation, other
-/// PSFs, positive weights, and colours that are one colour times their weights.
-fn pair_of(a: &SplatRecord, b: &SplatRecord, ka: TurnKey, kb: TurnKey, steps: &[u32]) -> Option<PairKey> {
+/// PSFs, positive weights, and colours that are one colour times their weights. Each PSF's turn
+/// step is its record's.
+fn pair_of(a: &SplatRecord, b: &SplatRecord, ka: TurnKey, kb: TurnKey) -> Option<PairKey> {
     let blend = ka != NONE
         && kb != NONE
         && a.layer == b.layer
@@ -124,10 +125,10 @@ fn pair_of(a: &SplatRecord, b: &SplatRecord, ka: TurnKey, kb: TurnKey, steps: &[
     if !same_colour {
         return None;
     }
-    let (lo, hi, w_hi) = if a.psf_index < b.psf_index {
-        (a.psf_index, b.psf_index, b.weight)
+    let ((lo, lo_key), (hi, hi_key), w_hi) = if a.psf_index < b.psf_index {
+        ((a.psf_index, ka), (b.psf_index, kb), b.weight)
     } else {
-        (b.psf_index, a.psf_index, a.weight)
+        ((b.psf_index, kb), (a.psf_index, ka), a.weight)
     };
     let share = w_hi / (a.weight + b.weight);
     let share_step = (share * PAIR_SHARE_STEPS as f32).round() as u32;
@@ -135,8 +136,8 @@ fn pair_of(a: &SplatRecord, b: &SplatRecord, ka: TurnKey, kb: TurnKey, steps: &[
         lo,
         hi,
         share_step: share_step.min(PAIR_SHARE_STEPS),
-        lo_step: turn_step(a, steps[lo as usize]),
-        hi_step: turn_step(a, steps[hi as usize]),
+        lo_step: lo_key as u32,
+        hi_step: hi_key as u32,
     })
 }
 
@@ -195,7 +196,7 @@ pub(super) fn draw_shared_turns_upright(
         .flat_map_iter(|start| {
             let end = (start + CHUNK).min(records.len() - 1);
             (start..end).filter_map(|i| {
-                pair_of(&records[i], &records[i + 1], keys[i], keys[i + 1], &steps).map(|k| (i, k))
+                pair_of(&records[i], &records[i + 1], keys[i], keys[i + 1]).map(|k| (i, k))
             })
         })
         .collect();
