@@ -290,6 +290,13 @@ fn records_drawn_from_shared_turns_match_their_own_turns() {
     let (own, own_stats) = run(false);
     let (shared, shared_stats) = run(true);
     assert_eq!(own_stats.counts.turned, 0);
+    // Sparse PSFs that many records share are integrated and turned once too.
+    assert!(
+        shared_stats.counts.sparse < own_stats.counts.sparse,
+        "sparse records drawn from shared turns: {} left of {}",
+        shared_stats.counts.sparse,
+        own_stats.counts.sparse
+    );
     // A still pixel blends two cells along inverse depth: premixed, one record instead of two.
     assert!(
         shared_stats.counts.dense < own_stats.counts.dense,
