@@ -289,6 +289,22 @@ fn records_drawn_from_shared_turns_match_their_own_turns() {
     };
     let (own, own_stats) = run(false);
     let (shared, shared_stats) = run(true);
+    // The splat makes a layer's planes by its path counts: they follow the records redirected.
+    let dbs = set(db);
+    let c = classify(&g, &cam, &dbs, &ClassifyOptions::default()).expect("classify");
+    for (l, info) in c.layers.iter().enumerate() {
+        let layer = &c.records[info.first_record..info.first_record + info.record_count];
+        let of = |p: SplatPath| layer.iter().filter(|r| r.path == p as u32).count();
+        assert_eq!(
+            (info.sparse, info.dense, info.copied),
+            (
+                of(SplatPath::Sparse),
+                of(SplatPath::Dense),
+                of(SplatPath::Copy)
+            ),
+            "layer {l}"
+        );
+    }
     assert_eq!(own_stats.counts.turned, 0);
     // Sparse PSFs that many records share are integrated and turned once too.
     assert!(

@@ -441,9 +441,9 @@ pub(super) fn draw_shared_turns_upright(
             redirected
         })
         .sum::<usize>();
-    if dropped.iter().any(|&d| d) {
-        drop_records(classified, &dropped);
-    }
+    // Sparse records drawn from dense images moved to the other kind of plane: the layers'
+    // counts say which planes the splat makes, so they are counted again.
+    drop_records(classified, &dropped);
     classified.database = Some(std::sync::Arc::new(database));
     Ok(drawn_shared)
 }
@@ -451,6 +451,10 @@ pub(super) fn draw_shared_turns_upright(
 /// `classified` without the records `dropped` marks, each layer's place and path counts
 /// updated.
 fn drop_records(classified: &mut Classified, dropped: &[bool]) {
+    if !dropped.iter().any(|&d| d) {
+        count_paths_again(classified);
+        return;
+    }
     let records = &classified.records;
     // Each layer's kept records counted, then written into one list on every thread.
     let kept_per_layer: Vec<usize> = classified
@@ -498,6 +502,18 @@ fn drop_records(classified: &mut Classified, dropped: &[bool]) {
     }
     classified.records = kept;
     classified.frame.record_count = classified.records.len() as u32;
+}
+
+/// Each layer's path counts, and the frame's, from its records as they are now.
+fn count_paths_again(classified: &mut Classified) {
+    let records = &classified.records;
+    let counts = &mut classified.counts;
+    (counts.sparse, counts.dense, counts.copied) = (0, 0, 0);
+    for info in &mut classified.layers {
+        (info.sparse, info.dense, info.copied) = (0, 0, 0);
+        info.count_paths(&records[info.first_record..info.first_record + info.record_count]);
+        counts.add_layer(info);
+    }
 }
 
 #[cfg(test)]
