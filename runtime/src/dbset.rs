@@ -445,32 +445,9 @@ fn round_on_axis(db: &PsfDatabase) -> Vec<Option<DenseImage>> {
             let turned: Vec<PsfImage> = (0..AXIS_TURNS)
                 .map(|k| turn(&psf, k as f32 * std::f32::consts::TAU / AXIS_TURNS as f32))
                 .collect();
-            let ch = psf.channels;
-            let x0 = turned.iter().map(|t| t.origin[0]).min()?;
-            let y0 = turned.iter().map(|t| t.origin[1]).min()?;
-            let x1 = turned.iter().map(|t| t.origin[0] + t.width as i32).max()?;
-            let y1 = turned.iter().map(|t| t.origin[1] + t.height as i32).max()?;
-            let (w, h) = ((x1 - x0) as usize, (y1 - y0) as usize);
-            let mut data = vec![0f32; w * h * ch];
             let share = 1.0 / AXIS_TURNS as f32;
-            for t in &turned {
-                for v in 0..t.height {
-                    let row = ((v as i32 + t.origin[1] - y0) as usize * w
-                        + (t.origin[0] - x0) as usize)
-                        * ch;
-                    let src = &t.data[v * t.width * ch..(v + 1) * t.width * ch];
-                    for (d, &x) in data[row..row + t.width * ch].iter_mut().zip(src) {
-                        *d += share * x;
-                    }
-                }
-            }
-            into_dense_image(PsfImage {
-                origin: [x0, y0],
-                width: w,
-                height: h,
-                channels: ch,
-                data,
-            })
+            let weighted: Vec<(&PsfImage, f32)> = turned.iter().map(|t| (t, share)).collect();
+            into_dense_image(crate::motion_smear::weighted_sum(&weighted)?)
         })
         .collect()
 }

@@ -688,6 +688,40 @@ pub fn smeared_psf(db: &PsfDatabase, key: SmearKey) -> Result<Option<PsfImage>, 
     smear(&turned, key.length_px(), key.angle_rad(), key.bend_px()).map(Some)
 }
 
+/// The sum of `images`, each times its weight, over the union of their boxes (`None` for no
+/// images, or images of different channel counts). Each pixel adds the images' values in
+/// their order.
+pub fn weighted_sum(images: &[(&PsfImage, f32)]) -> Option<PsfImage> {
+    let ch = images.first()?.0.channels;
+    if images.iter().any(|(img, _)| img.channels != ch) {
+        return None;
+    }
+    let x0 = images.iter().map(|(t, _)| t.origin[0]).min()?;
+    let y0 = images.iter().map(|(t, _)| t.origin[1]).min()?;
+    let x1 = images.iter().map(|(t, _)| t.origin[0] + t.width as i32).max()?;
+    let y1 = images.iter().map(|(t, _)| t.origin[1] + t.height as i32).max()?;
+    let (width, height) = ((x1 - x0) as usize, (y1 - y0) as usize);
+    let mut data = vec![0f32; width * height * ch];
+    for &(img, w) in images {
+        for v in 0..img.height {
+            let row = ((v as i32 + img.origin[1] - y0) as usize * width
+                + (img.origin[0] - x0) as usize)
+                * ch;
+            let src = &img.data[v * img.width * ch..(v + 1) * img.width * ch];
+            for (d, &x) in data[row..row + img.width * ch].iter_mut().zip(src) {
+                *d += w * x;
+            }
+        }
+    }
+    Some(PsfImage {
+        origin: [x0, y0],
+        width,
+        height,
+        channels: ch,
+        data,
+    })
+}
+
 /// `psf` turned by `angle` radians about its centre (its +x onto `(cos, sin)`, y down): each
 /// output pixel samples the PSF at the point that turns onto it with the Catmull-Rom cubic
 /// (4 x 4 taps), its negative lobes clamped to zero, and each channel keeps its sum. Bilinear

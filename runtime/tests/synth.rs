@@ -187,21 +187,7 @@ fn one_pixel_reproduces_physical_lens_psfs() {
         let recorded_l1 = f64::from(raw.header().stats[index as usize].l1);
         // A pixel on the row through the centre whose eccentricity lies in the cell, +x side.
         let (w, h) = (lens.image_width_px as usize, 8usize);
-        let cam = Camera {
-            width: w as u32,
-            height: h as u32,
-            focal_length_mm: lens.focal_length_mm,
-            sensor_width_mm: lens.sensor_width_mm,
-            f_stop: Some(4.0),
-            focus_distance: Some(lens.focus_distance),
-            aperture_blades: 0,
-            aperture_rotation_deg: 0.0,
-            aperture_ratio: 1.0,
-            aperture_image: None,
-            lens: None,
-            shutter_frames: 0.0,
-            scene_unit_mm: lens.scene_unit_mm,
-        };
+        let cam = physical_camera(db, h);
         let target_px = s[1] * ppm;
         let px = (w as f64 / 2.0 + target_px - 0.5).round().max(0.0) as usize;
         let px = px.min(w - 1);

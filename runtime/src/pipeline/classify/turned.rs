@@ -27,7 +27,7 @@ use rayon::prelude::*;
 use psf_db::PsfDatabase;
 
 use super::ClassifyError;
-use crate::motion_smear::{psf_image, turn, PsfImage};
+use crate::motion_smear::{psf_image, turn, weighted_sum, PsfImage};
 use crate::pipeline::types::{psf_reach, Classified, SplatPath, SplatRecord};
 
 /// Largest move of a PSF's rim between neighbouring turn steps, px: a record drawn from its
@@ -151,35 +151,6 @@ fn pair_of(a: &SplatRecord, b: &SplatRecord, ka: TurnKey, kb: TurnKey) -> Option
         lo_step: lo_key as u32,
         hi_step: hi_key as u32,
     })
-}
-
-/// `a` and `b` mixed over the union of their boxes: `(1 - s) a + s b`.
-fn mixed(a: &PsfImage, b: &PsfImage, s: f32) -> PsfImage {
-    let ch = a.channels;
-    let x0 = a.origin[0].min(b.origin[0]);
-    let y0 = a.origin[1].min(b.origin[1]);
-    let x1 = (a.origin[0] + a.width as i32).max(b.origin[0] + b.width as i32);
-    let y1 = (a.origin[1] + a.height as i32).max(b.origin[1] + b.height as i32);
-    let (width, height) = ((x1 - x0) as usize, (y1 - y0) as usize);
-    let mut data = vec![0f32; width * height * ch];
-    for (img, w) in [(a, 1.0 - s), (b, s)] {
-        for v in 0..img.height {
-            let row = ((v as i32 + img.origin[1] - y0) as usize * width
-                + (img.origin[0] - x0) as usize)
-                * ch;
-            let src = &img.data[v * img.width * ch..(v + 1) * img.width * ch];
-            for (d, &x) in data[row..row + img.width * ch].iter_mut().zip(src) {
-                *d += w * x;
-            }
-        }
-    }
-    PsfImage {
-        origin: [x0, y0],
-        width,
-        height,
-        channels: ch,
-        data,
-    }
 }
 
 /// Redirects the dense records of `classified` whose (PSF, turn step) is shared to that PSF
@@ -350,9 +321,8 @@ pub(super) fn draw_shared_turns_upright(
             Shared::Pair(p) => {
                 let a = turned_of(p.lo, p.lo_step, steps[p.lo as usize])?;
                 let b = turned_of(p.hi, p.hi_step, steps[p.hi as usize])?;
-                (a.channels == b.channels).then(|| {
-                    mixed(a, b, p.share_step as f32 / PAIR_SHARE_STEPS as f32)
-                })
+                let s = p.share_step as f32 / PAIR_SHARE_STEPS as f32;
+                weighted_sum(&[(a, 1.0 - s), (b, s)])
             }
         })
         .collect();
