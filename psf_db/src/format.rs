@@ -239,6 +239,13 @@ impl PsfDatabase {
         self.header.space.neighbour_blend(s, dim)
     }
 
+    /// [`PsfDatabase::lookup`] and [`PsfDatabase::neighbour_blend`] of one `s` at the cost of
+    /// one lookup; see [`crate::ParamSpace::lookup_and_blend`].
+    #[inline]
+    pub fn lookup_and_blend(&self, s: [f32; 2], dim: usize) -> (u32, bool, Option<(u32, f32)>) {
+        self.header.space.lookup_and_blend(s, dim)
+    }
+
     /// [`PsfDatabase::lookup`] of `[s, 0]` and, with `blend`, its neighbour blend along the
     /// first dimension, through `memo`; see [`crate::ParamSpace::lookup_blended_1d`].
     pub fn lookup_blended_1d(

@@ -189,7 +189,9 @@ impl ParamSpace {
         for (k, d) in self.dims.iter().enumerate() {
             let t = u[k] / n;
             let t = if t > 0.0 { t.min(1.0) } else { 0.0 };
-            s[k] = d.min + (d.max - d.min) * t.powf(d.beta);
+            // `t^1` is `t` exactly: skip the general power there.
+            let power = if d.beta == 1.0 { t } else { t.powf(d.beta) };
+            s[k] = d.min + (d.max - d.min) * power;
         }
         s
     }
@@ -224,6 +226,36 @@ impl ParamSpace {
             return None;
         }
         let u = self.to_grid([f64::from(s[0]), f64::from(s[1])]);
+        self.neighbour_blend_at(u, dim)
+    }
+
+    /// [`ParamSpace::lookup`] and [`ParamSpace::neighbour_blend`] along `dim` of one `s`,
+    /// with its grid coordinates found once: the same results as the two calls.
+    pub fn lookup_and_blend(&self, s: [f32; 2], dim: usize) -> (u32, bool, Option<(u32, f32)>) {
+        let mut clamped = false;
+        let mut sd = [0.0f64; 2];
+        for (k, d) in self.dims.iter().enumerate() {
+            let v = s[k] as f64;
+            // `!(a && b)` so that NaN counts as clamped.
+            if !(v >= d.min && v <= d.max) {
+                clamped = true;
+            }
+            sd[k] = v;
+        }
+        let u = self.to_grid(sd);
+        let index = self.grid.index_of(u);
+        let blend = if dim < self.dims.len() && s[dim].is_finite() {
+            // `to_grid` reads only the space's dimensions, so `u` is what the blend's own
+            // conversion of `s` would give.
+            self.neighbour_blend_at(u, dim)
+        } else {
+            None
+        };
+        (index, clamped, blend)
+    }
+
+    /// [`ParamSpace::neighbour_blend`] at grid coordinates `u`.
+    fn neighbour_blend_at(&self, u: [f64; 2], dim: usize) -> Option<(u32, f32)> {
         let cell = self.grid.cell_box(self.grid.index_of(u))?;
         let (lo, hi) = (cell.min[dim], cell.max[dim]);
         self.tent_share(
@@ -394,6 +426,30 @@ struct MemoCell {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn one_lookup_and_blend_is_the_two_calls() {
+        for model in [
+            PsfModel::ThinLens,
+            PsfModel::LensMotion,
+            PsfModel::PhysicalLens,
+        ] {
+            let ranges: Vec<[f64; 2]> = model.default_beta().iter().map(|_| [0.0, 30.0]).collect();
+            let space = ParamSpace::for_model(model, &ranges, 16).expect("a valid space");
+            for i in 0..400 {
+                let s = [i as f32 * 0.083 - 1.0, (i * 7 % 400) as f32 * 0.081 - 0.5];
+                for dim in 0..2 {
+                    let (index, clamped) = space.lookup(s);
+                    let blend = space.neighbour_blend(s, dim);
+                    assert_eq!(
+                        space.lookup_and_blend(s, dim),
+                        (index, clamped, blend),
+                        "{s:?}"
+                    );
+                }
+            }
+        }
+    }
 
     fn lens_motion() -> ParamSpace {
         ParamSpace::for_model(PsfModel::LensMotion, &[[0.0, 64.0], [0.0, 192.0]], 20).unwrap()

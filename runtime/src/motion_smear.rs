@@ -323,6 +323,15 @@ pub fn psf_image(db: &PsfDatabase, index: usize) -> Option<PsfImage> {
 /// Scales each channel of `after` (channel-interleaved, `ch` channels) to the sum it has in
 /// `before`; a channel with nothing left stays as it is.
 fn keep_channel_sums(before: &[f32], after: &mut [f32], ch: usize) {
+    if ch == 3 {
+        keep_rgb_sums(before, after);
+    } else {
+        keep_any_sums(before, after, ch);
+    }
+}
+
+/// [`keep_channel_sums`] for any channel count.
+fn keep_any_sums(before: &[f32], after: &mut [f32], ch: usize) {
     if ch == 0 {
         return;
     }
@@ -348,6 +357,31 @@ fn keep_channel_sums(before: &[f32], after: &mut [f32], ch: usize) {
                 *v *= s;
             }
         }
+    }
+}
+
+/// [`keep_channel_sums`] for three channels, with the sums in registers: the same sums in
+/// the same order, so the same result to the bit.
+fn keep_rgb_sums(before: &[f32], after: &mut [f32]) {
+    let sums = |data: &[f32]| -> [f64; 3] {
+        let mut sums = [0f64; 3];
+        for px in data.chunks_exact(3) {
+            sums[0] += f64::from(px[0]);
+            sums[1] += f64::from(px[1]);
+            sums[2] += f64::from(px[2]);
+        }
+        sums
+    };
+    let (was, is) = (sums(before), sums(after));
+    let scale: [f32; 3] =
+        std::array::from_fn(|k| if is[k] > 0.0 { (was[k] / is[k]) as f32 } else { 1.0 });
+    if scale == [1.0; 3] {
+        return;
+    }
+    for px in after.chunks_exact_mut(3) {
+        px[0] *= scale[0];
+        px[1] *= scale[1];
+        px[2] *= scale[2];
     }
 }
 
@@ -823,6 +857,23 @@ pub fn turn(psf: &PsfImage, angle: f32) -> PsfImage {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn rgb_sums_are_kept_to_the_bit_as_any_channel_count_keeps_them() {
+        let before: Vec<f32> = (0..300).map(|i| ((i * 37) % 101) as f32 * 0.013).collect();
+        let mut after: Vec<f32> = before.iter().map(|v| v * 0.7 + 0.001).collect();
+        after[5] = 0.0;
+        // A channel that sums to zero is left as it is.
+        let mut silent = after.clone();
+        silent.iter_mut().skip(2).step_by(3).for_each(|v| *v = 0.0);
+        for after in [after, silent] {
+            let (mut fast, mut general) = (after.clone(), after);
+            keep_rgb_sums(&before, &mut fast);
+            keep_any_sums(&before, &mut general, 3);
+            let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&fast), bits(&general));
+        }
+    }
 
     /// A single lit pixel: the PSF of an in-focus point.
     fn point() -> PsfImage {

@@ -87,8 +87,10 @@ pub(super) fn lookup_psf(
             }
             // The physical-lens space is over inverse depth (1 / scene units).
             let s = [1.0 / frag.depth, r / pixels_per_mm];
-            let (idx, cl) = db.lookup(s);
-            blend = neighbour(db, s, 0, offset);
+            let (idx, cl, neighbour) = db.lookup_and_blend(s, 0);
+            blend = neighbour
+                .filter(|_| continuous)
+                .map(|(i, share)| blend_with((i + offset, share)));
             round_share = axis_share(db, idx, r, pixels_per_mm);
             (path_of(all, idx + offset), idx + offset, cl)
         }
@@ -139,6 +141,13 @@ pub(super) fn lookup_psf(
 /// PSF stands for all of it.
 pub(super) fn axis_share(db: &PsfDatabase, idx: u32, r_px: f32, pixels_per_mm: f32) -> f32 {
     let space = db.space();
+    // A cell above the grid's first eccentricity box starts above the range's start, which
+    // is not below zero: decided without turning grid units into millimetres.
+    let above_first_box = space.grid().cell_box(idx).is_some_and(|g| g.min[1] > 0.0)
+        && space.dims().get(1).is_some_and(|d| d.min >= 0.0 && d.max > d.min);
+    if above_first_box {
+        return 0.0;
+    }
     let first_box = space.cell_box(idx).is_some_and(|b| b.min[1] <= 0.0);
     let Some(centre) = space.cell_center(idx).filter(|_| first_box) else {
         return 0.0;

@@ -220,7 +220,16 @@ pub(super) fn draw_shared_turns_upright(
             runs
         })
         .collect();
-    uses.extend(pairs.iter().map(|&(_, key)| (Shared::Pair(key), 1)));
+    uses.par_extend(pairs.par_chunks(4096).flat_map_iter(|chunk| {
+        let mut runs: Vec<(Shared, usize)> = Vec::new();
+        for &(_, key) in chunk {
+            match runs.last_mut() {
+                Some((Shared::Pair(last), n)) if *last == key => *n += 1,
+                _ => runs.push((Shared::Pair(key), 1)),
+            }
+        }
+        runs
+    }));
     if uses.is_empty() {
         return Ok(0);
     }
@@ -360,8 +369,18 @@ pub(super) fn draw_shared_turns_upright(
     // Premixed pairs: the first record draws both (their colours and weights summed), the
     // second is dropped.
     let pair_images: Vec<Option<u32>> = pairs
-        .par_iter()
-        .map(|&(_, key)| index_of(Shared::Pair(key)))
+        .par_chunks(4096)
+        .flat_map_iter(|chunk| {
+            let mut last: Option<(PairKey, Option<u32>)> = None;
+            chunk.iter().map(move |&(_, key)| match last {
+                Some((k, index)) if k == key => index,
+                _ => {
+                    let index = index_of(Shared::Pair(key));
+                    last = Some((key, index));
+                    index
+                }
+            })
+        })
         .collect();
     let mut dropped = vec![false; classified.records.len()];
     let mut drawn_shared = 0;
@@ -425,8 +444,6 @@ fn drop_records(classified: &mut Classified, dropped: &[bool]) {
         count_paths_again(classified);
         return;
     }
-    let records = &classified.records;
-    // Each layer's kept records counted, then written into one list on every thread.
     let kept_per_layer: Vec<usize> = classified
         .layers
         .par_iter()
@@ -435,25 +452,14 @@ fn drop_records(classified: &mut Classified, dropped: &[bool]) {
             dropped[range].iter().filter(|&&d| !d).count()
         })
         .collect();
-    let total: usize = kept_per_layer.iter().sum();
-    let mut kept = vec![SplatRecord::default(); total];
-    let mut rest = kept.as_mut_slice();
-    let mut places = Vec::with_capacity(kept_per_layer.len());
-    for &n in &kept_per_layer {
-        let (place, tail) = std::mem::take(&mut rest).split_at_mut(n);
-        places.push(place);
-        rest = tail;
-    }
-    places
-        .into_par_iter()
-        .zip(classified.layers.par_iter())
-        .for_each(|(place, info)| {
-            let range = info.first_record..info.first_record + info.record_count;
-            let from = records[range.clone()].iter().zip(&dropped[range]);
-            for (to, (r, _)) in place.iter_mut().zip(from.filter(|(_, &d)| !d)) {
-                *to = *r;
-            }
-        });
+    // Compacted in place: layers are contiguous and in order, so one pass keeps them so,
+    // without a second list of records to allocate and fault in.
+    let mut at = 0;
+    classified.records.retain(|_| {
+        at += 1;
+        !dropped[at - 1]
+    });
+    let kept = &classified.records;
     let mut first_record = 0;
     let counts = &mut classified.counts;
     (counts.sparse, counts.dense, counts.copied) = (0, 0, 0);
@@ -470,7 +476,6 @@ fn drop_records(classified: &mut Classified, dropped: &[bool]) {
         counts.add_layer(info);
         first_record += n;
     }
-    classified.records = kept;
     classified.frame.record_count = classified.records.len() as u32;
 }
 
