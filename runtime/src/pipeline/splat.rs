@@ -610,13 +610,14 @@ fn splat_dense_upright(
                 } else if ch == 3 {
                     // Adding a zero leaves a pixel as it was, so RGB rows need no test per
                     // pixel. Alpha takes the mean of the three weights, as `weighted` does.
+                    let third = ca[3] / 3.0;
                     let pixels = row[lo as usize..hi as usize].iter_mut();
                     for (px, vals) in pixels.zip(values.chunks_exact(3)) {
                         let (r, g, b) = (vals[0], vals[1], vals[2]);
                         px[0] += ca[0] * r;
                         px[1] += ca[1] * g;
                         px[2] += ca[2] * b;
-                        px[3] += ca[3] * (r + g + b) / 3.0;
+                        px[3] += third * (r + g + b);
                     }
                 } else {
                     let pixels = row[lo as usize..hi as usize].iter_mut();
