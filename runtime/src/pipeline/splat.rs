@@ -598,26 +598,23 @@ fn splat_dense_upright(
                     continue;
                 }
                 let values = &values[(lo - ax0) as usize * ch..(hi - ax0) as usize * ch];
+                // Adding a zero leaves a pixel as it was, so rows need no test per pixel;
+                // each pixel is one four-wide multiply and add (`Vec4` is a SIMD register
+                // where the target has one): a PSF's rows are short, and a loop over groups
+                // of pixels would spend them in its remainders.
                 if ch == 1 {
+                    let colour = glam::Vec4::from_array(ca);
                     for (px, &v) in row[lo as usize..hi as usize].iter_mut().zip(values) {
-                        if v != 0.0 {
-                            let value = ca.map(|c| c * v);
-                            for k in 0..4 {
-                                px[k] += value[k];
-                            }
-                        }
+                        *px = (glam::Vec4::from_array(*px) + colour * v).to_array();
                     }
                 } else if ch == 3 {
-                    // Adding a zero leaves a pixel as it was, so RGB rows need no test per
-                    // pixel. Alpha takes the mean of the three weights, as `weighted` does.
-                    let third = ca[3] / 3.0;
+                    // Alpha takes the mean of the three weights, as `weighted` does.
+                    let weights = glam::Vec4::new(ca[0], ca[1], ca[2], ca[3] / 3.0);
                     let pixels = row[lo as usize..hi as usize].iter_mut();
                     for (px, vals) in pixels.zip(values.chunks_exact(3)) {
                         let (r, g, b) = (vals[0], vals[1], vals[2]);
-                        px[0] += ca[0] * r;
-                        px[1] += ca[1] * g;
-                        px[2] += ca[2] * b;
-                        px[3] += third * (r + g + b);
+                        let sum = glam::Vec4::from_array(*px) + weights * glam::Vec4::new(r, g, b, r + g + b);
+                        *px = sum.to_array();
                     }
                 } else {
                     let pixels = row[lo as usize..hi as usize].iter_mut();
