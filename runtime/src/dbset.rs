@@ -426,8 +426,12 @@ fn physical_twins(db: &PsfDatabase) -> Vec<Option<(TwinCell, Vec<DenseImage>)>> 
         .collect()
 }
 
-/// Turns over which a PSF on the optical axis is averaged ([`DbSet::axis_round`]).
-const AXIS_TURNS: u32 = 32;
+/// Turns over which a PSF on the optical axis is averaged ([`DbSet::axis_round`]). The first
+/// eccentricity box's PSFs are nearly round, so eight turns leave a flat wall through the
+/// double Gauss as even on the axis as 32 did (within 2 px of it 0.9953 against 0.9952 of the
+/// wall's level at 3 m, 0.9943 against 0.9942 at 0.6 m), at a quarter of the cost a process
+/// pays when it loads the database (14 ms -> 4 ms on 2 cores).
+const AXIS_TURNS: u32 = 8;
 
 /// For each PSF of a physical-lens `db` whose cell starts at eccentricity 0: its average over
 /// [`AXIS_TURNS`] turns (each by [`crate::motion_smear::turn`]), over the union of their boxes.
