@@ -226,7 +226,7 @@ impl ParamSpace {
             return None;
         }
         let u = self.to_grid([f64::from(s[0]), f64::from(s[1])]);
-        self.neighbour_blend_at(u, dim)
+        self.neighbour_blend_at(u, self.grid.index_of(u), dim)
     }
 
     /// [`ParamSpace::lookup`] and [`ParamSpace::neighbour_blend`] along `dim` of one `s`,
@@ -247,16 +247,16 @@ impl ParamSpace {
         let blend = if dim < self.dims.len() && s[dim].is_finite() {
             // `to_grid` reads only the space's dimensions, so `u` is what the blend's own
             // conversion of `s` would give.
-            self.neighbour_blend_at(u, dim)
+            self.neighbour_blend_at(u, index, dim)
         } else {
             None
         };
         (index, clamped, blend)
     }
 
-    /// [`ParamSpace::neighbour_blend`] at grid coordinates `u`.
-    fn neighbour_blend_at(&self, u: [f64; 2], dim: usize) -> Option<(u32, f32)> {
-        let cell = self.grid.cell_box(self.grid.index_of(u))?;
+    /// [`ParamSpace::neighbour_blend`] at grid coordinates `u`, which cell `index` holds.
+    fn neighbour_blend_at(&self, u: [f64; 2], index: u32, dim: usize) -> Option<(u32, f32)> {
+        let cell = self.grid.cell_box(index)?;
         let (lo, hi) = (cell.min[dim], cell.max[dim]);
         self.tent_share(
             u[dim],
