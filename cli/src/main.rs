@@ -54,13 +54,6 @@ enum Command {
     Study(cmd::study::StudyArgs),
 }
 
-/// mimalloc, not the system's allocator: classification and reconstruction allocate from
-/// every thread, and glibc's allocator cost rain's classification a quarter of its time at
-/// 512 x 512 (114 -> 84 ms; docs/BENCHMARKS.md). It also keeps freed memory for the next
-/// stage, which glibc did only where it was told to.
-#[global_allocator]
-static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
-
 fn main() {
     let cli = Cli::parse();
     let result = match cli.command {

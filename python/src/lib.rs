@@ -14,12 +14,6 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-/// mimalloc for the module's own allocations, as the command line has: classification and
-/// reconstruction allocate from every thread, where the system allocator cost a quarter of a
-/// real-lens frame's classification.
-#[global_allocator]
-static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
-
 fn value_error(e: impl std::fmt::Display) -> PyErr {
     PyValueError::new_err(e.to_string())
 }

@@ -111,6 +111,7 @@ pub(crate) fn run(args: ReconstructArgs) -> Result<()> {
     )?)?;
     for job in &jobs {
         let camera = load_camera(job.camera.as_deref(), &args.camera_flags)?;
+        super::keep_freed_memory_below(camera.width, camera.height);
         let mut frames = StochasticFrames::read_exr(&job.input)
             .with_context(|| format!("reading stochastic frames {}", job.input.display()))?;
         if args.no_denoise {

@@ -496,6 +496,7 @@ pub(crate) fn run(args: SynthArgs) -> Result<()> {
 fn synth_frame(args: &SynthArgs, job: &FrameJob, renderer: &mut Renderer) -> Result<()> {
     let started = Instant::now();
     let camera = load_camera(job.camera.as_deref(), &args.camera_flags)?;
+    super::keep_freed_memory_below(camera.width, camera.height);
     let t = Instant::now();
     if spreadlet::formats::deep::is_deep_exr_file(&job.input) {
         let deep = read_deep(args, job)?;
