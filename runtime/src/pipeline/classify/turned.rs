@@ -93,24 +93,46 @@ pub fn turn_steps(reach_px: f32) -> u32 {
         .clamp(8.0, 4096.0) as u32
 }
 
-/// The turn step of `r`'s rotation over `n` steps.
-fn turn_step(r: &SplatRecord, n: u32) -> u32 {
-    let angle = r.rot_sin.atan2(r.rot_cos).rem_euclid(std::f32::consts::TAU);
+/// The angle of `r`'s rotation in `[0, 2 pi)`, radians.
+fn turn_angle(r: &SplatRecord) -> f32 {
+    r.rot_sin.atan2(r.rot_cos).rem_euclid(std::f32::consts::TAU)
+}
+
+/// The nearest of `n` turn steps to `angle` (radians, in `[0, 2 pi)`).
+fn step_of_angle(angle: f32, n: u32) -> u32 {
     ((angle / std::f32::consts::TAU * n as f32).round() as u32) % n
 }
 
-/// The key of a dense record turned by its rotation, or [`NONE`] when it is drawn upright
-/// already. `steps[i]` is PSF `i`'s turn steps, 0 for a PSF without a dense image.
-fn key_of(r: &SplatRecord, steps: &[u32]) -> TurnKey {
-    let drawn = r.path == SplatPath::Dense as u32 || r.path == SplatPath::Sparse as u32;
-    if !drawn || (r.rot_cos == 1.0 && r.rot_sin == 0.0) {
-        return NONE;
+/// The keys of records taken in order: a dense record turned by its rotation has its PSF and
+/// turn step, one drawn upright already [`NONE`] (`steps[i]` is PSF `i`'s turn steps, 0 for
+/// a PSF without a dense image). The last rotation's angle is remembered: the records of one
+/// fragment (a blend's two, the share drawn round) share their rotation.
+struct Keys<'s> {
+    steps: &'s [u32],
+    last: Option<((u32, u32), f32)>,
+}
+
+impl Keys<'_> {
+    fn of(&mut self, r: &SplatRecord) -> TurnKey {
+        let drawn = r.path == SplatPath::Dense as u32 || r.path == SplatPath::Sparse as u32;
+        if !drawn || (r.rot_cos == 1.0 && r.rot_sin == 0.0) {
+            return NONE;
+        }
+        let n = match self.steps.get(r.psf_index as usize) {
+            Some(&n) if n > 0 => n,
+            _ => return NONE,
+        };
+        let rotation = (r.rot_cos.to_bits(), r.rot_sin.to_bits());
+        let angle = match self.last {
+            Some((last, angle)) if last == rotation => angle,
+            _ => {
+                let angle = turn_angle(r);
+                self.last = Some((rotation, angle));
+                angle
+            }
+        };
+        (u64::from(r.psf_index) << 32) | u64::from(step_of_angle(angle, n))
     }
-    let n = match steps.get(r.psf_index as usize) {
-        Some(&n) if n > 0 => n,
-        _ => return NONE,
-    };
-    (u64::from(r.psf_index) << 32) | u64::from(turn_step(r, n))
 }
 
 /// The pair key of records `a` and `b` (keys `ka`, `kb`), where they are one fragment's blend
@@ -179,20 +201,42 @@ pub(super) fn draw_shared_turns_upright(
         })
         .collect();
     let records = &classified.records;
-    let keys: Vec<TurnKey> = records.par_iter().map(|r| key_of(r, &steps)).collect();
-    // Blended pairs, in order: each record with the next where the two are a blend (found in
-    // chunks on every thread), then taken from the left, a record in one pair at most.
+    // Every record's key and the blended pairs, in order, in one pass over the records in
+    // chunks on every thread: each record with the next where the two are a blend (the last
+    // of a chunk with the first of the next), then taken from the left, a record in one pair
+    // at most.
     const CHUNK: usize = 4096;
-    let candidates: Vec<(usize, PairKey)> = (0..records.len().saturating_sub(1))
-        .into_par_iter()
-        .step_by(CHUNK)
-        .flat_map_iter(|start| {
-            let end = (start + CHUNK).min(records.len() - 1);
-            (start..end).filter_map(|i| {
-                pair_of(&records[i], &records[i + 1], keys[i], keys[i + 1]).map(|k| (i, k))
-            })
+    let per_chunk: Vec<(Vec<TurnKey>, Vec<(usize, PairKey)>)> = records
+        .par_chunks(CHUNK)
+        .enumerate()
+        .map(|(c, chunk)| {
+            let start = c * CHUNK;
+            let mut keyer = Keys {
+                steps: &steps,
+                last: None,
+            };
+            let keys: Vec<TurnKey> = chunk.iter().map(|r| keyer.of(r)).collect();
+            let next = records.get(start + chunk.len()).map(|r| (r, keyer.of(r)));
+            let mut candidates = Vec::new();
+            for (i, (r, &key)) in chunk.iter().zip(&keys).enumerate() {
+                let following = match chunk.get(i + 1) {
+                    Some(b) => Some((b, keys[i + 1])),
+                    None => next,
+                };
+                let Some((b, b_key)) = following else { break };
+                if let Some(pair) = pair_of(r, b, key, b_key) {
+                    candidates.push((start + i, pair));
+                }
+            }
+            (keys, candidates)
         })
         .collect();
+    let mut keys: Vec<TurnKey> = Vec::with_capacity(records.len());
+    let mut candidates: Vec<(usize, PairKey)> = Vec::new();
+    for (chunk_keys, chunk_candidates) in per_chunk {
+        keys.extend(chunk_keys);
+        candidates.extend(chunk_candidates);
+    }
     let mut pairs: Vec<(usize, PairKey)> = Vec::with_capacity(candidates.len());
     for (i, key) in candidates {
         if pairs.last().is_none_or(|&(last, _)| last + 1 < i) {
