@@ -78,6 +78,10 @@ struct PairKey {
     hi_step: u32,
 }
 
+/// A run of records' keys, and the blended pairs that start in it (the first record's index,
+/// the pair's key).
+type KeysAndPairs = (Vec<TurnKey>, Vec<(usize, PairKey)>);
+
 /// What a shared image is: one PSF turned, or two turned and mixed.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
 enum Shared {
@@ -206,7 +210,7 @@ pub(super) fn draw_shared_turns_upright(
     // of a chunk with the first of the next), then taken from the left, a record in one pair
     // at most.
     const CHUNK: usize = 4096;
-    let per_chunk: Vec<(Vec<TurnKey>, Vec<(usize, PairKey)>)> = records
+    let per_chunk: Vec<KeysAndPairs> = records
         .par_chunks(CHUNK)
         .enumerate()
         .map(|(c, chunk)| {
