@@ -542,6 +542,10 @@ fn splat_dense_upright(
         return;
     }
     let ch = a.channels;
+    if b.is_none() && (ch == 1 || ch == 3) {
+        splat_upright_rows(band, r.color, (r.center_x, r.center_y), &a);
+        return;
+    }
     if b.as_ref().is_some_and(|(view, _)| view.channels != ch) {
         return;
     }
@@ -598,32 +602,14 @@ fn splat_dense_upright(
                     continue;
                 }
                 let values = &values[(lo - ax0) as usize * ch..(hi - ax0) as usize * ch];
-                // Adding a zero leaves a pixel as it was, so rows need no test per pixel;
-                // each pixel is one four-wide multiply and add (`Vec4` is a SIMD register
-                // where the target has one): a PSF's rows are short, and a loop over groups
-                // of pixels would spend them in its remainders.
-                if ch == 1 {
-                    let colour = glam::Vec4::from_array(ca);
-                    for (px, &v) in row[lo as usize..hi as usize].iter_mut().zip(values) {
-                        *px = (glam::Vec4::from_array(*px) + colour * v).to_array();
-                    }
-                } else if ch == 3 {
-                    // Alpha takes the mean of the three weights, as `weighted` does.
-                    let weights = glam::Vec4::new(ca[0], ca[1], ca[2], ca[3] / 3.0);
-                    let pixels = row[lo as usize..hi as usize].iter_mut();
-                    for (px, vals) in pixels.zip(values.chunks_exact(3)) {
-                        let (r, g, b) = (vals[0], vals[1], vals[2]);
-                        let sum = glam::Vec4::from_array(*px) + weights * glam::Vec4::new(r, g, b, r + g + b);
-                        *px = sum.to_array();
-                    }
-                } else {
-                    let pixels = row[lo as usize..hi as usize].iter_mut();
-                    for (px, vals) in pixels.zip(values.chunks_exact(ch)) {
-                        if !zero(vals) {
-                            let value = weighted(ca, vals);
-                            for k in 0..4 {
-                                px[k] += value[k];
-                            }
+                // Grey and RGB images are drawn by `splat_upright_rows`; other channel
+                // counts here.
+                let pixels = row[lo as usize..hi as usize].iter_mut();
+                for (px, vals) in pixels.zip(values.chunks_exact(ch)) {
+                    if !zero(vals) {
+                        let value = weighted(ca, vals);
+                        for k in 0..4 {
+                            px[k] += value[k];
                         }
                     }
                 }
@@ -666,6 +652,54 @@ fn splat_dense_upright(
                         px[k] += value[k];
                     }
                 }
+            }
+        }
+    }
+}
+
+/// One grey or RGB dense image `v` weighted by `colour`, drawn upright centred on `centre`
+/// (band coordinates): each row's non-zero span, each pixel one four-wide multiply and add
+/// (`Vec4` is a SIMD register where the target has one). A PSF's rows are short, so the rows
+/// are walked together with the band's, with no per-row lookups beyond the span.
+fn splat_upright_rows(
+    band: &mut Band,
+    colour: [f32; 4],
+    centre: (i32, i32),
+    v: &psf_db::DenseView,
+) {
+    let ch = v.channels;
+    let (x0, y0) = (centre.0 + v.origin[0], centre.1 + v.origin[1]);
+    let (top, bottom) = (y0.max(band.y0), (y0 + v.height as i32).min(band.y1));
+    if top >= bottom || v.width == 0 {
+        return;
+    }
+    let width = band.width as usize;
+    let first_row = (top - y0) as usize;
+    let rows = (bottom - top) as usize;
+    let band_rows = band.data[(top - band.y0) as usize * width..].chunks_exact_mut(width);
+    let image_rows = v.data.chunks_exact(v.width * ch).skip(first_row);
+    let spans = v.row_spans.iter().skip(first_row);
+    let colour4 = glam::Vec4::from_array(colour);
+    // Red, green and blue by the colour, alpha by the mean of the three weights, as `weighted`
+    // does.
+    let rgb_weights = glam::Vec4::new(colour[0], colour[1], colour[2], colour[3] / 3.0);
+    for ((row, image_row), span) in band_rows.zip(image_rows).zip(spans).take(rows) {
+        let [first, end] = span.map(i32::from);
+        let (lo, hi) = ((x0 + first).max(0), (x0 + end).min(band.width));
+        if lo >= hi {
+            continue;
+        }
+        let values = &image_row[(lo - x0) as usize * ch..(hi - x0) as usize * ch];
+        let pixels = &mut row[lo as usize..hi as usize];
+        if ch == 1 {
+            for (px, &v) in pixels.iter_mut().zip(values) {
+                *px = (glam::Vec4::from_array(*px) + colour4 * v).to_array();
+            }
+        } else {
+            for (px, vals) in pixels.iter_mut().zip(values.chunks_exact(3)) {
+                let (r, g, b) = (vals[0], vals[1], vals[2]);
+                let value = rgb_weights * glam::Vec4::new(r, g, b, r + g + b);
+                *px = (glam::Vec4::from_array(*px) + value).to_array();
             }
         }
     }
