@@ -235,18 +235,16 @@ pub(super) fn draw_shared_turns_upright(
             (keys, candidates)
         })
         .collect();
-    let mut keys: Vec<TurnKey> = Vec::with_capacity(records.len());
-    let mut candidates: Vec<(usize, PairKey)> = Vec::new();
-    for (chunk_keys, chunk_candidates) in per_chunk {
-        keys.extend(chunk_keys);
-        candidates.extend(chunk_candidates);
-    }
-    let mut pairs: Vec<(usize, PairKey)> = Vec::with_capacity(candidates.len());
-    for (i, key) in candidates {
+    // The keys stay in their chunks (the passes below take the records in the same chunks):
+    // joined, they were a list as long as the records' written again in fresh memory.
+    let candidates = per_chunk.iter().map(|(_, candidates)| candidates.len()).sum();
+    let mut pairs: Vec<(usize, PairKey)> = Vec::with_capacity(candidates);
+    for &(i, key) in per_chunk.iter().flat_map(|(_, candidates)| candidates) {
         if pairs.last().is_none_or(|&(last, _)| last + 1 < i) {
             pairs.push((i, key));
         }
     }
+    let key_chunks: Vec<&[TurnKey]> = per_chunk.iter().map(|(keys, _)| &keys[..]).collect();
     let mut in_pair = vec![false; records.len()];
     for &(i, _) in &pairs {
         in_pair[i] = true;
@@ -254,9 +252,9 @@ pub(super) fn draw_shared_turns_upright(
     }
     // Every shared image with the records that use it: singles in runs of neighbours first
     // (neighbouring records mostly share a key), then sorted and merged.
-    let mut uses: Vec<(Shared, usize)> = keys
-        .par_chunks(4096)
-        .zip(in_pair.par_chunks(4096))
+    let mut uses: Vec<(Shared, usize)> = key_chunks
+        .par_iter()
+        .zip(in_pair.par_chunks(CHUNK))
         .flat_map_iter(|(chunk, paired)| {
             let mut runs: Vec<(Shared, usize)> = Vec::new();
             for (&k, _) in chunk.iter().zip(paired).filter(|(&k, &p)| k != NONE && !p) {
@@ -450,13 +448,13 @@ pub(super) fn draw_shared_turns_upright(
     // Records in chunks, each remembering the last key it looked up: neighbours share keys.
     drawn_shared += classified
         .records
-        .par_chunks_mut(4096)
-        .zip(keys.par_chunks(4096))
-        .zip(in_pair.par_chunks(4096))
+        .par_chunks_mut(CHUNK)
+        .zip(key_chunks.par_iter())
+        .zip(in_pair.par_chunks(CHUNK))
         .map(|((records, keys), paired)| {
             let mut last: Option<(TurnKey, Option<u32>)> = None;
             let mut redirected = 0;
-            for ((r, &key), &p) in records.iter_mut().zip(keys).zip(paired) {
+            for ((r, &key), &p) in records.iter_mut().zip(keys.iter()).zip(paired) {
                 if key == NONE || p {
                     continue;
                 }
