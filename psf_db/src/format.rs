@@ -246,6 +246,17 @@ impl PsfDatabase {
         self.header.space.lookup_and_blend(s, dim)
     }
 
+    /// [`PsfDatabase::lookup_and_blend`] along the first dimension through `memo`; see
+    /// [`crate::ParamSpace::lookup_and_blend_memo`].
+    #[inline]
+    pub fn lookup_and_blend_memo(
+        &self,
+        s: [f32; 2],
+        memo: &mut crate::CellMemo,
+    ) -> (u32, bool, Option<(u32, f32)>) {
+        self.header.space.lookup_and_blend_memo(s, memo)
+    }
+
     /// [`PsfDatabase::lookup`] of `[s, 0]` and, with `blend`, its neighbour blend along the
     /// first dimension, through `memo`; see [`crate::ParamSpace::lookup_blended_1d`].
     pub fn lookup_blended_1d(

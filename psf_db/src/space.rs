@@ -164,21 +164,27 @@ impl ParamSpace {
     /// Physical `s` to grid coordinates `u` in `[0, n]` (clamped to the range, NaN to `min`).
     #[inline]
     pub fn to_grid(&self, s: [f64; 2]) -> [f64; 2] {
-        let n = self.grid.n() as f64;
         let mut u = [0.0; 2];
         for (k, d) in self.dims.iter().enumerate() {
-            let t = (s[k] - d.min) / (d.max - d.min);
-            let t = if t > 0.0 { t.min(1.0) } else { 0.0 };
-            // The paper's betas are 1 and 2 in most dimensions: skip the general power there.
-            u[k] = n * if d.beta == 1.0 {
-                t
-            } else if d.beta == 2.0 {
-                t.sqrt()
-            } else {
-                t.powf(1.0 / d.beta)
-            };
+            u[k] = self.grid_coordinate(d, s[k]);
         }
         u
+    }
+
+    /// Physical `s` along dimension `d` to its grid coordinate ([`ParamSpace::to_grid`]).
+    #[inline]
+    fn grid_coordinate(&self, d: &Dimension, s: f64) -> f64 {
+        let n = self.grid.n() as f64;
+        let t = (s - d.min) / (d.max - d.min);
+        let t = if t > 0.0 { t.min(1.0) } else { 0.0 };
+        // The paper's betas are 1 and 2 in most dimensions: skip the general power there.
+        n * if d.beta == 1.0 {
+            t
+        } else if d.beta == 2.0 {
+            t.sqrt()
+        } else {
+            t.powf(1.0 / d.beta)
+        }
     }
 
     /// Grid coordinates `u` (clamped to `[0, n]`) to physical `s`.
@@ -252,6 +258,107 @@ impl ParamSpace {
             None
         };
         (index, clamped, blend)
+    }
+
+    /// [`ParamSpace::lookup_and_blend`] along the first dimension of a two-dimensional space
+    /// whose first dimension is linear (beta 1), through `memo`: the same results. Where `s`
+    /// lies well inside the cell the last lookup found (its second coordinate compared in
+    /// physical units, so that its power is not taken), the cell and its neighbour along the
+    /// first dimension are the memo's: a row of pixels through a real lens mostly stays in one
+    /// cell of inverse depth and eccentricity. One memo serves one space.
+    pub fn lookup_and_blend_memo(
+        &self,
+        s: [f32; 2],
+        memo: &mut CellMemo,
+    ) -> (u32, bool, Option<(u32, f32)>) {
+        let linear_first = self.dims.len() == 2 && self.dims[0].beta == 1.0;
+        if !linear_first || !s[0].is_finite() || !s[1].is_finite() {
+            return self.lookup_and_blend(s, 0);
+        }
+        let (d0, d1) = (&self.dims[0], &self.dims[1]);
+        let (s0, s1) = (f64::from(s[0]), f64::from(s[1]));
+        // `!(a && b)` so that NaN counts as clamped.
+        let within = |v: f64, d: &Dimension| v >= d.min && v <= d.max;
+        let clamped = !(within(s0, d0) && within(s1, d1));
+        let u0 = self.grid_coordinate(d0, s0);
+        let inside = |b: &MemoBox| b.lo0 < u0 && u0 < b.hi0 && b.s1_lo < s1 && s1 < b.s1_hi;
+        let cell = match memo.cell2.filter(inside) {
+            Some(cell) => cell,
+            None => {
+                let (index, clamped, blend) = self.lookup_and_blend(s, 0);
+                memo.cell2 = self.memo_box(index);
+                return (index, clamped, blend);
+            }
+        };
+        // A neighbour found before serves while `s` lies within its range of the second
+        // coordinate too: the point just across the boundary then falls in the same cell.
+        let neighbour = |side: &mut Option<MemoNeighbour>, above: bool| {
+            if let Some(n) = side.filter(|n| n.s1_lo < s1 && s1 < n.s1_hi) {
+                return Some((n.index, n.centre));
+            }
+            let u = [u0, self.grid_coordinate(d1, s1)];
+            let found = self.neighbour_along(u, 0, cell.lo0, cell.hi0, above)?;
+            *side = self.memo_neighbour(found);
+            Some(found)
+        };
+        let (mut lower, mut upper) = (cell.lower, cell.upper);
+        let blend = self.tent_share(
+            u0,
+            cell.lo0,
+            cell.hi0,
+            || neighbour(&mut lower, false),
+            || neighbour(&mut upper, true),
+        );
+        memo.cell2 = Some(MemoBox {
+            lower,
+            upper,
+            ..cell
+        });
+        (cell.index, clamped, blend)
+    }
+
+    /// The memo of cell `index`, its second coordinate's range shrunk
+    /// by a millionth of a millionth of the dimension's range at either end (far beyond the
+    /// rounding of the power between grid and physical units); `None` for an empty cell.
+    fn memo_box(&self, index: u32) -> Option<MemoBox> {
+        let b = self.grid.cell_box(index)?;
+        if b.max[0] - b.min[0] <= 0.0 || b.max[1] - b.min[1] <= 0.0 {
+            return None;
+        }
+        let (s1_lo, s1_hi) = self.shrunk_second_range(b.min[1], b.max[1])?;
+        Some(MemoBox {
+            index,
+            lo0: b.min[0],
+            hi0: b.max[0],
+            s1_lo,
+            s1_hi,
+            lower: None,
+            upper: None,
+        })
+    }
+
+    /// The memo of a neighbour `(index, centre along the first dimension)`.
+    fn memo_neighbour(&self, (index, centre): (u32, f64)) -> Option<MemoNeighbour> {
+        let b = self.grid.cell_box(index)?;
+        let (s1_lo, s1_hi) = self.shrunk_second_range(b.min[1], b.max[1])?;
+        Some(MemoNeighbour {
+            index,
+            centre,
+            s1_lo,
+            s1_hi,
+        })
+    }
+
+    /// The physical range of grid coordinates `[lo, hi]` of the second dimension, shrunk as
+    /// [`ParamSpace::memo_box`] says; `None` where nothing is left.
+    fn shrunk_second_range(&self, lo: f64, hi: f64) -> Option<(f64, f64)> {
+        let d = self.dims.get(1)?;
+        let margin = 1e-12 * (d.max - d.min);
+        let (a, b) = (
+            self.from_grid([0.0, lo])[1] + margin,
+            self.from_grid([0.0, hi])[1] - margin,
+        );
+        (a < b).then_some((a, b))
     }
 
     /// [`ParamSpace::neighbour_blend`] at grid coordinates `u`, which cell `index` holds.
@@ -410,6 +517,31 @@ impl ParamSpace {
 #[derive(Clone, Copy, Debug, Default)]
 pub struct CellMemo {
     cell: Option<MemoCell>,
+    cell2: Option<MemoBox>,
+}
+
+/// A cell of a two-dimensional space ([`ParamSpace::lookup_and_blend_memo`]): its index, its
+/// box along the first dimension (grid units), the physical range of the second coordinate
+/// it holds for certain, and its neighbours along the first dimension as found so far.
+#[derive(Clone, Copy, Debug)]
+struct MemoBox {
+    index: u32,
+    lo0: f64,
+    hi0: f64,
+    s1_lo: f64,
+    s1_hi: f64,
+    lower: Option<MemoNeighbour>,
+    upper: Option<MemoNeighbour>,
+}
+
+/// A neighbouring cell along the first dimension: its index, its centre along that
+/// dimension (grid units), and the physical range of the second coordinate it holds.
+#[derive(Clone, Copy, Debug)]
+struct MemoNeighbour {
+    index: u32,
+    centre: f64,
+    s1_lo: f64,
+    s1_hi: f64,
 }
 
 /// A one-dimensional cell: its index, its box along the dimension (grid units), and its
@@ -426,6 +558,38 @@ struct MemoCell {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_remembered_cell_gives_what_a_fresh_lookup_gives() {
+        let ranges = [[0.05, 3.0], [0.0, 21.0]];
+        let nested = ParamSpace::for_model(PsfModel::PhysicalLens, &ranges, 16).expect("nested");
+        let dims = nested.dims().to_vec();
+        let regular = ParamSpace::regular(dims, [12, 7]).expect("regular");
+        for space in [nested, regular] {
+            let mut memo = CellMemo::default();
+            // Rows of pixels: inverse depth and eccentricity changing slowly, across cell
+            // boundaries and the space's ends, then jumps.
+            let mut points = Vec::new();
+            for row in 0..40 {
+                for x in 0..300 {
+                    let t = x as f32 / 300.0;
+                    let s0 = -0.2 + 3.4 * t + 0.3 * (row as f32 * 0.37).sin();
+                    let s1 = (row as f32 * 0.55 + 8.0 * (t - 0.5) * (t - 0.5)) - 0.5;
+                    points.push([s0, s1]);
+                }
+            }
+            for i in 0..2000 {
+                let k = (i * 7919 % 2003) as f32 / 2003.0;
+                points.push([3.5 * k - 0.2, 22.0 * ((k * 13.0).fract()) - 0.5]);
+            }
+            points.push([f32::NAN, 3.0]);
+            points.push([1.0, f32::INFINITY]);
+            for s in points {
+                let fresh = space.lookup_and_blend(s, 0);
+                assert_eq!(space.lookup_and_blend_memo(s, &mut memo), fresh, "{s:?}");
+            }
+        }
+    }
 
     #[test]
     fn one_lookup_and_blend_is_the_two_calls() {

@@ -37,7 +37,7 @@ pub(super) struct Blend {
 /// everything from a physical-lens one (whose moving fragments the caller then smears along
 /// their motion, [`crate::motion_smear`]); copied when both are under
 /// [`ClassifyOptions::copy_threshold_px`]. `centre` is the frame's centre, pixels. `memo`
-/// remembers the thin-lens cell last found, for the next fragment's lookup.
+/// remembers the thin-lens or physical-lens cell last found, for the next fragment's lookup.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn lookup_psf(
     frag: &Fragment,
@@ -87,7 +87,7 @@ pub(super) fn lookup_psf(
             }
             // The physical-lens space is over inverse depth (1 / scene units).
             let s = [1.0 / frag.depth, r / pixels_per_mm];
-            let (idx, cl, neighbour) = db.lookup_and_blend(s, 0);
+            let (idx, cl, neighbour) = db.lookup_and_blend_memo(s, memo);
             blend = neighbour
                 .filter(|_| continuous)
                 .map(|(i, share)| blend_with((i + offset, share)));
