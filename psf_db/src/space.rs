@@ -206,17 +206,25 @@ impl ParamSpace {
     /// into the space (outside `[min, max]` in some dimension, or NaN). O(1).
     #[inline]
     pub fn lookup(&self, s: [f32; 2]) -> (u32, bool) {
+        let (sd, clamped) = self.widened(s);
+        (self.grid.index_of(self.to_grid(sd)), clamped)
+    }
+
+    /// `s` in f64, and whether it lies outside `[min, max]` in one of the space's dimensions
+    /// (NaN counts as outside).
+    #[inline]
+    fn widened(&self, s: [f32; 2]) -> ([f64; 2], bool) {
         let mut clamped = false;
         let mut sd = [0.0f64; 2];
         for (k, d) in self.dims.iter().enumerate() {
-            let v = s[k] as f64;
+            let v = f64::from(s[k]);
             // `!(a && b)` so that NaN counts as clamped.
             if !(v >= d.min && v <= d.max) {
                 clamped = true;
             }
             sd[k] = v;
         }
-        (self.grid.index_of(self.to_grid(sd)), clamped)
+        (sd, clamped)
     }
 
     /// The neighbouring cell along dimension `dim` that a PSF for `s` is blended with, so that
@@ -238,16 +246,7 @@ impl ParamSpace {
     /// [`ParamSpace::lookup`] and [`ParamSpace::neighbour_blend`] along `dim` of one `s`,
     /// with its grid coordinates found once: the same results as the two calls.
     pub fn lookup_and_blend(&self, s: [f32; 2], dim: usize) -> (u32, bool, Option<(u32, f32)>) {
-        let mut clamped = false;
-        let mut sd = [0.0f64; 2];
-        for (k, d) in self.dims.iter().enumerate() {
-            let v = s[k] as f64;
-            // `!(a && b)` so that NaN counts as clamped.
-            if !(v >= d.min && v <= d.max) {
-                clamped = true;
-            }
-            sd[k] = v;
-        }
+        let (sd, clamped) = self.widened(s);
         let u = self.to_grid(sd);
         let index = self.grid.index_of(u);
         let blend = if dim < self.dims.len() && s[dim].is_finite() {
@@ -276,10 +275,7 @@ impl ParamSpace {
             return self.lookup_and_blend(s, 0);
         }
         let (d0, d1) = (&self.dims[0], &self.dims[1]);
-        let (s0, s1) = (f64::from(s[0]), f64::from(s[1]));
-        // `!(a && b)` so that NaN counts as clamped.
-        let within = |v: f64, d: &Dimension| v >= d.min && v <= d.max;
-        let clamped = !(within(s0, d0) && within(s1, d1));
+        let ([s0, s1], clamped) = self.widened(s);
         let u0 = self.grid_coordinate(d0, s0);
         let inside = |b: &MemoBox| b.lo0 < u0 && u0 < b.hi0 && b.s1_lo < s1 && s1 < b.s1_hi;
         let cell = match memo.cell2.filter(inside) {
