@@ -30,6 +30,9 @@ fn plain_options(integrator: Integrator) -> SynthOptions {
             edge_split: false,
             // One record per pixel, of the cell holding its parameters.
             continuous_lookup: false,
+            // Each record drawn at its own turn from the database's own PSF (a frame's few
+            // sparse records are otherwise drawn from images turned for the frame).
+            shared_turns: false,
             ..ClassifyOptions::default()
         },
         integrator,
@@ -325,6 +328,74 @@ fn records_drawn_from_shared_turns_match_their_own_turns() {
         "mean difference {relative:.4} of the level"
     );
     assert!(worst < 0.04, "largest difference {worst}");
+}
+
+/// A frame through a real lens whose only sparse PSFs are a few drops off the axis: those
+/// few sparse records are turned into images too, so that no layer needs the frame's
+/// integration, and the frame is what drawing them sparse gives, to the turn's quantisation.
+#[test]
+fn a_few_sparse_records_are_drawn_from_turned_images() {
+    let db = test_db(PsfModel::PhysicalLens);
+    let cam = physical_camera(db, 160);
+    let (w, h) = (cam.width as usize, cam.height as usize);
+    // The test database's PSFs are dense at the near end of its inverse depths (the grey
+    // wall), and sparse behind it where the field is far from the axis (the drops).
+    let inv = db.space().dims()[0];
+    let at = |t: f64| (1.0 / (inv.min + (inv.max - inv.min) * t)) as f32;
+    let (wall, drop) = (at(0.95), at(0.65));
+    let mut color = vec![[0.2f32, 0.2, 0.2, 1.0]; w * h];
+    let mut depth = vec![wall; w * h];
+    let drops = [
+        (40, 30),
+        (w - 40, 30),
+        (40, h - 30),
+        (w - 40, h - 30),
+        (w - 60, h / 2),
+    ];
+    for &(x, y) in &drops {
+        color[y * w + x] = [0.9, 0.7, 0.5, 1.0];
+        depth[y * w + x] = drop;
+    }
+    let g = GBuffer::from_planes(w, h, color, Some(depth), None).expect("g");
+    let run = |shared_turns: bool| {
+        let options = SynthOptions {
+            classify: ClassifyOptions {
+                shared_turns,
+                ..ClassifyOptions::default()
+            },
+            ..SynthOptions::default()
+        };
+        synthesize(&g, &cam, &set(db), &options).expect("synth")
+    };
+    let (own, own_stats) = run(false);
+    let (shared, shared_stats) = run(true);
+    assert!(
+        own_stats.counts.sparse > 0,
+        "the drops are drawn sparse when each record is turned on its own: {:?}",
+        own_stats.counts
+    );
+    assert_eq!(
+        shared_stats.counts.sparse, 0,
+        "every sparse record drawn from a turned image"
+    );
+    let (mut diff, mut level, mut worst) = (0.0f64, 0.0f64, 0.0f32);
+    for (a, b) in own.pixels.iter().zip(&shared.pixels) {
+        for c in 0..3 {
+            diff += f64::from((a[c] - b[c]).abs());
+            level += f64::from(a[c].abs());
+            worst = worst.max((a[c] - b[c]).abs());
+        }
+    }
+    let relative = diff / level;
+    assert!(
+        relative < 0.006,
+        "mean difference {relative:.4} of the level"
+    );
+    assert!(worst < 0.08, "largest difference {worst}");
+    assert!(
+        shared.pixels.iter().all(|p| p.iter().all(|&v| v >= 0.0)),
+        "no pixel below zero around the drops"
+    );
 }
 
 /// A camera for the physical-lens test database: its lens, sensor and focus, `h` rows.

@@ -28,7 +28,7 @@ use psf_db::PsfDatabase;
 
 use super::ClassifyError;
 use crate::motion_smear::{psf_image, turn, weighted_sum, PsfImage};
-use crate::pipeline::types::{psf_reach, Classified, SplatPath, SplatRecord};
+use crate::pipeline::types::{psf_reach, Classified, FrameParams, SplatPath, SplatRecord};
 
 /// Largest move of a PSF's rim between neighbouring turn steps, px: a record drawn from its
 /// step's image has its rim at most half of this from where its own turn puts it.
@@ -41,6 +41,15 @@ pub const MIN_SHARED_RECORDS: usize = 2;
 /// Records that must share a turn of a sparse PSF for it to be integrated and turned once: its
 /// image is large, and turning it costs what drawing a dozen records from it saves.
 pub const MIN_SHARED_SPARSE_RECORDS: usize = 16;
+
+/// What building one pixel of a sparse PSF's turned image costs, in pixels of an upright dense
+/// image drawn: the exact integration of each colour channel on the PSF's own plane, and the
+/// cubic turn.
+pub const IMAGE_BUILD_COST: usize = 32;
+
+/// What integrating one pixel of one layer's padded frame costs, in pixels of an upright dense
+/// image drawn: the exact lattice inverse (an FFT in f64 there and back) of four planes.
+pub const LAYER_INTEGRATION_COST: usize = 32;
 
 /// Most pixels of turned images one frame appends, summed (each holds a value per channel):
 /// beyond it, the keys used by fewest records are drawn turned as before.
@@ -179,6 +188,39 @@ fn pair_of(a: &SplatRecord, b: &SplatRecord, ka: TurnKey, kb: TurnKey) -> Option
     })
 }
 
+/// Whether the frame's sparse records are few enough that each is drawn from a turned image,
+/// whatever it shares: then no layer has a Laplacian plane, and the frame's integration is
+/// skipped. They must all be turned (an upright one is drawn as it is), and building and
+/// drawing their images, each record's its own at worst, must cost less than integrating
+/// one layer of the frame.
+fn turns_every_sparse_record(records: &[SplatRecord], reach: &[i32], frame: FrameParams) -> bool {
+    let plane = frame.padded_width as usize * frame.padded_height as usize;
+    let most = LAYER_INTEGRATION_COST * plane;
+    let reach_of = |psf: u32| reach.get(psf as usize).copied().unwrap_or(0).max(0) as usize;
+    let side = |psf: u32| 2 * reach_of(psf) + 9;
+    // The (PSF, turn step) of each sparse record, while drawing them stays under the bound.
+    let mut keys: Vec<(u32, u32)> = Vec::new();
+    let mut cost = 0usize;
+    for r in records.iter().filter(|r| r.path == SplatPath::Sparse as u32) {
+        if r.rot_cos == 1.0 && r.rot_sin == 0.0 {
+            return false;
+        }
+        cost += side(r.psf_index).pow(2);
+        if cost > most {
+            return false;
+        }
+        let steps = turn_steps(reach_of(r.psf_index) as f32);
+        keys.push((r.psf_index, step_of_angle(turn_angle(r), steps)));
+    }
+    keys.sort_unstable();
+    keys.dedup();
+    cost += keys
+        .iter()
+        .map(|&(psf, _)| side(psf).pow(2) * IMAGE_BUILD_COST)
+        .sum::<usize>();
+    !keys.is_empty() && cost <= most
+}
+
 /// Redirects the dense records of `classified` whose (PSF, turn step) is shared to that PSF
 /// turned once, drawn upright, and premixes the shared blends of two PSFs into one upright
 /// record; `base` is the database the records index now. The frame's database becomes `base`
@@ -188,12 +230,13 @@ pub(super) fn draw_shared_turns_upright(
     base: &PsfDatabase,
 ) -> Result<usize, ClassifyError> {
     let reach = psf_reach(base);
+    let every_sparse = turns_every_sparse_record(&classified.records, &reach, classified.frame);
     // A sparse PSF is drawn from a turned dense image where that costs less per record
-    // ([`SPREADLET_COST`]).
+    // ([`SPREADLET_COST`]), or where its records are the frame's few sparse ones.
     let steps: Vec<u32> = (0..base.psf_count())
         .map(|i| {
             let reach_px = reach[i].max(0) as usize;
-            let worth = base.dense(i).is_some() || {
+            let worth = base.dense(i).is_some() || every_sparse || {
                 let side = 2 * reach_px + 5;
                 SPREADLET_COST * base.spreadlets(i).0.len() >= side * side
             };
@@ -290,8 +333,10 @@ pub(super) fn draw_shared_turns_upright(
             Shared::Single(k) => sparse(psf_of(k)),
             Shared::Pair(p) => sparse(p.lo) || sparse(p.hi),
         };
-        let least = if any_sparse {
+        let least = if any_sparse && !every_sparse {
             MIN_SHARED_SPARSE_RECORDS
+        } else if any_sparse {
+            1
         } else {
             MIN_SHARED_RECORDS
         };
