@@ -250,7 +250,8 @@ impl BuildPlan {
             None
         };
         let cfg = &self.config;
-        let dense = sparse.len() as f64 > f64::from(cfg.dense_ratio) * support as f64
+        let dense = support <= cfg.dense_up_to_support as usize
+            || sparse.len() as f64 > f64::from(cfg.dense_ratio) * support as f64
             || ((sim < f64::from(cfg.dense_below_similarity)
                 || err > f64::from(cfg.dense_above_l1))
                 && support <= cfg.dense_max_support as usize);

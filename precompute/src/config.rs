@@ -362,15 +362,29 @@ pub struct BuildConfig {
     pub dense_above_l1: f32,
     /// Largest dense support (pixels) the similarity and L1 rules apply to.
     pub dense_max_support: u32,
+    /// A PSF whose dense support is at most this many pixels is stored dense whatever its
+    /// spreadlets: up to about this size (a disc of radius 18 px) drawing its pixels on the
+    /// CPU costs about what drawing its spreadlets and integrating their layer costs, and the
+    /// image is the pre-filtered PSF itself, where the spreadlets approximate it. 0 leaves the
+    /// choice to the other rules ([`DEFAULT_DENSE_UP_TO_SUPPORT`]; the test profile uses 0, so
+    /// that its small PSFs exercise the sparse path).
+    pub dense_up_to_support: u32,
 }
+
+/// [`BuildConfig::dense_up_to_support`] of the quick and paper profiles, pixels. Measured at
+/// 512 x 512 against the same databases with 0 (docs/BENCHMARKS.md, "Small PSFs stored
+/// dense"): the frames whose PSFs all fall under it skip integration and score as well or
+/// better; larger PSFs stay sparse, where the spreadlets pay.
+pub const DEFAULT_DENSE_UP_TO_SUPPORT: u32 = 1024;
 
 impl BuildConfig {
     /// Defaults for `model` and `profile`: seed 1, rays from the profile, budget 1,
     /// pre-filtering on, circular aperture, default lens, the analytic shutter, the paper's
     /// procedure plus a least-squares re-fit ([`Procedure::Refit`]) on a per-PSF density ladder
     /// ([`DEFAULT_BUDGET_TRADEOFF`]); [`BuildConfig::paper`] gives the paper's. Stored dense
-    /// above 0.5 spreadlets per support pixel, or, when at most 4096 px, below similarity 0.9
-    /// or above L1 0.15.
+    /// up to [`DEFAULT_DENSE_UP_TO_SUPPORT`] support pixels (but in the test profile), above
+    /// 0.5 spreadlets per support pixel, or, when at most 4096 px, below similarity 0.9 or
+    /// above L1 0.15.
     pub fn new(model: PsfModel, profile: Profile) -> Self {
         BuildConfig {
             model,
@@ -395,6 +409,10 @@ impl BuildConfig {
             dense_below_similarity: 0.9,
             dense_above_l1: 0.15,
             dense_max_support: 4096,
+            dense_up_to_support: match profile {
+                Profile::Test => 0,
+                Profile::Quick | Profile::Paper => DEFAULT_DENSE_UP_TO_SUPPORT,
+            },
         }
     }
 

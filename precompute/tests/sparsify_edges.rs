@@ -272,3 +272,56 @@ fn a_sparse_only_build_keeps_tiny_psfs() {
         assert!((energy - 1.0).abs() < 0.02, "PSF {i}: energy {energy}");
     }
 }
+
+/// PSFs up to `dense_up_to_support` pixels are stored dense whatever their spreadlets, larger
+/// ones by the other rules: on the Test profile's thin-lens PSFs (CoC up to 12 px, supports up
+/// to about 500 px), a bound of 300 px stores exactly the PSFs of at most 300 support pixels
+/// dense that the other rules alone leave sparse, and leaves every larger one as it was.
+#[test]
+fn psfs_up_to_the_dense_support_are_stored_dense() {
+    use precompute::{build_database, BuildConfig, Profile};
+    use psf_db::PsfModel;
+    let mut cfg = BuildConfig::new(PsfModel::ThinLens, Profile::Test);
+    assert_eq!(
+        cfg.dense_up_to_support, 0,
+        "the test profile keeps the sparse path"
+    );
+    cfg.psf_count = Some(16);
+    let (_, by_rules) = build_database(&cfg, false).expect("build");
+    cfg.dense_up_to_support = 300;
+    let (db, by_size) = build_database(&cfg, false).expect("build");
+    let mut made_dense = 0;
+    for (i, (a, b)) in by_rules.psfs.iter().zip(&by_size.psfs).enumerate() {
+        assert_eq!(a.dense_support, b.dense_support, "PSF {i}: the same image");
+        if b.dense_support <= 300 {
+            assert!(b.dense, "PSF {i} ({} px) stored dense", b.dense_support);
+            assert!(
+                db.dense(i).is_some(),
+                "PSF {i}: its image is in the database"
+            );
+            made_dense += usize::from(!a.dense);
+        } else {
+            assert_eq!(
+                a.dense, b.dense,
+                "PSF {i} ({} px) as before",
+                b.dense_support
+            );
+        }
+    }
+    assert!(
+        made_dense > 0,
+        "some small PSF was sparse by the other rules alone"
+    );
+    assert!(
+        by_size
+            .psfs
+            .iter()
+            .any(|p| p.dense_support > 300 && !p.dense),
+        "some larger PSF stays sparse"
+    );
+    let quick = BuildConfig::new(PsfModel::ThinLens, Profile::Quick);
+    assert_eq!(
+        quick.dense_up_to_support,
+        precompute::config::DEFAULT_DENSE_UP_TO_SUPPORT
+    );
+}

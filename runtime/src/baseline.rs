@@ -71,13 +71,14 @@ pub fn dense_build_config(cfg: &BuildConfig) -> BuildConfig {
     dense
 }
 
-/// `cfg` with every PSF stored sparse: no fast track (the spreadlet ratio, similarity and L1
-/// rules of the precompute all disabled).
+/// `cfg` with every PSF stored sparse: no fast track (the size, spreadlet ratio, similarity and
+/// L1 rules of the precompute all disabled).
 pub fn sparse_build_config(cfg: &BuildConfig) -> BuildConfig {
     let mut sparse = cfg.clone();
     sparse.dense_ratio = 1e6;
     sparse.dense_below_similarity = 0.0;
     sparse.dense_above_l1 = 1e9;
+    sparse.dense_up_to_support = 0;
     sparse
 }
 
