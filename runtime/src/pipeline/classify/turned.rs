@@ -190,8 +190,8 @@ fn pair_of(a: &SplatRecord, b: &SplatRecord, ka: TurnKey, kb: TurnKey) -> Option
 
 /// Whether the frame's sparse records are few enough that each is drawn from a turned image,
 /// whatever it shares: then no layer has a Laplacian plane, and the frame's integration is
-/// skipped. They must all be turned (an upright one is drawn as it is), and building and
-/// drawing their images, each record's its own at worst, must cost less than integrating
+/// skipped. They must all be turned (an upright one is drawn as it is), and drawing their
+/// images plus building one per PSF and turn step they use must cost less than integrating
 /// one layer of the frame.
 fn turns_every_sparse_record(records: &[SplatRecord], reach: &[i32], frame: FrameParams) -> bool {
     let plane = frame.padded_width as usize * frame.padded_height as usize;
