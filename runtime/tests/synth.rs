@@ -3,6 +3,7 @@
 
 mod support;
 
+use formats::image::RgbaImage;
 use poisson::Plane;
 use precompute::{BuildConfig, BuildPlan, Profile};
 use psf_db::{PsfDatabase, PsfModel};
@@ -13,7 +14,7 @@ use spreadlet::pipeline::{
     classify, composite, integrate, splat, ClassifyOptions, CompositeOptions, Effects, Integrator,
     SplatOptions, SplatPath,
 };
-use spreadlet::synth::{synthesize, SynthOptions};
+use spreadlet::synth::{synthesize, SynthOptions, SynthStats};
 use support::{camera, depth_for_coc, one_pixel, raw_test_db, test_db};
 
 /// A set of one database.
@@ -244,6 +245,37 @@ fn one_pixel_reproduces_physical_lens_psfs() {
     }
 }
 
+/// `g` synthesised with default options, shared turns on or off.
+fn with_shared_turns(
+    g: &GBuffer,
+    cam: &Camera,
+    db: &PsfDatabase,
+    shared_turns: bool,
+) -> (RgbaImage, SynthStats) {
+    let options = SynthOptions {
+        classify: ClassifyOptions {
+            shared_turns,
+            ..ClassifyOptions::default()
+        },
+        ..SynthOptions::default()
+    };
+    synthesize(g, cam, &set(db), &options).expect("synth")
+}
+
+/// The mean absolute difference of `b` from `a` over their colour channels, relative to `a`'s
+/// mean level, and the largest difference.
+fn colour_difference(a: &RgbaImage, b: &RgbaImage) -> (f64, f32) {
+    let (mut diff, mut level, mut worst) = (0.0f64, 0.0f64, 0.0f32);
+    for (p, q) in a.pixels.iter().zip(&b.pixels) {
+        for c in 0..3 {
+            diff += f64::from((p[c] - q[c]).abs());
+            level += f64::from(p[c].abs());
+            worst = worst.max((p[c] - q[c]).abs());
+        }
+    }
+    (diff / level, worst)
+}
+
 /// Through a real lens most records of a frame share their PSF and, quantised, their turn
 /// onto the radial direction: drawn upright from that PSF turned once, the frame is what each
 /// record drawn at its own turn gives (the independent, slower path), to the quantisation's
@@ -266,18 +298,8 @@ fn records_drawn_from_shared_turns_match_their_own_turns() {
         }
     }
     let g = GBuffer::from_planes(w, h, color, Some(depth), None).expect("g");
-    let run = |shared_turns: bool| {
-        let options = SynthOptions {
-            classify: ClassifyOptions {
-                shared_turns,
-                ..ClassifyOptions::default()
-            },
-            ..SynthOptions::default()
-        };
-        synthesize(&g, &cam, &set(db), &options).expect("synth")
-    };
-    let (own, own_stats) = run(false);
-    let (shared, shared_stats) = run(true);
+    let (own, own_stats) = with_shared_turns(&g, &cam, db, false);
+    let (shared, shared_stats) = with_shared_turns(&g, &cam, db, true);
     // The splat makes a layer's planes by its path counts: they follow the records redirected.
     let dbs = set(db);
     let c = classify(&g, &cam, &dbs, &ClassifyOptions::default()).expect("classify");
@@ -314,15 +336,7 @@ fn records_drawn_from_shared_turns_match_their_own_turns() {
         "most dense records share a turn: {:?}",
         shared_stats.counts
     );
-    let (mut diff, mut level, mut worst) = (0.0f64, 0.0f64, 0.0f32);
-    for (a, b) in own.pixels.iter().zip(&shared.pixels) {
-        for c in 0..3 {
-            diff += f64::from((a[c] - b[c]).abs());
-            level += f64::from(a[c].abs());
-            worst = worst.max((a[c] - b[c]).abs());
-        }
-    }
-    let relative = diff / level;
+    let (relative, worst) = colour_difference(&own, &shared);
     assert!(
         relative < 0.006,
         "mean difference {relative:.4} of the level"
@@ -357,18 +371,8 @@ fn a_few_sparse_records_are_drawn_from_turned_images() {
         depth[y * w + x] = drop;
     }
     let g = GBuffer::from_planes(w, h, color, Some(depth), None).expect("g");
-    let run = |shared_turns: bool| {
-        let options = SynthOptions {
-            classify: ClassifyOptions {
-                shared_turns,
-                ..ClassifyOptions::default()
-            },
-            ..SynthOptions::default()
-        };
-        synthesize(&g, &cam, &set(db), &options).expect("synth")
-    };
-    let (own, own_stats) = run(false);
-    let (shared, shared_stats) = run(true);
+    let (own, own_stats) = with_shared_turns(&g, &cam, db, false);
+    let (shared, shared_stats) = with_shared_turns(&g, &cam, db, true);
     assert!(
         own_stats.counts.sparse > 0,
         "the drops are drawn sparse when each record is turned on its own: {:?}",
@@ -378,15 +382,7 @@ fn a_few_sparse_records_are_drawn_from_turned_images() {
         shared_stats.counts.sparse, 0,
         "every sparse record drawn from a turned image"
     );
-    let (mut diff, mut level, mut worst) = (0.0f64, 0.0f64, 0.0f32);
-    for (a, b) in own.pixels.iter().zip(&shared.pixels) {
-        for c in 0..3 {
-            diff += f64::from((a[c] - b[c]).abs());
-            level += f64::from(a[c].abs());
-            worst = worst.max((a[c] - b[c]).abs());
-        }
-    }
-    let relative = diff / level;
+    let (relative, worst) = colour_difference(&own, &shared);
     assert!(
         relative < 0.006,
         "mean difference {relative:.4} of the level"
@@ -728,7 +724,7 @@ fn synthesis_is_bit_identical_across_runs_and_thread_counts() {
     let a = run(1);
     let b = run(2);
     let c = run(3);
-    let bits = |img: &formats::image::RgbaImage| {
+    let bits = |img: &RgbaImage| {
         img.pixels
             .iter()
             .flat_map(|p| p.map(f32::to_bits))
