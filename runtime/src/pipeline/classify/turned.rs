@@ -198,10 +198,11 @@ fn turns_every_sparse_record(records: &[SplatRecord], reach: &[i32], frame: Fram
     let most = LAYER_INTEGRATION_COST * plane;
     let reach_of = |psf: u32| reach.get(psf as usize).copied().unwrap_or(0).max(0) as usize;
     let side = |psf: u32| 2 * reach_of(psf) + 9;
-    // The (PSF, turn step) of each sparse record, while drawing them stays under the bound.
-    let mut keys: Vec<(u32, u32)> = Vec::new();
+    let sparse = || records.iter().filter(|r| r.path == SplatPath::Sparse as u32);
+    // Drawing them first, which a frame of many sparse records exceeds early, before keys
+    // are gathered.
     let mut cost = 0usize;
-    for r in records.iter().filter(|r| r.path == SplatPath::Sparse as u32) {
+    for r in sparse() {
         if r.rot_cos == 1.0 && r.rot_sin == 0.0 {
             return false;
         }
@@ -209,9 +210,14 @@ fn turns_every_sparse_record(records: &[SplatRecord], reach: &[i32], frame: Fram
         if cost > most {
             return false;
         }
-        let steps = turn_steps(reach_of(r.psf_index) as f32);
-        keys.push((r.psf_index, step_of_angle(turn_angle(r), steps)));
     }
+    // The (PSF, turn step) of each.
+    let mut keys: Vec<(u32, u32)> = sparse()
+        .map(|r| {
+            let steps = turn_steps(reach_of(r.psf_index) as f32);
+            (r.psf_index, step_of_angle(turn_angle(r), steps))
+        })
+        .collect();
     keys.sort_unstable();
     keys.dedup();
     cost += keys
