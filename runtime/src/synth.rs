@@ -62,7 +62,8 @@ impl SynthOptions {
 pub struct StageTimes {
     /// Classification.
     pub classify_ms: f64,
-    /// Splatting (sparse and dense).
+    /// Splatting (sparse and dense). A frame without a Laplacian plane is splatted and
+    /// composited band by band, and both are counted here.
     pub splat_ms: f64,
     /// Integration.
     pub integrate_ms: f64,
@@ -206,6 +207,26 @@ fn render_classified(
     stats: &mut SynthStats,
 ) -> RgbaImage {
     let db = classified.database_or(dbs.combined.as_ref());
+    let sharpness = |db| {
+        if options.composite.restore_occluded {
+            crate::pipeline::composite::layer_sharpness(classified, db)
+        } else {
+            Vec::new()
+        }
+    };
+    if crate::pipeline::direct::all_direct(classified) {
+        let t = Instant::now();
+        let sharpness = sharpness(db);
+        let image = crate::pipeline::direct::splat_composite(
+            classified,
+            db,
+            &options.splat,
+            &options.composite,
+            &sharpness,
+        );
+        stats.times.splat_ms = ms_since(t);
+        return image;
+    }
     let draw = |frame: &crate::pipeline::Classified, times: &mut crate::synth::StageTimes| {
         let t = Instant::now();
         let stack = splat(frame, db, &options.splat);
@@ -224,11 +245,7 @@ fn render_classified(
     }
 
     let t = Instant::now();
-    let sharpness = if options.composite.restore_occluded {
-        crate::pipeline::composite::layer_sharpness(classified, db)
-    } else {
-        Vec::new()
-    };
+    let sharpness = sharpness(db);
     let image = crate::pipeline::composite::composite_with_sharpness(
         &layers,
         &options.composite,

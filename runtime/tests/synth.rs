@@ -801,3 +801,77 @@ fn hdr_highlight_keeps_the_dim_side_clean() {
         "spreadlets alone would keep the dim side clean too: [{lo_sparse}, {hi_sparse}]"
     );
 }
+
+/// A frame whose records are all dense images and copies is drawn band by band, splat and
+/// composite at once, without its layers' planes: the image is the three stages' one by one
+/// to the bit, through a real lens (turned and premixed records), with soft layers and
+/// copies, compositing by either rule.
+#[test]
+fn a_frame_drawn_all_direct_is_the_three_stages_one_by_one_to_the_bit() {
+    use spreadlet::pipeline::composite::{composite_with_sharpness, layer_sharpness};
+    use spreadlet::pipeline::direct::{all_direct, splat_composite};
+    use spreadlet::pipeline::integrate_owned;
+    let db = test_db(PsfModel::PhysicalLens);
+    let cam = physical_camera(db, 150);
+    let (w, h) = (cam.width as usize, cam.height as usize);
+    // A textured surface in front of a farther one, over the database's dense inverse depths,
+    // with a pixel in focus here and there (a copy).
+    let inv = db.space().dims()[0];
+    let at = |t: f64| (1.0 / (inv.min + (inv.max - inv.min) * t)) as f32;
+    let mut color = vec![[0.0f32; 4]; w * h];
+    let mut depth = vec![0.0f32; w * h];
+    for y in 0..h {
+        for x in 0..w {
+            let t = (x as f32 * 0.29 + y as f32 * 0.17).sin() * 0.5 + 0.5;
+            color[y * w + x] = [t, 0.5 * t, 1.0 - t, 1.0];
+            let near = (x as i32 - w as i32 / 2).abs() < 20 && y > h / 3;
+            depth[y * w + x] = if near {
+                at(0.98)
+            } else {
+                at(0.85 + 0.1 * t as f64)
+            };
+        }
+    }
+    let dbs = set(db);
+    let options = ClassifyOptions::default();
+    let c = classify(&g_of(w, h, color, depth), &cam, &dbs, &options).expect("classify");
+    assert!(
+        all_direct(&c),
+        "every record dense or copied: {:?}",
+        c.counts
+    );
+    assert!(
+        c.layers.iter().filter(|l| l.record_count > 0).count() >= 2,
+        "more than one layer"
+    );
+    let db_used = c.database_or(dbs.combined.as_ref());
+    for restore_occluded in [false, true] {
+        let composite_options = CompositeOptions {
+            restore_occluded,
+            ..CompositeOptions::default()
+        };
+        let sharpness = layer_sharpness(&c, db_used);
+        let splat_options = SplatOptions::default();
+        let stack = splat(&c, db_used, &splat_options);
+        let layers = integrate_owned(stack, Integrator::Exact);
+        let staged = composite_with_sharpness(&layers, &composite_options, &sharpness);
+        let banded = splat_composite(&c, db_used, &splat_options, &composite_options, &sharpness);
+        let bits = |img: &RgbaImage| -> Vec<u32> {
+            img.pixels
+                .iter()
+                .flat_map(|p| p.map(f32::to_bits))
+                .collect()
+        };
+        assert!(staged.pixels.iter().any(|p| p[0] > 0.0), "something drawn");
+        assert_eq!(
+            bits(&staged),
+            bits(&banded),
+            "restore_occluded {restore_occluded}"
+        );
+    }
+}
+
+/// A G-buffer of colour and depth.
+fn g_of(w: usize, h: usize, color: Vec<[f32; 4]>, depth: Vec<f32>) -> GBuffer {
+    GBuffer::from_planes(w, h, color, Some(depth), None).expect("g")
+}

@@ -173,30 +173,13 @@ pub fn composite_with_sharpness(
                 }
                 for x in 0..w {
                     let k = row + x;
-                    let mut c = [
+                    let c = [
                         planes[0].data[k],
                         planes[1].data[k],
                         planes[2].data[k],
-                        planes[3].data[k].max(0.0),
+                        planes[3].data[k],
                     ];
-                    if c[3] > 1.0 {
-                        let inv = 1.0 / c[3];
-                        c = c.map(|v| v * inv);
-                    }
-                    for ch in 0..4 {
-                        total[x][ch] += c[ch];
-                    }
-                    let t = 1.0 - c[3];
-                    let acc = &mut over[x];
-                    let [shown, summed, hiding] = sharp[x];
-                    sharp[x] = [
-                        s * c[3] + t * shown,
-                        summed + s * c[3],
-                        hiding + s * c[3] * acc[3],
-                    ];
-                    for ch in 0..4 {
-                        acc[ch] = c[ch] + t * acc[ch];
-                    }
+                    fold_layer_pixel(c, s, &mut over[x], &mut total[x], &mut sharp[x]);
                 }
             }
             for (((dst, mut px), sum), sharp) in out_row.iter_mut().zip(over).zip(&total).zip(&sharp)
@@ -208,10 +191,42 @@ pub fn composite_with_sharpness(
     out
 }
 
+/// One layer's pixel `c` (premultiplied RGBA, as drawn) of sharpness `s` put under a pixel's
+/// sums so far, which go from the farthest layer to the nearest: its "over" `acc`, the plain
+/// sum `total`, and the coverage-weighted sharpness sums `sharp`. The layer is first
+/// renormalised where its coverage exceeds one, its negative coverage taken as zero.
+#[inline]
+pub(super) fn fold_layer_pixel(
+    mut c: [f32; 4],
+    s: f32,
+    acc: &mut [f32; 4],
+    total: &mut [f32; 4],
+    sharp: &mut [f32; 3],
+) {
+    c[3] = c[3].max(0.0);
+    if c[3] > 1.0 {
+        let inv = 1.0 / c[3];
+        c = c.map(|v| v * inv);
+    }
+    for ch in 0..4 {
+        total[ch] += c[ch];
+    }
+    let t = 1.0 - c[3];
+    let [shown, summed, hiding] = *sharp;
+    *sharp = [
+        s * c[3] + t * shown,
+        summed + s * c[3],
+        hiding + s * c[3] * acc[3],
+    ];
+    for ch in 0..4 {
+        acc[ch] = c[ch] + t * acc[ch];
+    }
+}
+
 /// A pixel's "over" `px` made up to the layers' joint coverage (`sum`, the plain sum of the
 /// layers; `sharp`, the coverage-weighted sharpness sums) as `options` ask, then clamped at 0.
 #[inline]
-fn finish_pixel(px: &mut [f32; 4], sum: &[f32; 4], sharp: &[f32; 3], options: &CompositeOptions) {
+pub(super) fn finish_pixel(px: &mut [f32; 4], sum: &[f32; 4], sharp: &[f32; 3], options: &CompositeOptions) {
     if options.renormalize_coverage && options.restore_occluded {
         let hidden = sum[3] - px[3];
         if hidden > FILL_MIN_HIDDEN && px[3] < 1.0 {

@@ -7,9 +7,13 @@
 //! 3. [`integrate::integrate`]: Laplacian planes -> primal planes (pyramid or exact), direct
 //!    planes added;
 //! 4. [`composite::composite`]: layers back to front -> RGBA image.
+//!
+//! A frame with no Laplacian plane ([`direct::all_direct`]) runs 2 to 4 at once, band by band
+//! ([`direct::splat_composite`]), without holding its layers as planes.
 
 pub mod classify;
 pub mod composite;
+pub mod direct;
 pub mod integrate;
 pub mod splat;
 pub mod types;

@@ -150,11 +150,9 @@ pub fn splat(
     let (pw, ph) = (frame.padded_width as usize, frame.padded_height as usize);
     let bands = ph.div_ceil(BAND_ROWS);
     let n_layers = frame.layers as usize;
-    let extent = frame.pad as i32 + 2;
     // Reach of each PSF (px, rounded up, +1 for bilinear splitting): a record only visits the
     // bands its own PSF reaches.
-    let reach: Vec<i32> = db.map_or_else(Vec::new, psf_reach);
-    let in_row_order = db.is_some_and(PsfDatabase::spreadlets_in_row_order);
+    let drawing = Drawing::new(frame, db, options);
 
     // Per (layer, kind), with kind 0 = Laplacian, 1 = direct: whether any record draws in it.
     let present = |l: usize, kind: usize| {
@@ -203,81 +201,15 @@ pub fn splat(
                 &classified.records[info.first_record..info.first_record + info.record_count];
             let y0 = (b * BAND_ROWS) as i32;
             let y1 = ((b + 1) * BAND_ROWS).min(ph) as i32;
-            // Records are in row order within a layer: the ones that can reach the band.
-            let lo = recs.partition_point(|r| r.center_y < y0 - extent);
-            let hi = recs.partition_point(|r| r.center_y < y1 + extent);
-            // A band no record draws in stays zero: its buffer is cleared at its first
-            // record, so the rows no record reaches are never cleared or written (a depth
-            // layer of a slanted surface covers a strip of the frame).
-            let mut band: Option<Band> = None;
-            let recs = &recs[lo..hi];
-            let mut i = 0;
-            while i < recs.len() {
-                let r = &recs[i];
-                i += 1;
-                if let Some(&k) = reach.get(r.psf_index as usize) {
-                    if r.center_y + k < y0 || r.center_y - k >= y1 {
-                        continue;
-                    }
-                }
-                let drawn_here = match kind {
-                    0 => r.path == SplatPath::Sparse as u32,
-                    _ => r.path == SplatPath::Dense as u32 || r.path == SplatPath::Copy as u32,
-                };
-                if !drawn_here {
-                    continue;
-                }
-                let band = band.get_or_insert_with(|| {
-                    let mut data = std::mem::take(buffer);
-                    data.clear();
-                    data.resize((y1 - y0) as usize * pw, [0.0f32; 4]);
-                    Band {
-                        data,
-                        width: pw as i32,
-                        y0,
-                        y1,
-                    }
-                });
-                match (kind, r.path) {
-                    (0, p) if p == SplatPath::Sparse as u32 => {
-                        if let Some(db) = db {
-                            let reach = reach.get(r.psf_index as usize).copied();
-                            splat_sparse(band, r, db, options.rotation, in_row_order, reach);
-                        }
-                    }
-                    (1, p) if p == SplatPath::Dense as u32 => {
-                        let Some(db) = db else { continue };
-                        // Two dense records at one centre and one rotation (a fragment blended
-                        // across a cell boundary, or a split pixel's two parts): drawn as one
-                        // image, their sum.
-                        let next = recs.get(i).filter(|next| drawn_together(r, next));
-                        if next.is_some() {
-                            i += 1;
-                        }
-                        if is_identity(r) {
-                            splat_dense_upright(band, r, next, db);
-                            continue;
-                        }
-                        match next {
-                            Some(next) => {
-                                splat_dense_pair(band, [r, next], db, options.rotation)
-                            }
-                            None => splat_dense(band, r, db, options.rotation),
-                        }
-                    }
-                    (1, p) if p == SplatPath::Copy as u32 => {
-                        band.add(r.center_x, r.center_y, r.color);
-                    }
-                    _ => {}
-                }
-            }
-            let band = band?;
+            let kind = if kind == 0 { Planes::Laplacian } else { Planes::Direct };
+            let rows = BandRows { y0, y1, width: pw };
+            let band = draw_band(recs, kind, rows, &drawing, buffer)?;
             let [r, g, bl, a] = out;
             for ((((px, r), g), bl), a) in band.data.iter().zip(r).zip(g).zip(bl).zip(a) {
                 (*r, *g, *bl, *a) = (px[0], px[1], px[2], px[3]);
             }
             *buffer = band.data;
-            Some((l, b, kind))
+            Some((l, b, kind as usize))
         })
         .collect();
 
@@ -311,9 +243,138 @@ pub fn splat(
     }
 }
 
+/// The two kinds of plane a layer has: spreadlets go into the Laplacian planes, dense images
+/// and copied pixels into the direct planes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Planes {
+    Laplacian = 0,
+    Direct = 1,
+}
+
+/// A band's rows of a padded layer: `[y0, y1)`, each `width` pixels.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct BandRows {
+    pub y0: i32,
+    pub y1: i32,
+    pub width: usize,
+}
+
+/// What drawing any band of a frame needs.
+pub(super) struct Drawing<'a> {
+    /// The database the records index; `None` only when every record is a copy.
+    pub db: Option<&'a PsfDatabase>,
+    /// [`psf_reach`] of `db`.
+    pub reach: Vec<i32>,
+    /// Rows beyond which no record's PSF reaches from its centre: the padding and 2.
+    pub extent: i32,
+    /// Whether `db`'s spreadlets are in row order.
+    pub in_row_order: bool,
+    /// Splat options.
+    pub options: SplatOptions,
+}
+
+impl<'a> Drawing<'a> {
+    /// What drawing `frame`'s records from `db` needs.
+    pub(super) fn new(frame: FrameParams, db: Option<&'a PsfDatabase>, options: &SplatOptions) -> Self {
+        Drawing {
+            db,
+            reach: db.map_or_else(Vec::new, psf_reach),
+            extent: frame.pad as i32 + 2,
+            in_row_order: db.is_some_and(PsfDatabase::spreadlets_in_row_order),
+            options: *options,
+        }
+    }
+}
+
+/// Draws the records of one layer (`recs`, in row order) that go into planes of `kind` and
+/// reach `rows`, in record order, into a band that takes `buffer`'s memory (give it back
+/// with `*buffer = band.data`); `None`, and `buffer` untouched, where no record draws there.
+pub(super) fn draw_band(
+    recs: &[SplatRecord],
+    kind: Planes,
+    rows: BandRows,
+    drawing: &Drawing,
+    buffer: &mut Vec<[f32; 4]>,
+) -> Option<Band> {
+    let BandRows { y0, y1, width } = rows;
+    let Drawing {
+        db,
+        ref reach,
+        extent,
+        in_row_order,
+        ref options,
+    } = *drawing;
+    // Records are in row order within a layer: the ones that can reach the band.
+    let lo = recs.partition_point(|r| r.center_y < y0 - extent);
+    let hi = recs.partition_point(|r| r.center_y < y1 + extent);
+    // A band no record draws in stays zero: its buffer is cleared at its first record, so the
+    // rows no record reaches are never cleared or written (a depth layer of a slanted surface
+    // covers a strip of the frame).
+    let mut band: Option<Band> = None;
+    let recs = &recs[lo..hi];
+    let mut i = 0;
+    while i < recs.len() {
+        let r = &recs[i];
+        i += 1;
+        if let Some(&k) = reach.get(r.psf_index as usize) {
+            if r.center_y + k < y0 || r.center_y - k >= y1 {
+                continue;
+            }
+        }
+        let drawn_here = match kind {
+            Planes::Laplacian => r.path == SplatPath::Sparse as u32,
+            Planes::Direct => r.path == SplatPath::Dense as u32 || r.path == SplatPath::Copy as u32,
+        };
+        if !drawn_here {
+            continue;
+        }
+        let band = band.get_or_insert_with(|| {
+            let mut data = std::mem::take(buffer);
+            data.clear();
+            data.resize((y1 - y0) as usize * width, [0.0f32; 4]);
+            Band {
+                data,
+                width: width as i32,
+                y0,
+                y1,
+            }
+        });
+        match (kind, r.path) {
+            (Planes::Laplacian, _) => {
+                if let Some(db) = db {
+                    let reach = reach.get(r.psf_index as usize).copied();
+                    splat_sparse(band, r, db, options.rotation, in_row_order, reach);
+                }
+            }
+            (Planes::Direct, p) if p == SplatPath::Dense as u32 => {
+                let Some(db) = db else { continue };
+                // Two dense records at one centre and one rotation (a fragment blended across
+                // a cell boundary, or a split pixel's two parts): drawn as one image, their
+                // sum.
+                let next = recs.get(i).filter(|next| drawn_together(r, next));
+                if next.is_some() {
+                    i += 1;
+                }
+                if is_identity(r) {
+                    splat_dense_upright(band, r, next, db);
+                    continue;
+                }
+                match next {
+                    Some(next) => splat_dense_pair(band, [r, next], db, options.rotation),
+                    None => splat_dense(band, r, db, options.rotation),
+                }
+            }
+            (Planes::Direct, _) => {
+                band.add(r.center_x, r.center_y, r.color);
+            }
+        }
+    }
+    band
+}
+
 /// Rows `[y0, y1)` of a padded layer, RGBA interleaved.
-struct Band {
-    data: Vec<[f32; 4]>,
+pub(super) struct Band {
+    pub(super) data: Vec<[f32; 4]>,
     width: i32,
     y0: i32,
     y1: i32,
