@@ -276,6 +276,9 @@ pub fn classify_fragments(
         _ => SmearedPsfs::default(),
     };
     let combined = smeared.database.as_deref().or(combined);
+    // A still pixel's blend of two turned dense PSFs is one record until the shared turns
+    // premix it.
+    let pack_pairs = options.shared_turns && model == Some(PsfModel::PhysicalLens);
     // One fragment's records into `per_layer`, and what it counts into `counts`.
     let emit = |index: usize,
                 frag: &Fragment,
@@ -392,9 +395,37 @@ pub fn classify_fragments(
                     .copied()
                     .filter(|&i| round_share > 0.0 && i != NO_TWIN)
             };
-            for &(path, psf_index, share) in &parts[..n_parts] {
+            let part_weight = |psf_index: u32, share: f32| {
                 let kept = if round_of(psf_index).is_some() { 1.0 - round_share } else { 1.0 };
-                let weight = weight * share * kept;
+                weight * share * kept
+            };
+            // Two turned dense PSFs of a frame whose shared turns are drawn upright: one
+            // record, premixed there ([`super::turned::pack_pair`]).
+            let [(path_a, psf_a, share_a), (path_b, psf_b, share_b)] = parts;
+            let pair = (pack_pairs
+                && level_of(index) == 0
+                && n_parts == 2
+                && path_a == SplatPath::Dense
+                && path_b == SplatPath::Dense)
+                .then(|| {
+                    super::turned::pack_pair(
+                        (x, y),
+                        layer as u32,
+                        (rot_cos, rot_sin),
+                        color,
+                        (psf_a, part_weight(psf_a, share_a)),
+                        (psf_b, part_weight(psf_b, share_b)),
+                    )
+                })
+                .flatten();
+            if let Some(pair) = pair {
+                per_layer[layer].push(pair);
+            }
+            for &(path, psf_index, share) in &parts[..n_parts] {
+                if pair.is_some() {
+                    break;
+                }
+                let weight = part_weight(psf_index, share);
                 // Frame coordinates for now; shifted by the padding once it is known.
                 per_layer[layer].push(SplatRecord {
                     center_x: x,
@@ -912,10 +943,13 @@ pub(super) fn assemble_layers(
     // Beyond the data: records of the outermost pixels, repeated outwards (or nothing).
     let reach: Vec<i32> = combined.map_or_else(Vec::new, psf_reach);
     let reach_of = |r: &SplatRecord| -> i32 {
+        let of = |psf: u32| reach.get(psf as usize).copied().unwrap_or(0);
         if r.path == SplatPath::Copy as u32 {
             0
+        } else if let Some((lo, hi, _, _)) = super::turned::pair_parts(r) {
+            of(lo).max(of(hi))
         } else {
-            reach.get(r.psf_index as usize).copied().unwrap_or(0)
+            of(r.psf_index)
         }
     };
     let frame = DataWindow::frame(w, h);

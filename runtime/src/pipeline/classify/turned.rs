@@ -17,10 +17,13 @@
 //! quantised without it paying off.
 //!
 //! A still pixel's lookup blends its cell's PSF with the neighbouring cell's along inverse
-//! depth (two records at one pixel whose colours are the same colour times their shares).
-//! Such a pair is premixed: the two PSFs turned, then mixed in the proportion of the
-//! records' weights (rounded to [`PAIR_SHARE_STEPS`]), and drawn as one upright record, where
-//! drawing the two would cost twice as much.
+//! depth. Where both are dense, the fragment is emitted as one record that names both PSFs and
+//! the neighbour's share ([`pack_pair`]), and that pair is premixed here: the two PSFs turned,
+//! then mixed in the proportion of their weights (rounded to [`PAIR_SHARE_STEPS`]), and drawn
+//! as one upright record, where drawing the two would cost twice as much. Through the double
+//! Gauss half of a frame's fragments blend: as one record each, the frame's records are a third
+//! fewer from the start. A pair whose image the frame's memory bound leaves out is split into
+//! its two PSFs' records at the rounded share, drawn turned.
 
 use rayon::prelude::*;
 
@@ -65,6 +68,56 @@ pub const SPREADLET_COST: usize = 25;
 /// Steps of a premixed pair's share over `[0, 1]`: a step moves the blend's size by 1/16 of
 /// what a cell spans (through the double Gauss at 512 px, 0.08 px of blur radius).
 pub const PAIR_SHARE_STEPS: u32 = 16;
+
+/// The path of a still pixel's blend of two turned dense PSFs while it is one record (see
+/// [`pack_pair`]). It never leaves classification: [`draw_shared_turns_upright`] draws each
+/// such record from its premixed image, or splits it into its two PSFs' records.
+const PAIR_PATH: u32 = 0x100;
+
+/// A fragment's blend of two turned dense PSFs as one record, where it would be two records
+/// at one pixel with one rotation (`first` and `second`: each PSF and its weight; `color`, the
+/// fragment's colour). The record holds the two colours summed and the two weights summed,
+/// as premixing them sums them; its PSF is the lower index of the two, the higher goes in the
+/// high bits of its layer, and its path is [`PAIR_PATH`] with the higher PSF's share in steps
+/// of [`PAIR_SHARE_STEPS`]. `None` where the two do not fit those fields or a weight is not
+/// positive: then they are two records.
+pub(super) fn pack_pair(
+    (x, y): (i32, i32),
+    layer: u32,
+    (rot_cos, rot_sin): (f32, f32),
+    color: [f32; 4],
+    first: (u32, f32),
+    second: (u32, f32),
+) -> Option<SplatRecord> {
+    let ((a, wa), (b, wb)) = (first, second);
+    if a == b || wa <= 0.0 || wb <= 0.0 || layer > 0xFF || (rot_cos == 1.0 && rot_sin == 0.0) {
+        return None;
+    }
+    let (lo, hi, w_hi) = if a < b { (a, b, wb) } else { (b, a, wa) };
+    if hi > 0x00FF_FFFF {
+        return None;
+    }
+    let share = w_hi / (wa + wb);
+    let share_step = ((share * PAIR_SHARE_STEPS as f32).round() as u32).min(PAIR_SHARE_STEPS);
+    let (ca, cb) = (color.map(|v| v * wa), color.map(|v| v * wb));
+    Some(SplatRecord {
+        center_x: x,
+        center_y: y,
+        psf_index: lo,
+        layer: layer | (hi << 8),
+        rot_cos,
+        rot_sin,
+        weight: wa + wb,
+        path: PAIR_PATH | share_step,
+        color: [0, 1, 2, 3].map(|c| ca[c] + cb[c]),
+    })
+}
+
+/// A record made by [`pack_pair`]: its two PSFs (lower index first), the higher one's share
+/// in steps of [`PAIR_SHARE_STEPS`], and its layer.
+pub(super) fn pair_parts(r: &SplatRecord) -> Option<(u32, u32, u32, u32)> {
+    (r.path & !0xFF == PAIR_PATH).then_some((r.psf_index, r.layer >> 8, r.path & 0xFF, r.layer & 0xFF))
+}
 
 /// A dense PSF and a quantised turn of it, packed into one integer (the PSF's index in the
 /// high half, the turn step in the low) so that a frame's keys sort fast; `NONE` for a record
@@ -135,57 +188,38 @@ impl Keys<'_> {
             Some(&n) if n > 0 => n,
             _ => return NONE,
         };
+        (u64::from(r.psf_index) << 32) | u64::from(step_of_angle(self.angle(r), n))
+    }
+
+    /// The pair key of a record made by [`pack_pair`]: each PSF's turn step is what a record
+    /// of it alone at this rotation would have. `None` for any other record, or where either
+    /// PSF is not turned.
+    fn pair(&mut self, r: &SplatRecord) -> Option<PairKey> {
+        let (lo, hi, share_step, _) = pair_parts(r)?;
+        let steps = |psf: u32| self.steps.get(psf as usize).copied().filter(|&n| n > 0);
+        let (n_lo, n_hi) = (steps(lo)?, steps(hi)?);
+        let angle = self.angle(r);
+        Some(PairKey {
+            lo,
+            hi,
+            share_step,
+            lo_step: step_of_angle(angle, n_lo),
+            hi_step: step_of_angle(angle, n_hi),
+        })
+    }
+
+    /// The angle of `r`'s rotation ([`turn_angle`]), remembered for the next record.
+    fn angle(&mut self, r: &SplatRecord) -> f32 {
         let rotation = (r.rot_cos.to_bits(), r.rot_sin.to_bits());
-        let angle = match self.last {
+        match self.last {
             Some((last, angle)) if last == rotation => angle,
             _ => {
                 let angle = turn_angle(r);
                 self.last = Some((rotation, angle));
                 angle
             }
-        };
-        (u64::from(r.psf_index) << 32) | u64::from(step_of_angle(angle, n))
+        }
     }
-}
-
-/// The pair key of records `a` and `b` (keys `ka`, `kb`), where they are one fragment's blend
-/// of two PSFs: both turned dense records at one pixel of one layer, with one rotation, other
-/// PSFs, positive weights, and colours that are one colour times their weights. Each PSF's turn
-/// step is its record's.
-fn pair_of(a: &SplatRecord, b: &SplatRecord, ka: TurnKey, kb: TurnKey) -> Option<PairKey> {
-    let blend = ka != NONE
-        && kb != NONE
-        && a.layer == b.layer
-        && (a.center_x, a.center_y) == (b.center_x, b.center_y)
-        && a.rot_cos.to_bits() == b.rot_cos.to_bits()
-        && a.rot_sin.to_bits() == b.rot_sin.to_bits()
-        && a.psf_index != b.psf_index
-        && a.weight > 0.0
-        && b.weight > 0.0;
-    if !blend {
-        return None;
-    }
-    let same_colour = a.color.iter().zip(&b.color).all(|(&ca, &cb)| {
-        let (x, y) = (ca * b.weight, cb * a.weight);
-        (x - y).abs() <= 1e-6 * x.abs().max(y.abs())
-    });
-    if !same_colour {
-        return None;
-    }
-    let ((lo, lo_key), (hi, hi_key), w_hi) = if a.psf_index < b.psf_index {
-        ((a.psf_index, ka), (b.psf_index, kb), b.weight)
-    } else {
-        ((b.psf_index, kb), (a.psf_index, ka), a.weight)
-    };
-    let share = w_hi / (a.weight + b.weight);
-    let share_step = (share * PAIR_SHARE_STEPS as f32).round() as u32;
-    Some(PairKey {
-        lo,
-        hi,
-        share_step: share_step.min(PAIR_SHARE_STEPS),
-        lo_step: lo_key as u32,
-        hi_step: hi_key as u32,
-    })
 }
 
 /// Whether the frame's sparse records are few enough that each is drawn from a turned image,
@@ -254,59 +288,41 @@ pub(super) fn draw_shared_turns_upright(
         })
         .collect();
     let records = &classified.records;
-    // Every record's key and the blended pairs, in order, in one pass over the records in
-    // chunks on every thread: each record with the next where the two are a blend (the last
-    // of a chunk with the first of the next), then taken from the left, a record in one pair
-    // at most.
+    // Every record's key, and the premixed pairs' (their records' index and key), in one pass
+    // over the records in chunks on every thread.
     const CHUNK: usize = 4096;
     let per_chunk: Vec<KeysAndPairs> = records
         .par_chunks(CHUNK)
         .enumerate()
         .map(|(c, chunk)| {
-            let start = c * CHUNK;
             let mut keyer = Keys {
                 steps: &steps,
                 last: None,
             };
-            let keys: Vec<TurnKey> = chunk.iter().map(|r| keyer.of(r)).collect();
-            let next = records.get(start + chunk.len()).map(|r| (r, keyer.of(r)));
-            let mut candidates = Vec::new();
-            for (i, (r, &key)) in chunk.iter().zip(&keys).enumerate() {
-                let following = match chunk.get(i + 1) {
-                    Some(b) => Some((b, keys[i + 1])),
-                    None => next,
-                };
-                let Some((b, b_key)) = following else { break };
-                if let Some(pair) = pair_of(r, b, key, b_key) {
-                    candidates.push((start + i, pair));
-                }
-            }
-            (keys, candidates)
+            let mut pairs = Vec::new();
+            let keys: Vec<TurnKey> = chunk
+                .iter()
+                .enumerate()
+                .map(|(i, r)| {
+                    if let Some(pair) = keyer.pair(r) {
+                        pairs.push((c * CHUNK + i, pair));
+                    }
+                    keyer.of(r)
+                })
+                .collect();
+            (keys, pairs)
         })
         .collect();
-    // The keys stay in their chunks (the passes below take the records in the same chunks):
-    // joined, they were a list as long as the records' written again in fresh memory.
-    let candidates = per_chunk.iter().map(|(_, candidates)| candidates.len()).sum();
-    let mut pairs: Vec<(usize, PairKey)> = Vec::with_capacity(candidates);
-    for &(i, key) in per_chunk.iter().flat_map(|(_, candidates)| candidates) {
-        if pairs.last().is_none_or(|&(last, _)| last + 1 < i) {
-            pairs.push((i, key));
-        }
-    }
+    // The keys and pairs stay in their chunks (the passes below take the records in the same
+    // chunks): joined, they were lists as long as the records' written again in fresh memory.
     let key_chunks: Vec<&[TurnKey]> = per_chunk.iter().map(|(keys, _)| &keys[..]).collect();
-    let mut in_pair = vec![false; records.len()];
-    for &(i, _) in &pairs {
-        in_pair[i] = true;
-        in_pair[i + 1] = true;
-    }
     // Every shared image with the records that use it: singles in runs of neighbours first
     // (neighbouring records mostly share a key), then sorted and merged.
     let mut uses: Vec<(Shared, usize)> = key_chunks
         .par_iter()
-        .zip(in_pair.par_chunks(CHUNK))
-        .flat_map_iter(|(chunk, paired)| {
+        .flat_map_iter(|chunk| {
             let mut runs: Vec<(Shared, usize)> = Vec::new();
-            for (&k, _) in chunk.iter().zip(paired).filter(|(&k, &p)| k != NONE && !p) {
+            for &k in chunk.iter().filter(|&&k| k != NONE) {
                 match runs.last_mut() {
                     Some((Shared::Single(last), n)) if *last == k => *n += 1,
                     _ => runs.push((Shared::Single(k), 1)),
@@ -315,9 +331,9 @@ pub(super) fn draw_shared_turns_upright(
             runs
         })
         .collect();
-    uses.par_extend(pairs.par_chunks(4096).flat_map_iter(|chunk| {
+    uses.par_extend(per_chunk.par_iter().flat_map_iter(|(_, pairs)| {
         let mut runs: Vec<(Shared, usize)> = Vec::new();
-        for &(_, key) in chunk {
+        for &(_, key) in pairs {
             match runs.last_mut() {
                 Some((Shared::Pair(last), n)) if *last == key => *n += 1,
                 _ => runs.push((Shared::Pair(key), 1)),
@@ -326,6 +342,7 @@ pub(super) fn draw_shared_turns_upright(
         runs
     }));
     if uses.is_empty() {
+        split_pairs(classified);
         return Ok(0);
     }
     uses.par_sort_unstable();
@@ -339,9 +356,10 @@ pub(super) fn draw_shared_turns_upright(
             Shared::Single(k) => sparse(psf_of(k)),
             Shared::Pair(p) => sparse(p.lo) || sparse(p.hi),
         };
+        // A pair is one record already: split, it would be two records drawn turned.
         let least = if any_sparse && !every_sparse {
             MIN_SHARED_SPARSE_RECORDS
-        } else if any_sparse {
+        } else if any_sparse || matches!(run[0].0, Shared::Pair(_)) {
             1
         } else {
             MIN_SHARED_RECORDS
@@ -352,6 +370,7 @@ pub(super) fn draw_shared_turns_upright(
     }
     drop(uses);
     if shared.is_empty() {
+        split_pairs(classified);
         return Ok(0);
     }
     shared.sort_unstable_by(|a, b| b.0.cmp(&a.0).then(a.1.cmp(&b.1)));
@@ -463,50 +482,50 @@ pub(super) fn draw_shared_turns_upright(
         let k = chosen.binary_search(&key).ok()?;
         index_of_key[k]
     };
-    // Premixed pairs: the first record draws both (their colours and weights summed), the
-    // second is dropped.
-    let pair_images: Vec<Option<u32>> = pairs
-        .par_chunks(4096)
-        .flat_map_iter(|chunk| {
+    // Premixed pairs: the record draws its premixed image upright (its colours and weights
+    // are the two PSFs' summed already). Records in chunks, each remembering the last pair it
+    // looked up.
+    let (mut drawn_shared, unmixed) = classified
+        .records
+        .par_chunks_mut(CHUNK)
+        .zip(per_chunk.par_iter())
+        .enumerate()
+        .map(|(c, (records, (_, pairs)))| {
             let mut last: Option<(PairKey, Option<u32>)> = None;
-            chunk.iter().map(move |&(_, key)| match last {
-                Some((k, index)) if k == key => index,
-                _ => {
-                    let index = index_of(Shared::Pair(key));
-                    last = Some((key, index));
-                    index
-                }
-            })
-        })
-        .collect();
-    let mut dropped = vec![false; classified.records.len()];
-    let mut drawn_shared = 0;
-    for (&(i, _), index) in pairs.iter().zip(pair_images) {
-        if let Some(index) = index {
-            let second = classified.records[i + 1];
-            let r = &mut classified.records[i];
-            r.psf_index = index;
-            (r.rot_cos, r.rot_sin) = (1.0, 0.0);
-            r.path = SplatPath::Dense as u32;
-            r.weight += second.weight;
-            for (c, s) in r.color.iter_mut().zip(second.color) {
-                *c += s;
+            let (mut mixed, mut unmixed) = (0, 0);
+            for &(i, key) in pairs {
+                let index = match last {
+                    Some((k, index)) if k == key => index,
+                    _ => {
+                        let index = index_of(Shared::Pair(key));
+                        last = Some((key, index));
+                        index
+                    }
+                };
+                let Some(index) = index else {
+                    unmixed += 1;
+                    continue;
+                };
+                let r = &mut records[i - c * CHUNK];
+                r.psf_index = index;
+                r.layer &= 0xFF;
+                (r.rot_cos, r.rot_sin) = (1.0, 0.0);
+                r.path = SplatPath::Dense as u32;
+                mixed += 1;
             }
-            dropped[i + 1] = true;
-            drawn_shared += 1;
-        }
-    }
+            (mixed, unmixed)
+        })
+        .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
     // Records in chunks, each remembering the last key it looked up: neighbours share keys.
     drawn_shared += classified
         .records
         .par_chunks_mut(CHUNK)
         .zip(key_chunks.par_iter())
-        .zip(in_pair.par_chunks(CHUNK))
-        .map(|((records, keys), paired)| {
+        .map(|(records, keys)| {
             let mut last: Option<(TurnKey, Option<u32>)> = None;
             let mut redirected = 0;
-            for ((r, &key), &p) in records.iter_mut().zip(keys.iter()).zip(paired) {
-                if key == NONE || p {
+            for (r, &key) in records.iter_mut().zip(keys.iter()) {
+                if key == NONE {
                     continue;
                 }
                 let index = match last {
@@ -527,53 +546,58 @@ pub(super) fn draw_shared_turns_upright(
             redirected
         })
         .sum::<usize>();
-    // Sparse records drawn from dense images moved to the other kind of plane: the layers'
-    // counts say which planes the splat makes, so they are counted again.
-    drop_records(classified, &dropped);
+    // Pairs without a premixed image become their two PSFs' records; sparse records drawn
+    // from dense images moved to the other kind of plane: the layers' counts say which
+    // planes the splat makes, so they are counted again.
+    if unmixed > 0 {
+        split_pairs(classified);
+    } else {
+        count_paths_again(classified);
+    }
     classified.database = Some(std::sync::Arc::new(database));
     Ok(drawn_shared)
 }
 
-/// `classified` without the records `dropped` marks, each layer's place and path counts
-/// updated.
-fn drop_records(classified: &mut Classified, dropped: &[bool]) {
-    if !dropped.iter().any(|&d| d) {
-        count_paths_again(classified);
-        return;
-    }
-    let kept_per_layer: Vec<usize> = classified
-        .layers
+/// Every record of `classified` still made by [`pack_pair`] replaced by its two PSFs' records,
+/// the lower index first, each with its share of the pair's colour and weight (the share as
+/// premixing rounds it) and the pair's rotation; then each layer's place and path counts.
+fn split_pairs(classified: &mut Classified) {
+    let pairs = classified
+        .records
         .par_iter()
-        .map(|info| {
-            let range = info.first_record..info.first_record + info.record_count;
-            dropped[range].iter().filter(|&&d| !d).count()
-        })
-        .collect();
-    // Compacted in place: layers are contiguous and in order, so one pass keeps them so,
-    // without a second list of records to allocate and fault in.
-    let mut at = 0;
-    classified.records.retain(|_| {
-        at += 1;
-        !dropped[at - 1]
-    });
-    let kept = &classified.records;
-    let mut first_record = 0;
-    let counts = &mut classified.counts;
-    (counts.sparse, counts.dense, counts.copied) = (0, 0, 0);
-    for (info, &n) in classified.layers.iter_mut().zip(&kept_per_layer) {
-        *info = crate::pipeline::types::LayerInfo {
-            first_record,
-            record_count: n,
-            sparse: 0,
-            dense: 0,
-            copied: 0,
-            ..*info
-        };
-        info.count_paths(&kept[first_record..first_record + n]);
-        counts.add_layer(info);
-        first_record += n;
+        .filter(|r| pair_parts(r).is_some())
+        .count();
+    if pairs > 0 {
+        let mut records = Vec::with_capacity(classified.records.len() + pairs);
+        for info in &mut classified.layers {
+            let layer = &classified.records[info.first_record..][..info.record_count];
+            info.first_record = records.len();
+            for r in layer {
+                let Some((lo, hi, share_step, l)) = pair_parts(r) else {
+                    records.push(*r);
+                    continue;
+                };
+                let s = share_step as f32 / PAIR_SHARE_STEPS as f32;
+                for (psf, share) in [(lo, 1.0 - s), (hi, s)] {
+                    if share == 0.0 {
+                        continue;
+                    }
+                    records.push(SplatRecord {
+                        psf_index: psf,
+                        layer: l,
+                        weight: r.weight * share,
+                        path: SplatPath::Dense as u32,
+                        color: r.color.map(|c| c * share),
+                        ..*r
+                    });
+                }
+            }
+            info.record_count = records.len() - info.first_record;
+        }
+        classified.records = records;
+        classified.frame.record_count = classified.records.len() as u32;
     }
-    classified.frame.record_count = classified.records.len() as u32;
+    count_paths_again(classified);
 }
 
 /// Each layer's path counts, and the frame's, from its records as they are now.
@@ -581,9 +605,11 @@ fn count_paths_again(classified: &mut Classified) {
     let records = &classified.records;
     let counts = &mut classified.counts;
     (counts.sparse, counts.dense, counts.copied) = (0, 0, 0);
-    for info in &mut classified.layers {
+    classified.layers.par_iter_mut().for_each(|info| {
         (info.sparse, info.dense, info.copied) = (0, 0, 0);
         info.count_paths(&records[info.first_record..info.first_record + info.record_count]);
+    });
+    for info in &classified.layers {
         counts.add_layer(info);
     }
 }
@@ -591,6 +617,99 @@ fn count_paths_again(classified: &mut Classified) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::pipeline::types::{LayerInfo, PathCounts};
+
+    /// Half a turn's eighth: a rotation a pair may be packed at.
+    const TURNED: (f32, f32) = (std::f32::consts::FRAC_1_SQRT_2, std::f32::consts::FRAC_1_SQRT_2);
+
+    #[test]
+    fn a_packed_pair_holds_both_psfs_their_summed_light_and_the_higher_ones_share() {
+        let colour = [0.5, 0.25, 2.0, 1.0];
+        let (wa, wb) = (0.3f32, 0.1f32);
+        // The first part's PSF is the higher index: the share is the first part's.
+        let r = pack_pair((7, 9), 3, TURNED, colour, (40, wa), (12, wb)).expect("packed");
+        let (lo, hi, share_step, layer) = pair_parts(&r).expect("a pair");
+        assert_eq!((lo, hi, layer), (12, 40, 3));
+        assert_eq!(share_step, (wa / (wa + wb) * PAIR_SHARE_STEPS as f32).round() as u32);
+        assert_eq!(r.weight, wa + wb);
+        for (&c, &v) in r.color.iter().zip(&colour) {
+            assert_eq!(c, v * wa + v * wb);
+        }
+        assert_eq!((r.center_x, r.center_y, r.rot_cos, r.rot_sin), (7, 9, TURNED.0, TURNED.1));
+        // Not a pair: drawn upright already, a weight of zero, one PSF twice, indices or a
+        // layer beyond the fields, or a record of any path.
+        assert!(pack_pair((0, 0), 0, (1.0, 0.0), colour, (1, wa), (2, wb)).is_none());
+        assert!(pack_pair((0, 0), 0, TURNED, colour, (1, 0.0), (2, wb)).is_none());
+        assert!(pack_pair((0, 0), 0, TURNED, colour, (2, wa), (2, wb)).is_none());
+        assert!(pack_pair((0, 0), 0, TURNED, colour, (1, wa), (1 << 24, wb)).is_none());
+        assert!(pack_pair((0, 0), 256, TURNED, colour, (1, wa), (2, wb)).is_none());
+        for path in [SplatPath::Sparse, SplatPath::Dense, SplatPath::Copy] {
+            let plain = SplatRecord {
+                path: path as u32,
+                layer: 5,
+                ..r
+            };
+            assert!(pair_parts(&plain).is_none());
+        }
+    }
+
+    #[test]
+    fn an_unmixed_pair_splits_into_its_two_psfs_at_the_rounded_share() {
+        let colour = [1.0, 2.0, 4.0, 1.0];
+        let plain = |x: i32, layer: u32| SplatRecord {
+            center_x: x,
+            layer,
+            psf_index: 1,
+            rot_cos: 1.0,
+            weight: 1.0,
+            path: SplatPath::Dense as u32,
+            color: colour,
+            ..SplatRecord::default()
+        };
+        let pair = pack_pair((2, 0), 1, TURNED, colour, (5, 0.75), (4, 0.25)).expect("packed");
+        let records = vec![plain(0, 0), plain(1, 1), pair, plain(3, 1)];
+        let layers = vec![
+            LayerInfo {
+                first_record: 0,
+                record_count: 1,
+                ..LayerInfo::default()
+            },
+            LayerInfo {
+                first_record: 1,
+                record_count: 3,
+                ..LayerInfo::default()
+            },
+        ];
+        let mut classified = Classified {
+            frame: FrameParams {
+                layers: 2,
+                record_count: records.len() as u32,
+                ..FrameParams::default()
+            },
+            records,
+            layers,
+            counts: PathCounts::default(),
+            database: None,
+            coarse: Vec::new(),
+        };
+        split_pairs(&mut classified);
+        let r = &classified.records;
+        assert_eq!(r.len(), 5);
+        assert_eq!(classified.frame.record_count, 5);
+        assert_eq!((classified.layers[1].first_record, classified.layers[1].record_count), (1, 4));
+        assert_eq!((classified.layers[1].dense, classified.counts.dense), (4, 5));
+        // The pair's place, lower index first: 0.75 of the light is PSF 5's, 12 steps of 16.
+        let share = 12.0 / PAIR_SHARE_STEPS as f32;
+        for (k, (psf, s)) in [(4, 1.0 - share), (5, share)].into_iter().enumerate() {
+            let part = &r[2 + k];
+            assert_eq!((part.psf_index, part.layer, part.center_x), (psf, 1, 2));
+            assert_eq!(part.path, SplatPath::Dense as u32);
+            assert_eq!((part.rot_cos, part.rot_sin), TURNED);
+            assert_eq!(part.weight, pair.weight * s);
+            assert_eq!(part.color, pair.color.map(|c| c * s));
+        }
+        assert_eq!((r[1].center_x, r[4].center_x), (1, 3));
+    }
 
     #[test]
     fn a_step_moves_the_rim_at_most_the_bound() {
