@@ -722,6 +722,37 @@ pub fn smeared_psf(db: &PsfDatabase, key: SmearKey) -> Result<Option<PsfImage>, 
     smear(&turned, key.length_px(), key.angle_rad(), key.bend_px()).map(Some)
 }
 
+/// The union of `images`' boxes: its top-left pixel relative to the centre, width and height
+/// (px); `None` for no images.
+pub fn union_box(images: &[(&PsfImage, f32)]) -> Option<([i32; 2], usize, usize)> {
+    let x0 = images.iter().map(|(t, _)| t.origin[0]).min()?;
+    let y0 = images.iter().map(|(t, _)| t.origin[1]).min()?;
+    let x1 = images.iter().map(|(t, _)| t.origin[0] + t.width as i32).max()?;
+    let y1 = images.iter().map(|(t, _)| t.origin[1] + t.height as i32).max()?;
+    Some(([x0, y0], (x1 - x0) as usize, (y1 - y0) as usize))
+}
+
+/// Adds `images`, each times its weight, into `out`: the values of an image of
+/// [`union_box`]`(images)` (row-major, each image's channel count). Each pixel adds the
+/// images' values in their order.
+pub fn add_weighted(out: &mut [f32], images: &[(&PsfImage, f32)]) {
+    let Some(([x0, y0], width, _)) = union_box(images) else {
+        return;
+    };
+    for &(img, w) in images {
+        let ch = img.channels;
+        for v in 0..img.height {
+            let row = ((v as i32 + img.origin[1] - y0) as usize * width
+                + (img.origin[0] - x0) as usize)
+                * ch;
+            let src = &img.data[v * img.width * ch..(v + 1) * img.width * ch];
+            for (d, &x) in out[row..row + img.width * ch].iter_mut().zip(src) {
+                *d += w * x;
+            }
+        }
+    }
+}
+
 /// The sum of `images`, each times its weight, over the union of their boxes (`None` for no
 /// images, or images of different channel counts). Each pixel adds the images' values in
 /// their order.
@@ -730,25 +761,11 @@ pub fn weighted_sum(images: &[(&PsfImage, f32)]) -> Option<PsfImage> {
     if images.iter().any(|(img, _)| img.channels != ch) {
         return None;
     }
-    let x0 = images.iter().map(|(t, _)| t.origin[0]).min()?;
-    let y0 = images.iter().map(|(t, _)| t.origin[1]).min()?;
-    let x1 = images.iter().map(|(t, _)| t.origin[0] + t.width as i32).max()?;
-    let y1 = images.iter().map(|(t, _)| t.origin[1] + t.height as i32).max()?;
-    let (width, height) = ((x1 - x0) as usize, (y1 - y0) as usize);
+    let (origin, width, height) = union_box(images)?;
     let mut data = vec![0f32; width * height * ch];
-    for &(img, w) in images {
-        for v in 0..img.height {
-            let row = ((v as i32 + img.origin[1] - y0) as usize * width
-                + (img.origin[0] - x0) as usize)
-                * ch;
-            let src = &img.data[v * img.width * ch..(v + 1) * img.width * ch];
-            for (d, &x) in data[row..row + img.width * ch].iter_mut().zip(src) {
-                *d += w * x;
-            }
-        }
-    }
+    add_weighted(&mut data, images);
     Some(PsfImage {
-        origin: [x0, y0],
+        origin,
         width,
         height,
         channels: ch,

@@ -30,7 +30,7 @@ use rayon::prelude::*;
 use psf_db::PsfDatabase;
 
 use super::ClassifyError;
-use crate::motion_smear::{psf_image, turn, weighted_sum, PsfImage};
+use crate::motion_smear::{add_weighted, psf_image, turn, union_box, PsfImage};
 use crate::pipeline::types::{psf_reach, Classified, FrameParams, SplatPath, SplatRecord};
 
 /// Largest move of a PSF's rim between neighbouring turn steps, px: a record drawn from its
@@ -439,44 +439,51 @@ pub(super) fn draw_shared_turns_upright(
         turned[at].as_ref()
     };
     // Singles are their turned image; pairs are mixed.
-    let mixes: Vec<Option<PsfImage>> = chosen
-        .par_iter()
+    // Singles are their turned image; pairs are mixed as they are written into the frame's
+    // database, not built on their own first.
+    let sources: Vec<Option<[(&PsfImage, f32); 2]>> = chosen
+        .iter()
         .map(|key| match *key {
-            Shared::Single(_) => None,
+            Shared::Single(k) => {
+                let image = turned_of(psf_of(k), k as u32, steps[psf_of(k) as usize])?;
+                Some([(image, 1.0), (image, 0.0)])
+            }
             Shared::Pair(p) => {
                 let a = turned_of(p.lo, p.lo_step, steps[p.lo as usize])?;
                 let b = turned_of(p.hi, p.hi_step, steps[p.hi as usize])?;
                 let s = p.share_step as f32 / PAIR_SHARE_STEPS as f32;
-                weighted_sum(&[(a, 1.0 - s), (b, s)])
+                (a.channels == b.channels).then_some([(a, 1.0 - s), (b, s)])
             }
         })
         .collect();
-    let images: Vec<Option<&PsfImage>> = chosen
-        .iter()
-        .zip(&mixes)
-        .map(|(key, mix)| match *key {
-            Shared::Single(k) => turned_of(psf_of(k), k as u32, steps[psf_of(k) as usize]),
-            Shared::Pair(_) => mix.as_ref(),
-        })
-        .collect();
-    let boxes: Vec<_> = images
-        .iter()
-        .flatten()
-        .map(|img| (img.origin, img.width, img.height))
-        .collect();
+    let mut boxes = Vec::with_capacity(sources.len());
     let mut index_of_key: Vec<Option<u32>> = Vec::with_capacity(chosen.len());
-    let mut drawn: Vec<&PsfImage> = Vec::with_capacity(boxes.len());
+    let mut drawn: Vec<(&[(&PsfImage, f32); 2], bool)> = Vec::with_capacity(sources.len());
     let first = base.psf_count() as u32;
-    for img in &images {
-        index_of_key.push(img.map(|img| {
-            drawn.push(img);
+    for (key, source) in chosen.iter().zip(&sources) {
+        let single = matches!(key, Shared::Single(_));
+        let shape = source.as_ref().and_then(|parts| match single {
+            true => Some((parts[0].0.origin, parts[0].0.width, parts[0].0.height)),
+            false => union_box(parts),
+        });
+        index_of_key.push(shape.zip(source.as_ref()).map(|(shape, parts)| {
+            boxes.push(shape);
+            drawn.push((parts, single));
             first + drawn.len() as u32 - 1
         }));
     }
     let not_built = |e: psf_db::DbError| ClassifyError::PhysicalLens(e.to_string());
     let extension = crate::dbset::extend_with_dense(base, &boxes).map_err(not_built)?;
     let database = extension
-        .fill(|i, out| out.copy_from_slice(&drawn[i].data))
+        .fill(|i, out| match drawn[i] {
+            (parts, true) => out.copy_from_slice(&parts[0].0.data),
+            (parts, false) => {
+                // Written before it is read: a fresh page read first is mapped twice (the
+                // zero page, then its own copy), which made the mixing ten times slower.
+                out.fill(0.0);
+                add_weighted(out, parts);
+            }
+        })
         .map_err(not_built)?;
     let index_of = |key: Shared| -> Option<u32> {
         let k = chosen.binary_search(&key).ok()?;
