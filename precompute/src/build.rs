@@ -152,9 +152,22 @@ impl BuildPlan {
         })
     }
 
-    /// The pre-filter box of PSF `index`.
+    /// The pre-filter box of PSF `index`. A physical-lens PSF is pre-filtered over its box's
+    /// inverse depths, and traced at the middle of its eccentricities
+    /// ([`LensOptions::prefilter_eccentricity`](crate::LensOptions::prefilter_eccentricity)).
     pub fn param_box(&self, index: u32) -> Result<ParamBox, PrecomputeError> {
-        ParamBox::for_cell(&self.space, index, self.config.prefilter).ok_or_else(|| {
+        let prefilter = self.config.prefilter;
+        let along_eccentricity = match (&self.config.model, &self.config.lens) {
+            (PsfModel::PhysicalLens, Some(lens)) => lens.prefilter_eccentricity,
+            (PsfModel::PhysicalLens, None) => false,
+            _ => true,
+        };
+        ParamBox::for_cell_along(
+            &self.space,
+            index,
+            [prefilter, prefilter && along_eccentricity],
+        )
+        .ok_or_else(|| {
             PrecomputeError::InvalidConfig(format!(
                 "PSF {index} out of range (the space has {})",
                 self.space.psf_count()

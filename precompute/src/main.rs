@@ -45,6 +45,10 @@ struct Args {
     /// Trace every PSF at its cell centre instead of over its cell.
     #[arg(long)]
     no_prefilter: bool,
+    /// physical-lens: pre-filter each PSF over its cell's eccentricities too (by default
+    /// only over its inverse depths, traced at the middle of its eccentricities).
+    #[arg(long)]
+    prefilter_eccentricity: bool,
     /// Aperture blades (0 = circular) for thin-lens and lens-motion.
     #[arg(long, default_value_t = 0)]
     blades: u32,
@@ -261,6 +265,10 @@ fn main() -> Result<()> {
     }
     if let Some(n) = args.f_stop {
         lens.f_stop = Some(n);
+        lens_set = true;
+    }
+    if args.prefilter_eccentricity {
+        lens.prefilter_eccentricity = true;
         lens_set = true;
     }
     if lens_set {

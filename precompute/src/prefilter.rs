@@ -20,14 +20,29 @@ impl ParamBox {
     /// The box of PSF `index` of `space`; `prefilter = false` gives the cell centre only.
     /// `None` when `index` is out of range.
     pub fn for_cell(space: &ParamSpace, index: u32, prefilter: bool) -> Option<Self> {
+        Self::for_cell_along(space, index, [prefilter; 2])
+    }
+
+    /// [`ParamBox::for_cell`], pre-filtered only along the dimensions `prefilter` marks: along
+    /// the others every ray takes the middle of the box (in grid coordinates). A ray still draws
+    /// a uniform number per dimension, so the marked dimensions sample as they would with all
+    /// marked.
+    pub fn for_cell_along(space: &ParamSpace, index: u32, prefilter: [bool; 2]) -> Option<Self> {
         let b = space.grid().cell_box(index)?;
         let centre = space.cell_center(index)?;
+        let (mut u_min, mut u_max) = (b.min, b.max);
+        for k in 0..2 {
+            if !prefilter[k] {
+                let mid = 0.5 * (u_min[k] + u_max[k]);
+                (u_min[k], u_max[k]) = (mid, mid);
+            }
+        }
         Some(ParamBox {
             space: space.clone(),
-            u_min: b.min,
-            u_max: b.max,
+            u_min,
+            u_max,
             centre,
-            prefilter,
+            prefilter: prefilter.iter().any(|&p| p),
         })
     }
 

@@ -130,3 +130,36 @@ fn cat_eye_vignetting_off_axis() {
     assert!(se[0] < 0.9 * sf[0], "{se:?} vs {sf:?}");
     assert!((width(&edge, 1) / width(&free, 1) - 1.0).abs() < 0.25);
 }
+
+/// A physical-lens PSF is pre-filtered over its box's inverse depths, and traced at the middle
+/// of its eccentricities unless asked: the runtime takes a box's PSF for every pixel in it
+/// with no blend across eccentricity, so the box's average widened the bokeh at a corner.
+#[test]
+fn a_psf_is_traced_at_the_middle_of_its_eccentricities() {
+    let plan = plan();
+    let mut spread_cfg = BuildConfig::new(PsfModel::PhysicalLens, Profile::Quick);
+    spread_cfg.lens = Some(precompute::LensOptions {
+        prefilter_eccentricity: true,
+        ..Default::default()
+    });
+    let spread_plan = BuildPlan::new(&spread_cfg).unwrap();
+    assert_eq!(plan.space.psf_count(), spread_plan.space.psf_count());
+    for i in 0..plan.space.psf_count() {
+        let (depth, ecc) = {
+            let r = plan.param_box(i).unwrap().range();
+            (r[0], r[1])
+        };
+        let spread = spread_plan.param_box(i).unwrap().range();
+        assert!(depth[1] > depth[0], "PSF {i}: inverse depths {depth:?}");
+        assert_eq!(ecc[0], ecc[1], "PSF {i}: one eccentricity");
+        assert_eq!(
+            depth, spread[0],
+            "PSF {i}: the same inverse depths either way"
+        );
+        assert!(
+            spread[1][0] < ecc[0] && ecc[0] < spread[1][1],
+            "PSF {i}: {ecc:?} inside its box's {:?}",
+            spread[1]
+        );
+    }
+}

@@ -181,7 +181,7 @@ fn one_pixel_reproduces_physical_lens_psfs() {
     let model = PsfModel::PhysicalLens;
     let db = test_db(model);
     let raw = raw_test_db(model);
-    let plan = BuildPlan::new(&BuildConfig::new(model, Profile::Test)).expect("plan");
+    let plan = BuildPlan::new(&support::test_config(model)).expect("plan");
     let lens = db.header().lens.clone().expect("prescription");
     let ppm = f64::from(lens.image_width_px) / lens.sensor_width_mm;
     for index in 0..db.psf_count() as u32 {
