@@ -199,33 +199,7 @@ fn the_two_tracers_agree_on_psfs() {
 /// radial spread came out 39 % wide and the centroid 1.8 px off.
 #[test]
 fn the_database_keeps_a_corner_drops_cat_eye() {
-    let (width, height, sensor_mm) = (512.0, 344.0, 36.0);
-    let mut cfg = BuildConfig::new(PsfModel::PhysicalLens, Profile::Quick);
-    cfg.psf_count = Some(160);
-    cfg.lens = Some(LensOptions {
-        prescription: Some(Prescription::builtin("double-gauss-50mm").expect("built-in")),
-        f_stop: Some(2.1),
-        focus_distance: 1.2,
-        sensor_width_mm: sensor_mm,
-        image_width_px: Some(width as u32),
-        depth_range: [0.3, 1200.0],
-        max_eccentricity_mm: 0.5 * f64::hypot(width, height) * sensor_mm / width,
-        ..LensOptions::default()
-    });
-    let plan = BuildPlan::new(&cfg).expect("plan");
-    let (depth, ecc) = (0.45, 20.8);
-    let (cell, clamped) = plan.space.lookup([(1.0 / depth) as f32, ecc as f32]);
-    assert!(!clamped);
-    let rays = 1_500_000;
-    let (drawn, _) = trace_psf(
-        plan.tracer.as_ref(),
-        &plan.param_box(cell).expect("cell"),
-        RayCount::Fixed(rays),
-        &mut psf_rng(3, cell, 0),
-        cell,
-    )
-    .expect("trace");
-    let own = forward_psf(&plan, depth, ecc, rays);
+    let (drawn, own) = cell_and_own_psf(&corner_drops_plan(), 0.45, 20.8);
     for c in 0..3 {
         let plane =
             |img: &PsfImage| -> Vec<f64> { img.planes[c].iter().map(|&v| f64::from(v)).collect() };
@@ -756,20 +730,7 @@ fn points_outside_the_image_circle_are_a_clear_error() {
 /// scene renderer's reference, the drop is 2-5 % large per channel (docs/BENCHMARKS.md).
 #[test]
 fn a_far_corner_drops_bokeh_keeps_its_size_through_the_database_and_the_turn() {
-    let plan = corner_drops_plan();
-    let (depth, ecc) = (3.0, 20.8);
-    let (cell, clamped) = plan.space.lookup([(1.0 / depth) as f32, ecc as f32]);
-    assert!(!clamped);
-    let rays = 1_500_000;
-    let (drawn, _) = trace_psf(
-        plan.tracer.as_ref(),
-        &plan.param_box(cell).expect("cell"),
-        RayCount::Fixed(rays),
-        &mut psf_rng(3, cell, 0),
-        cell,
-    )
-    .expect("trace");
-    let own = forward_psf(&plan, depth, ecc, rays);
+    let (drawn, own) = cell_and_own_psf(&corner_drops_plan(), 3.0, 20.8);
     let drawn = runtime_image(&drawn);
     let turned = spreadlet::motion_smear::turn(&drawn, 34f32.to_radians());
     let half = 12;
@@ -812,6 +773,24 @@ fn corner_drops_plan() -> BuildPlan {
         ..LensOptions::default()
     });
     BuildPlan::new(&cfg).expect("plan")
+}
+
+/// The PSF the database holds for the cell of a point `depth_m` from the lens and `ecc_mm` off
+/// axis (traced as the builder traces it, over the cell's pre-filter box), and the point's own
+/// light-traced PSF, 1.5 M rays each.
+fn cell_and_own_psf(plan: &BuildPlan, depth_m: f64, ecc_mm: f64) -> (PsfImage, PsfImage) {
+    let (cell, clamped) = plan.space.lookup([(1.0 / depth_m) as f32, ecc_mm as f32]);
+    assert!(!clamped);
+    let rays = 1_500_000;
+    let (drawn, _) = trace_psf(
+        plan.tracer.as_ref(),
+        &plan.param_box(cell).expect("cell"),
+        RayCount::Fixed(rays),
+        &mut psf_rng(3, cell, 0),
+        cell,
+    )
+    .expect("trace");
+    (drawn, forward_psf(plan, depth_m, ecc_mm, rays))
 }
 
 /// `img` as the runtime holds a PSF image: RGB interleaved, origin relative to its centre.
