@@ -318,7 +318,11 @@ fn records_drawn_from_shared_turns_match_their_own_turns() {
         // What leaves classification is drawable as it is: blends emitted as one record are
         // premixed or split by then.
         for r in layer {
-            assert!(r.path <= SplatPath::Copy as u32, "layer {l}: path {:#x}", r.path);
+            assert!(
+                r.path <= SplatPath::Copy as u32,
+                "layer {l}: path {:#x}",
+                r.path
+            );
             assert_eq!(r.layer, l as u32, "a record's layer is its place");
         }
     }
