@@ -150,8 +150,6 @@ pub fn splat(
     let (pw, ph) = (frame.padded_width as usize, frame.padded_height as usize);
     let bands = ph.div_ceil(BAND_ROWS);
     let n_layers = frame.layers as usize;
-    // Reach of each PSF (px, rounded up, +1 for bilinear splitting): a record only visits the
-    // bands its own PSF reaches.
     let drawing = Drawing::new(frame, db, options);
 
     // Per (layer, kind), with kind 0 = Laplacian, 1 = direct: whether any record draws in it.
@@ -263,7 +261,8 @@ pub(super) struct BandRows {
 pub(super) struct Drawing<'a> {
     /// The database the records index; `None` only when every record is a copy.
     pub db: Option<&'a PsfDatabase>,
-    /// [`psf_reach`] of `db`.
+    /// [`psf_reach`] of `db` (px, rounded up, +1 for bilinear splitting): a record only visits
+    /// the bands its own PSF reaches.
     pub reach: Vec<i32>,
     /// Rows beyond which no record's PSF reaches from its centre: the padding and 2.
     pub extent: i32,

@@ -140,9 +140,16 @@ struct PairKey {
     hi_step: u32,
 }
 
-/// A run of records' keys, and the blended pairs that start in it (the first record's index,
-/// the pair's key).
+/// A run of records' keys, and its records made by [`pack_pair`] (each one's index in the
+/// frame and its pair key).
 type KeysAndPairs = (Vec<TurnKey>, Vec<(usize, PairKey)>);
+
+/// What a shared image appended to the frame's database is drawn from: one PSF turned, or two
+/// turned PSFs mixed with their weights.
+enum Source<'a> {
+    Turned(&'a PsfImage),
+    Mix([(&'a PsfImage, f32); 2]),
+}
 
 /// What a shared image is: one PSF turned, or two turned and mixed.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
@@ -438,37 +445,34 @@ pub(super) fn draw_shared_turns_upright(
         let at = turns.binary_search(&(psf, step, n)).ok()?;
         turned[at].as_ref()
     };
-    // Singles are their turned image; pairs are mixed.
     // Singles are their turned image; pairs are mixed as they are written into the frame's
     // database, not built on their own first.
-    let sources: Vec<Option<[(&PsfImage, f32); 2]>> = chosen
+    let sources: Vec<Option<Source>> = chosen
         .iter()
         .map(|key| match *key {
             Shared::Single(k) => {
-                let image = turned_of(psf_of(k), k as u32, steps[psf_of(k) as usize])?;
-                Some([(image, 1.0), (image, 0.0)])
+                turned_of(psf_of(k), k as u32, steps[psf_of(k) as usize]).map(Source::Turned)
             }
             Shared::Pair(p) => {
                 let a = turned_of(p.lo, p.lo_step, steps[p.lo as usize])?;
                 let b = turned_of(p.hi, p.hi_step, steps[p.hi as usize])?;
                 let s = p.share_step as f32 / PAIR_SHARE_STEPS as f32;
-                (a.channels == b.channels).then_some([(a, 1.0 - s), (b, s)])
+                (a.channels == b.channels).then_some(Source::Mix([(a, 1.0 - s), (b, s)]))
             }
         })
         .collect();
     let mut boxes = Vec::with_capacity(sources.len());
     let mut index_of_key: Vec<Option<u32>> = Vec::with_capacity(chosen.len());
-    let mut drawn: Vec<(&[(&PsfImage, f32); 2], bool)> = Vec::with_capacity(sources.len());
+    let mut drawn: Vec<&Source> = Vec::with_capacity(sources.len());
     let first = base.psf_count() as u32;
-    for (key, source) in chosen.iter().zip(&sources) {
-        let single = matches!(key, Shared::Single(_));
-        let shape = source.as_ref().and_then(|parts| match single {
-            true => Some((parts[0].0.origin, parts[0].0.width, parts[0].0.height)),
-            false => union_box(parts),
+    for source in &sources {
+        let shape = source.as_ref().and_then(|source| match source {
+            Source::Turned(image) => Some((image.origin, image.width, image.height)),
+            Source::Mix(parts) => union_box(parts),
         });
-        index_of_key.push(shape.zip(source.as_ref()).map(|(shape, parts)| {
+        index_of_key.push(shape.zip(source.as_ref()).map(|(shape, source)| {
             boxes.push(shape);
-            drawn.push((parts, single));
+            drawn.push(source);
             first + drawn.len() as u32 - 1
         }));
     }
@@ -476,8 +480,8 @@ pub(super) fn draw_shared_turns_upright(
     let extension = crate::dbset::extend_with_dense(base, &boxes).map_err(not_built)?;
     let database = extension
         .fill(|i, out| match drawn[i] {
-            (parts, true) => out.copy_from_slice(&parts[0].0.data),
-            (parts, false) => {
+            Source::Turned(image) => out.copy_from_slice(&image.data),
+            Source::Mix(parts) => {
                 // Written before it is read: a fresh page read first is mapped twice (the
                 // zero page, then its own copy), which made the mixing ten times slower.
                 out.fill(0.0);
