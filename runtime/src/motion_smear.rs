@@ -780,7 +780,19 @@ pub fn weighted_sum(images: &[(&PsfImage, f32)]) -> Option<PsfImage> {
 /// cubic by about 2 % (a far drop in a corner of `corner-drops`: +9 % -> +7 % against the
 /// reference, whose own pixel footprint and the cell's pre-filter make the rest).
 pub fn turn(psf: &PsfImage, angle: f32) -> PsfImage {
-    let (sin, cos) = angle.sin_cos();
+    turn_scaled(psf, angle, 1.0)
+}
+
+/// `psf` turned by `angle` radians about its centre as [`turn`] does, and enlarged by `scale`
+/// about it (a point `d` px from the centre lands `scale d` px from it; each channel keeps its
+/// sum). A real lens's defocus blur grows in proportion to the point's inverse depth from the
+/// focus plane, so a PSF scaled so is the PSF of a nearby depth: its rim stays as sharp as
+/// the PSF's own.
+pub fn turn_scaled(psf: &PsfImage, angle: f32, scale: f32) -> PsfImage {
+    let (turn_sin, turn_cos) = angle.sin_cos();
+    // Onto the output (corners) and back from it (each output pixel's sample point).
+    let (sin, cos) = (turn_sin * scale, turn_cos * scale);
+    let (inv_sin, inv_cos) = (turn_sin / scale, turn_cos / scale);
     let ch = psf.channels;
     let (x0, y0) = (psf.origin[0] as f32 - 0.5, psf.origin[1] as f32 - 0.5);
     let (x1, y1) = (x0 + psf.width as f32, y0 + psf.height as f32);
@@ -819,7 +831,7 @@ pub fn turn(psf: &PsfImage, angle: f32) -> PsfImage {
     for j in 0..height {
         for i in 0..width {
             let (qx, qy) = ((lo_x + i as i32) as f32, (lo_y + j as i32) as f32);
-            let (px, py) = (cos * qx + sin * qy, -sin * qx + cos * qy);
+            let (px, py) = (inv_cos * qx + inv_sin * qy, -inv_sin * qx + inv_cos * qy);
             let (fx, fy) = (floor_exact(px), floor_exact(py));
             let (u, v) = (fx as i32 - 1 - ox, fy as i32 - 1 - oy);
             if u < 0 || v < 0 || u + 4 > pw as i32 || v + 4 > ph as i32 {
@@ -1175,6 +1187,38 @@ mod tests {
 
     /// Turning keeps the sum and moves the centroid and the spread as a rotation does: a box
     /// off centre turned a quarter turn lands where the quarter turn puts it.
+    /// A disk of radius 8 px scaled by 9/8 has the RMS radius of a disk of 9 px (to the
+    /// pixel lattice's rounding), keeps its sum, and stays where it was; its rim is as steep
+    /// as the larger disk's, where mixing the two disks would leave a step of half height.
+    #[test]
+    fn scaling_a_psf_gives_the_larger_disks_size_and_rim() {
+        let (small, large) = (disk(8.0, 1), disk(9.0, 1));
+        let scaled = turn_scaled(&small, 0.7, 9.0 / 8.0);
+        let (s0, _, _) = moments(&small, 0);
+        let (s1, c1, v1) = moments(&scaled, 0);
+        let (_, _, v9) = moments(&large, 0);
+        assert!((s1 - s0).abs() < 1e-5, "sum {s0} -> {s1}");
+        assert!(c1[0].abs() < 0.02 && c1[1].abs() < 0.02, "centroid {c1:?}");
+        let rms = |v: [f64; 3]| (v[0] + v[1]).sqrt();
+        assert!(
+            (rms(v1) / rms(v9) - 1.0).abs() < 0.01,
+            "RMS radius {} against the 9 px disk's {}",
+            rms(v1),
+            rms(v9)
+        );
+        // Along +x, the light between 8.5 and 9.5 px from the centre: the scaled disk's rim
+        // lies where the larger disk's does.
+        let at = |img: &PsfImage, x: i32| {
+            let (u, v) = (x - img.origin[0], -img.origin[1]);
+            if u < 0 || u >= img.width as i32 {
+                return 0.0;
+            }
+            img.data[v as usize * img.width + u as usize]
+        };
+        let level = at(&large, 0);
+        assert!(at(&scaled, 8) > 0.8 * level && at(&scaled, 10) < 0.05 * level);
+    }
+
     #[test]
     fn turning_moves_a_psf_as_a_rotation_does() {
         let mut data = vec![0f32; 9 * 5];

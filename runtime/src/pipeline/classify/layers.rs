@@ -406,7 +406,8 @@ pub fn classify_fragments(
                 && level_of(index) == 0
                 && n_parts == 2
                 && path_a == SplatPath::Dense
-                && path_b == SplatPath::Dense)
+                && path_b == SplatPath::Dense
+                && !(rot_cos == 1.0 && rot_sin == 0.0))
                 .then(|| {
                     super::turned::pack_pair(
                         (x, y),
@@ -439,7 +440,28 @@ pub fn classify_fragments(
                     color: color.map(|v| v * weight),
                 });
             }
+            // The two PSFs' rotational averages, where both have one: one upright record,
+            // premixed as the turned pair is.
+            let round_pair = (pack_pairs && level_of(index) == 0 && n_parts == 2)
+                .then(|| {
+                    let (a, b) = (round_of(psf_a)?, round_of(psf_b)?);
+                    super::turned::pack_pair(
+                        (x, y),
+                        layer as u32,
+                        (1.0, 0.0),
+                        color,
+                        (a, weight * share_a * round_share),
+                        (b, weight * share_b * round_share),
+                    )
+                })
+                .flatten();
+            if let Some(pair) = round_pair {
+                per_layer[layer].push(pair);
+            }
             for &(_, psf_index, share) in &parts[..n_parts] {
+                if round_pair.is_some() {
+                    break;
+                }
                 if let Some(round) = round_of(psf_index) {
                     let weight = weight * share * round_share;
                     per_layer[layer].push(SplatRecord {
@@ -544,7 +566,9 @@ pub fn classify_fragments(
     if options.shared_turns && model == Some(PsfModel::PhysicalLens) {
         let frame_db = classified.database.clone();
         if let Some(base) = frame_db.as_deref().or(dbs.combined.as_ref()) {
-            let turned = super::turned::draw_shared_turns_upright(&mut classified, base)?;
+            let defocus = super::turned::lens_defocus(dbs, base.psf_count());
+            let turned =
+                super::turned::draw_shared_turns_upright(&mut classified, base, &defocus)?;
             classified.counts.turned += turned;
         }
     }

@@ -23,14 +23,21 @@
 //! as one upright record, where drawing the two would cost twice as much. Through the double
 //! Gauss half of a frame's fragments blend: as one record each, the frame's records are a third
 //! fewer from the start. A pair whose image the frame's memory bound leaves out is split into
-//! its two PSFs' records at the rounded share, drawn turned.
+//! its two PSFs' records at the rounded share, drawn turned. Near the optical axis the two
+//! PSFs' rotational averages are a pair too.
+//!
+//! Mixed as they are, two PSFs a cell apart draw two rims a cell's blur apart (0.6-1.3 px
+//! through the double Gauss at 512 px), and a bokeh's rim comes out softer than the lens's.
+//! So each PSF of a pair away from the focus plane is first scaled onto the blend's own
+//! defocus ([`morph_scales`]: a lens's blur grows in proportion to the inverse depth from the
+//! focus plane) in the same cubic pass that turns it, and the two rims coincide.
 
 use rayon::prelude::*;
 
 use psf_db::PsfDatabase;
 
 use super::ClassifyError;
-use crate::motion_smear::{add_weighted, psf_image, turn, union_box, PsfImage};
+use crate::motion_smear::{add_weighted, psf_image, turn_scaled, union_box, PsfImage};
 use crate::pipeline::types::{psf_reach, Classified, FrameParams, SplatPath, SplatRecord};
 
 /// Largest move of a PSF's rim between neighbouring turn steps, px: a record drawn from its
@@ -74,8 +81,9 @@ pub const PAIR_SHARE_STEPS: u32 = 16;
 /// such record from its premixed image, or splits it into its two PSFs' records.
 const PAIR_PATH: u32 = 0x100;
 
-/// A fragment's blend of two turned dense PSFs as one record, where it would be two records
-/// at one pixel with one rotation (`first` and `second`: each PSF and its weight; `color`, the
+/// A fragment's blend of two turned dense PSFs (or of their rotational averages, upright) as
+/// one record, where it would be two records at one pixel with one rotation (`first` and
+/// `second`: each PSF and its weight; `color`, the
 /// fragment's colour). The record holds the two colours summed and the two weights summed,
 /// as premixing them sums them; its PSF is the lower index of the two, the higher goes in the
 /// high bits of its layer, and its path is [`PAIR_PATH`] with the higher PSF's share in steps
@@ -90,7 +98,7 @@ pub(super) fn pack_pair(
     second: (u32, f32),
 ) -> Option<SplatRecord> {
     let ((a, wa), (b, wb)) = (first, second);
-    if a == b || wa <= 0.0 || wb <= 0.0 || layer > 0xFF || (rot_cos == 1.0 && rot_sin == 0.0) {
+    if a == b || wa <= 0.0 || wb <= 0.0 || layer > 0xFF {
         return None;
     }
     let (lo, hi, w_hi) = if a < b { (a, b, wb) } else { (b, a, wa) };
@@ -138,6 +146,63 @@ struct PairKey {
     share_step: u32,
     lo_step: u32,
     hi_step: u32,
+}
+
+/// Least distance from the focus plane, in cells' widths along inverse depth, of both PSFs of
+/// a pair that is morphed ([`morph_scales`]): each PSF is then scaled by at most 4/3 or 3/4.
+pub const MORPH_MIN_CELLS_FROM_FOCUS: f32 = 3.0;
+
+/// The scales that give the two PSFs of pair `p` the size of the blend's own depth before they
+/// are mixed, `[lower, higher]`. `defocus[i]` is PSF `i`'s inverse depth less the focus
+/// plane's (1 / scene units; NaN where it has none). A lens's blur grows in proportion to it,
+/// so at the blend's defocus `d = (1 - s) d_lo + s d_hi` the two PSFs scaled by `d / d_lo` and
+/// `d / d_hi` have their rims where the blend's depth has its rim: mixed, the rim stays sharp
+/// (mixed unscaled, two rims a cell's blur apart). `[1, 1]` near the focus plane (within
+/// [`MORPH_MIN_CELLS_FROM_FOCUS`] cells) or across it, where the blur does not scale so.
+fn morph_scales(defocus: &[f32], p: &PairKey) -> [f32; 2] {
+    let at = |i: u32| defocus.get(i as usize).copied().unwrap_or(f32::NAN);
+    let (d_lo, d_hi) = (at(p.lo), at(p.hi));
+    let width = (d_hi - d_lo).abs();
+    let nearest = d_lo.abs().min(d_hi.abs());
+    // NaN fails every comparison: no scaling.
+    if !(d_lo * d_hi > 0.0 && nearest >= MORPH_MIN_CELLS_FROM_FOCUS * width && width > 0.0) {
+        return [1.0, 1.0];
+    }
+    let s = p.share_step as f32 / PAIR_SHARE_STEPS as f32;
+    let d = (1.0 - s) * d_lo + s * d_hi;
+    [d / d_lo, d / d_hi]
+}
+
+/// For each of the first `count` PSFs of the frame's database: its inverse depth less the
+/// focus plane's (1 / scene units), for the physical-lens PSFs of `dbs` and their rotational
+/// averages on the axis; NaN for every other.
+pub(super) fn lens_defocus(dbs: &crate::dbset::DbSet, count: usize) -> Vec<f32> {
+    let mut defocus = vec![f32::NAN; count];
+    let Some(main) = dbs.main.as_ref() else {
+        return defocus;
+    };
+    let Some(lens) = main.header().lens.as_ref().filter(|l| l.focus_distance > 0.0) else {
+        return defocus;
+    };
+    let focus = 1.0 / lens.focus_distance;
+    let offset = dbs.main_offset as usize;
+    for i in 0..main.psf_count() {
+        let Some(centre) = main.space().cell_center(i as u32) else {
+            continue;
+        };
+        let d = (centre[0] - focus) as f32;
+        if let Some(slot) = defocus.get_mut(offset + i) {
+            *slot = d;
+        }
+        let round = dbs.axis_round.get(offset + i).copied();
+        if let Some(slot) = round
+            .filter(|&r| r != crate::dbset::NO_TWIN)
+            .and_then(|r| defocus.get_mut(r as usize))
+        {
+            *slot = d;
+        }
+    }
+    defocus
 }
 
 /// A run of records' keys, and its records made by [`pack_pair`] (each one's index in the
@@ -275,6 +340,7 @@ fn turns_every_sparse_record(records: &[SplatRecord], reach: &[i32], frame: Fram
 pub(super) fn draw_shared_turns_upright(
     classified: &mut Classified,
     base: &PsfDatabase,
+    defocus: &[f32],
 ) -> Result<usize, ClassifyError> {
     let reach = psf_reach(base);
     let every_sparse = turns_every_sparse_record(&classified.records, &reach, classified.frame);
@@ -383,7 +449,7 @@ pub(super) fn draw_shared_turns_upright(
     shared.sort_unstable_by(|a, b| b.0.cmp(&a.0).then(a.1.cmp(&b.1)));
     // The turned box of a w x h image fits in a square of its diagonal, plus the taps'
     // pixels either side.
-    let turned_pixels = |psf: u32| -> usize {
+    let turned_pixels_unscaled = |psf: u32| -> usize {
         base.dense(psf as usize).map_or_else(
             || {
                 let side = 2 * reach.get(psf as usize).copied().unwrap_or(0).max(0) as usize + 9;
@@ -396,12 +462,20 @@ pub(super) fn draw_shared_turns_upright(
             },
         )
     };
+    let scales_of = |p: &PairKey| morph_scales(defocus, p);
+    let turned_pixels = |psf: u32, scale: f32| -> usize {
+        let grown = scale.max(1.0);
+        (turned_pixels_unscaled(psf) as f32 * grown * grown).ceil() as usize
+    };
     let mut budget = MAX_FRAME_TURNED_PIXELS;
     let mut chosen: Vec<Shared> = Vec::with_capacity(shared.len());
     for &(_, key) in &shared {
         let pixels = match key {
-            Shared::Single(k) => turned_pixels(psf_of(k)),
-            Shared::Pair(p) => turned_pixels(p.lo).max(turned_pixels(p.hi)),
+            Shared::Single(k) => turned_pixels(psf_of(k), 1.0),
+            Shared::Pair(p) => {
+                let [k_lo, k_hi] = scales_of(&p);
+                turned_pixels(p.lo, k_lo).max(turned_pixels(p.hi, k_hi))
+            }
         };
         if pixels > budget {
             continue;
@@ -410,18 +484,23 @@ pub(super) fn draw_shared_turns_upright(
         chosen.push(key);
     }
     chosen.sort_unstable();
-    // Each PSF turned once per (turn step, steps) the chosen images need, in parallel.
-    let mut turns: Vec<(u32, u32, u32)> = chosen
+    // Each PSF turned once per (turn step, steps, scale) the chosen images need, in parallel
+    // (the scale as its bits: a positive float's bits sort as it does).
+    let one = 1f32.to_bits();
+    let mut turns: Vec<(u32, u32, u32, u32)> = chosen
         .iter()
         .flat_map(|key| match *key {
             Shared::Single(k) => {
                 let psf = psf_of(k);
-                vec![(psf, k as u32, steps[psf as usize])]
+                vec![(psf, k as u32, steps[psf as usize], one)]
             }
-            Shared::Pair(p) => vec![
-                (p.lo, p.lo_step, steps[p.lo as usize]),
-                (p.hi, p.hi_step, steps[p.hi as usize]),
-            ],
+            Shared::Pair(p) => {
+                let [k_lo, k_hi] = scales_of(&p);
+                vec![
+                    (p.lo, p.lo_step, steps[p.lo as usize], k_lo.to_bits()),
+                    (p.hi, p.hi_step, steps[p.hi as usize], k_hi.to_bits()),
+                ]
+            }
         })
         .collect();
     turns.sort_unstable();
@@ -434,15 +513,16 @@ pub(super) fn draw_shared_turns_upright(
         .collect();
     let turned: Vec<Option<PsfImage>> = turns
         .par_iter()
-        .map(|&(psf, step, n)| {
+        .map(|&(psf, step, n, scale)| {
             let at = psfs.binary_search(&psf).ok()?;
             let image = upright[at].as_ref()?;
             let angle = crate::motion_smear::turn_rad(step, n);
-            Some(turn(image, angle)).filter(|img| img.width > 0 && img.height > 0)
+            Some(turn_scaled(image, angle, f32::from_bits(scale)))
+                .filter(|img| img.width > 0 && img.height > 0)
         })
         .collect();
-    let turned_of = |psf: u32, step: u32, n: u32| -> Option<&PsfImage> {
-        let at = turns.binary_search(&(psf, step, n)).ok()?;
+    let turned_of = |psf: u32, step: u32, n: u32, scale: f32| -> Option<&PsfImage> {
+        let at = turns.binary_search(&(psf, step, n, scale.to_bits())).ok()?;
         turned[at].as_ref()
     };
     // Singles are their turned image; pairs are mixed as they are written into the frame's
@@ -451,11 +531,13 @@ pub(super) fn draw_shared_turns_upright(
         .iter()
         .map(|key| match *key {
             Shared::Single(k) => {
-                turned_of(psf_of(k), k as u32, steps[psf_of(k) as usize]).map(Source::Turned)
+                turned_of(psf_of(k), k as u32, steps[psf_of(k) as usize], 1.0)
+                    .map(Source::Turned)
             }
             Shared::Pair(p) => {
-                let a = turned_of(p.lo, p.lo_step, steps[p.lo as usize])?;
-                let b = turned_of(p.hi, p.hi_step, steps[p.hi as usize])?;
+                let [k_lo, k_hi] = scales_of(&p);
+                let a = turned_of(p.lo, p.lo_step, steps[p.lo as usize], k_lo)?;
+                let b = turned_of(p.hi, p.hi_step, steps[p.hi as usize], k_hi)?;
                 let s = p.share_step as f32 / PAIR_SHARE_STEPS as f32;
                 (a.channels == b.channels).then_some(Source::Mix([(a, 1.0 - s), (b, s)]))
             }
@@ -633,6 +715,35 @@ mod tests {
     /// Half a turn's eighth: a rotation a pair may be packed at.
     const TURNED: (f32, f32) = (std::f32::consts::FRAC_1_SQRT_2, std::f32::consts::FRAC_1_SQRT_2);
 
+    fn pair(share_step: u32) -> PairKey {
+        PairKey {
+            lo: 0,
+            hi: 1,
+            share_step,
+            lo_step: 0,
+            hi_step: 0,
+        }
+    }
+
+    /// Behind the focus plane, two cells 0.2 and 0.25 inverse units from it: the blend's
+    /// share moves its defocus linearly between them, and each PSF is scaled onto it. Near
+    /// the focus plane, across it, or without a defocus, the PSFs are mixed as they are.
+    #[test]
+    fn a_pair_is_scaled_onto_the_blends_own_defocus() {
+        let [lo, hi] = morph_scales(&[0.2, 0.25], &pair(PAIR_SHARE_STEPS / 4));
+        let d = 0.75 * 0.2 + 0.25 * 0.25;
+        assert!((lo - d / 0.2).abs() < 1e-6 && (hi - d / 0.25).abs() < 1e-6, "{lo} {hi}");
+        assert!(lo > 1.0 && hi < 1.0);
+        // In front of it (negative): the same scales.
+        let [lo_f, hi_f] = morph_scales(&[-0.2, -0.25], &pair(PAIR_SHARE_STEPS / 4));
+        assert_eq!([lo_f, hi_f], [lo, hi]);
+        for defocus in [[0.1, 0.14], [-0.02, 0.03], [f32::NAN, 0.25], [0.2, 0.2]] {
+            assert_eq!(morph_scales(&defocus, &pair(8)), [1.0, 1.0], "{defocus:?}");
+        }
+        // A PSF without a defocus entry (beyond the table) is not scaled either.
+        assert_eq!(morph_scales(&[0.2], &pair(8)), [1.0, 1.0]);
+    }
+
     #[test]
     fn a_packed_pair_holds_both_psfs_their_summed_light_and_the_higher_ones_share() {
         let colour = [0.5, 0.25, 2.0, 1.0];
@@ -647,9 +758,10 @@ mod tests {
             assert_eq!(c, v * wa + v * wb);
         }
         assert_eq!((r.center_x, r.center_y, r.rot_cos, r.rot_sin), (7, 9, TURNED.0, TURNED.1));
-        // Not a pair: drawn upright already, a weight of zero, one PSF twice, indices or a
-        // layer beyond the fields, or a record of any path.
-        assert!(pack_pair((0, 0), 0, (1.0, 0.0), colour, (1, wa), (2, wb)).is_none());
+        // Upright (two rotational averages on the axis) is a pair too.
+        assert!(pack_pair((0, 0), 0, (1.0, 0.0), colour, (1, wa), (2, wb)).is_some());
+        // Not a pair: a weight of zero, one PSF twice, indices or a layer beyond the fields,
+        // or a record of any path.
         assert!(pack_pair((0, 0), 0, TURNED, colour, (1, 0.0), (2, wb)).is_none());
         assert!(pack_pair((0, 0), 0, TURNED, colour, (2, wa), (2, wb)).is_none());
         assert!(pack_pair((0, 0), 0, TURNED, colour, (1, wa), (1 << 24, wb)).is_none());
