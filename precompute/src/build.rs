@@ -152,27 +152,38 @@ impl BuildPlan {
         })
     }
 
-    /// The pre-filter box of PSF `index`. A physical-lens PSF is pre-filtered over its box's
-    /// inverse depths, and traced at the middle of its eccentricities
-    /// ([`LensOptions::prefilter_eccentricity`](crate::LensOptions::prefilter_eccentricity)).
+    /// The pre-filter box of PSF `index`. A physical-lens PSF is traced at the middle of its
+    /// eccentricities, and at the middle of its inverse depths where the runtime scales it
+    /// onto each pixel's defocus ([`psf_db::ParamSpace::blend_scales_cell`]); nearer the
+    /// focus plane it is pre-filtered over them
+    /// ([`LensOptions::prefilter_inverse_depth`](crate::LensOptions::prefilter_inverse_depth),
+    /// [`LensOptions::prefilter_eccentricity`](crate::LensOptions::prefilter_eccentricity)).
     pub fn param_box(&self, index: u32) -> Result<ParamBox, PrecomputeError> {
         let prefilter = self.config.prefilter;
-        let along_eccentricity = match (&self.config.model, &self.config.lens) {
-            (PsfModel::PhysicalLens, Some(lens)) => lens.prefilter_eccentricity,
-            (PsfModel::PhysicalLens, None) => false,
-            _ => true,
+        let along = match (&self.config.model, &self.config.lens) {
+            (PsfModel::PhysicalLens, lens) => {
+                // A physical-lens build without lens options traces the default lens.
+                let default = crate::LensOptions::default();
+                let lens = lens.as_ref().unwrap_or(&default);
+                let scaled = lens.focus_distance > 0.0
+                    && self
+                        .space
+                        .blend_scales_cell(index, 1.0 / lens.focus_distance);
+                [
+                    lens.prefilter_inverse_depth || !scaled,
+                    lens.prefilter_eccentricity,
+                ]
+            }
+            _ => [true, true],
         };
-        ParamBox::for_cell_along(
-            &self.space,
-            index,
-            [prefilter, prefilter && along_eccentricity],
+        ParamBox::for_cell_along(&self.space, index, along.map(|a| prefilter && a)).ok_or_else(
+            || {
+                PrecomputeError::InvalidConfig(format!(
+                    "PSF {index} out of range (the space has {})",
+                    self.space.psf_count()
+                ))
+            },
         )
-        .ok_or_else(|| {
-            PrecomputeError::InvalidConfig(format!(
-                "PSF {index} out of range (the space has {})",
-                self.space.psf_count()
-            ))
-        })
     }
 
     /// Traces PSF `index` (deterministic for the seed).

@@ -45,10 +45,15 @@ struct Args {
     /// Trace every PSF at its cell centre instead of over its cell.
     #[arg(long)]
     no_prefilter: bool,
-    /// physical-lens: pre-filter each PSF over its cell's eccentricities too (by default
-    /// only over its inverse depths, traced at the middle of its eccentricities).
+    /// physical-lens: pre-filter each PSF over its cell's eccentricities (by default traced
+    /// at the middle of them).
     #[arg(long)]
     prefilter_eccentricity: bool,
+    /// physical-lens: pre-filter each PSF over its cell's inverse depths (by default traced
+    /// at the middle of them; the runtime scales a blend of two cells onto each pixel's
+    /// depth).
+    #[arg(long)]
+    prefilter_inverse_depth: bool,
     /// Aperture blades (0 = circular) for thin-lens and lens-motion.
     #[arg(long, default_value_t = 0)]
     blades: u32,
@@ -269,6 +274,10 @@ fn main() -> Result<()> {
     }
     if args.prefilter_eccentricity {
         lens.prefilter_eccentricity = true;
+        lens_set = true;
+    }
+    if args.prefilter_inverse_depth {
+        lens.prefilter_inverse_depth = true;
         lens_set = true;
     }
     if lens_set {

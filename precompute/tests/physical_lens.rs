@@ -131,9 +131,12 @@ fn cat_eye_vignetting_off_axis() {
     assert!((width(&edge, 1) / width(&free, 1) - 1.0).abs() < 0.25);
 }
 
-/// A physical-lens PSF is pre-filtered over its box's inverse depths, and traced at the middle
-/// of its eccentricities unless asked: the runtime takes a box's PSF for every pixel in it
-/// with no blend across eccentricity, so the box's average widened the bokeh at a corner.
+/// A physical-lens PSF is traced at the middle of its eccentricities unless asked: the runtime
+/// takes a box's PSF for every pixel in it with no blend across eccentricity, so the box's
+/// average widened the bokeh at a corner. Along inverse depth it is traced at the middle of
+/// its box where the runtime scales it onto each pixel's defocus (a few boxes or more from
+/// the focus plane), and pre-filtered over the box nearer the focus plane, where it is blended
+/// as it is; over every box when asked.
 #[test]
 fn a_psf_is_traced_at_the_middle_of_its_eccentricities() {
     let plan = plan();
@@ -143,14 +146,36 @@ fn a_psf_is_traced_at_the_middle_of_its_eccentricities() {
         ..Default::default()
     });
     let spread_plan = BuildPlan::new(&spread_cfg).unwrap();
+    let mut depth_cfg = BuildConfig::new(PsfModel::PhysicalLens, Profile::Quick);
+    depth_cfg.lens = Some(precompute::LensOptions {
+        prefilter_inverse_depth: true,
+        ..Default::default()
+    });
+    let depth_plan = BuildPlan::new(&depth_cfg).unwrap();
     assert_eq!(plan.space.psf_count(), spread_plan.space.psf_count());
+    let focus = 1.0 / precompute::LensOptions::default().focus_distance;
+    let (mut scaled, mut near_focus) = (0, 0);
     for i in 0..plan.space.psf_count() {
         let (depth, ecc) = {
             let r = plan.param_box(i).unwrap().range();
             (r[0], r[1])
         };
         let spread = spread_plan.param_box(i).unwrap().range();
-        assert!(depth[1] > depth[0], "PSF {i}: inverse depths {depth:?}");
+        let cell = plan.space.cell_box(i).unwrap();
+        if plan.space.blend_scales_cell(i, focus) {
+            scaled += 1;
+            assert_eq!(depth[0], depth[1], "PSF {i}: one inverse depth");
+            assert!(cell.min[0] < depth[0] && depth[0] < cell.max[0]);
+        } else {
+            near_focus += 1;
+            assert!(depth[1] > depth[0], "PSF {i}: inverse depths {depth:?}");
+        }
+        let all_depths = depth_plan.param_box(i).unwrap().range();
+        assert_eq!(
+            all_depths[0],
+            [cell.min[0], cell.max[0]],
+            "PSF {i}: over its box"
+        );
         assert_eq!(ecc[0], ecc[1], "PSF {i}: one eccentricity");
         assert_eq!(
             depth, spread[0],
@@ -162,4 +187,8 @@ fn a_psf_is_traced_at_the_middle_of_its_eccentricities() {
             spread[1]
         );
     }
+    assert!(
+        scaled > 0 && near_focus > 0,
+        "{scaled} scaled, {near_focus} near the focus plane"
+    );
 }

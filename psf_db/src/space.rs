@@ -21,6 +21,14 @@ pub struct Dimension {
     pub beta: f64,
 }
 
+/// Least distance from the focus plane, in widths of a cell along inverse depth, of a
+/// physical-lens cell whose PSF the runtime scales onto a pixel's own defocus before it
+/// blends it with the next cell's ([`ParamSpace::blend_scales_cell`]). Within it a lens's
+/// blur is not its defocus scaled (the aberrations that remain at focus are a large part of
+/// it), so those cells' PSFs are blended as they are, and pre-filtered over their inverse
+/// depths to keep that blend smooth. A scaled PSF grows or shrinks by at most 4/3.
+pub const SCALED_BLEND_MIN_CELLS_FROM_FOCUS: f64 = 3.0;
+
 /// The serialised form of [`ParamSpace`] (validated on load).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ParamSpaceSpec {
@@ -495,6 +503,18 @@ impl ParamSpace {
             min: self.from_grid(b.min),
             max: self.from_grid(b.max),
         })
+    }
+
+    /// Whether cell `i` of a physical-lens space (first dimension inverse depth, 1 / scene
+    /// units) lies at least [`SCALED_BLEND_MIN_CELLS_FROM_FOCUS`] of its widths from the
+    /// focus plane at inverse depth `focus`: the runtime scales its PSF onto a pixel's own
+    /// defocus, so the precompute traces it at its inverse depth's middle, not over its box.
+    pub fn blend_scales_cell(&self, i: u32, focus: f64) -> bool {
+        let (Some(b), Some(c)) = (self.cell_box(i), self.cell_center(i)) else {
+            return false;
+        };
+        let width = b.max[0] - b.min[0];
+        width > 0.0 && (c[0] - focus).abs() >= SCALED_BLEND_MIN_CELLS_FROM_FOCUS * width
     }
 
     /// The representative parameters of PSF `i` in physical units: the image of the cell's

@@ -178,13 +178,20 @@ pub const THIN_LENS_QUICK_PSFS: u32 = 64;
 pub const PHYSICAL_LENS_QUICK_PSFS: u32 = 160;
 
 /// The file name a configuration is cached under: model, profile, and a hash (FNV-1a 64) of
-/// every build setting, the profile's numbers and the database format version.
+/// every build setting, the profile's numbers and the database format version (and for a
+/// physical lens, which of its cells are traced at the middle of their inverse depths).
 pub fn cache_file_name(cfg: &BuildConfig) -> String {
-    let key = format!(
+    let mut key = format!(
         "{cfg:?} spec={:?} format={}",
         cfg.profile.spec(cfg.model),
         psf_db::FORMAT_VERSION
     );
+    if cfg.model == PsfModel::PhysicalLens {
+        key += &format!(
+            " scaled_blend={}",
+            psf_db::space::SCALED_BLEND_MIN_CELLS_FROM_FOCUS
+        );
+    }
     let mut h: u64 = 0xcbf2_9ce4_8422_2325;
     for b in key.bytes() {
         h ^= u64::from(b);

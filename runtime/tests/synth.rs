@@ -495,6 +495,126 @@ fn a_surface_through_a_real_lens_stays_even_on_the_axis() {
     );
 }
 
+/// A bright drop through a real lens, its inverse depth between two cells' centres far from
+/// the focus plane: the blend of the two cells' PSFs keeps one rim. Each PSF is scaled onto
+/// the drop's own defocus before they are mixed (the premixed pair), so the bokeh's rim is as
+/// steep as one PSF's; mixed as they are (`scaled_blends` off), they leave two rims a cell's
+/// blur apart, each of part of the height. Both have the same size: a squared RMS radius is
+/// linear in a mix, and so is the defocus between the cells. On the axis (the PSFs' rotational
+/// averages: the squared gradient over the frame 1.34 times the unscaled mix's) and off it
+/// (turned: 1.11 times, part of its rim being the vignetting's, which does not scale).
+#[test]
+fn a_real_lens_blend_of_two_cells_keeps_one_rim() {
+    // The Test profile's rays, with 16 boxes along inverse depth from 0.2 to 10 m: the
+    // nearest are far enough from the focus plane (1 m) to be scaled.
+    let mut cfg = support::test_config(PsfModel::PhysicalLens);
+    cfg.psf_count = Some(48);
+    if let Some(lens) = cfg.lens.as_mut() {
+        lens.depth_range = [0.2, 10.0];
+    }
+    let raw = precompute::build_database(&cfg, false).expect("build").0;
+    let db = &spreadlet::condition::condition(&raw).expect("condition").0;
+    let h = 96usize;
+    let cam = physical_camera(db, h);
+    let w = cam.width as usize;
+    let lens = db.header().lens.clone().expect("prescription");
+    let focus = 1.0 / lens.focus_distance;
+    let space = db.space();
+    let ppm = f64::from(lens.image_width_px) / lens.sensor_width_mm;
+    // The pixel's eccentricity box, and in it the cell of largest blur whose next cell (away
+    // from the focus plane) is scaled too, both dense, the bokeh within the frame.
+    let drop_at = |x: usize| -> (usize, f64) {
+        let ecc = ((x as f64 + 0.5 - w as f64 / 2.0).abs() + 0.5).hypot(0.5) / ppm;
+        let in_box = |i: u32| {
+            space
+                .cell_box(i)
+                .is_some_and(|b| b.min[1] <= ecc && ecc < b.max[1])
+        };
+        let usable = |i: u32| {
+            in_box(i)
+                && space.blend_scales_cell(i, focus)
+                && db
+                    .dense(i as usize)
+                    .is_some_and(|d| d.width.max(d.height) < h - 8)
+        };
+        let (cell, inv) = (0..db.psf_count() as u32)
+            .filter(|&i| usable(i))
+            .filter_map(|i| {
+                let b = space.cell_box(i)?;
+                let c = space.cell_center(i)?;
+                // Nine tenths of the way to the box's edge away from the focus plane.
+                let away = if c[0] > focus { b.max[0] } else { b.min[0] };
+                let inv = c[0] + 0.9 * (away - c[0]);
+                let (next, _) = space.lookup([(inv + (away - c[0])) as f32, ecc as f32]);
+                (next != i && usable(next)).then_some((i, inv))
+            })
+            .max_by(|a, b| (a.1 - focus).abs().total_cmp(&(b.1 - focus).abs()))
+            .expect("two neighbouring scaled dense cells");
+        assert!(in_box(cell));
+        (cell as usize, 1.0 / inv)
+    };
+    // Light over the padded frame's pixels, its RMS radius and its squared gradient
+    // (normalised to the image's squared light: larger for a steeper rim).
+    let measure = |out: &RgbaImage| -> (f64, f64) {
+        let g = |x: usize, y: usize| f64::from(out.pixels[y * w + x][1]);
+        let (mut s, mut sx, mut sy) = (0.0, 0.0, 0.0);
+        for y in 0..h {
+            for x in 0..w {
+                s += g(x, y);
+                sx += g(x, y) * x as f64;
+                sy += g(x, y) * y as f64;
+            }
+        }
+        let (cx, cy) = (sx / s, sy / s);
+        let (mut r2, mut grad, mut sq) = (0.0, 0.0, 0.0);
+        for y in 0..h - 1 {
+            for x in 0..w - 1 {
+                let v = g(x, y);
+                r2 += v * ((x as f64 - cx).powi(2) + (y as f64 - cy).powi(2));
+                grad += (g(x + 1, y) - v).powi(2) + (g(x, y + 1) - v).powi(2);
+                sq += v * v;
+            }
+        }
+        ((r2 / s).sqrt(), grad / sq)
+    };
+    for (place, x, steeper) in [
+        ("on the axis", w / 2, 1.25),
+        ("off the axis", w / 2 + w / 3, 1.06),
+    ] {
+        let (cell, depth) = drop_at(x);
+        let y = h / 2;
+        let far = 1.0 / space.dims()[0].min;
+        let mut color = vec![[0.0, 0.0, 0.0, 1.0]; w * h];
+        let mut depths = vec![far as f32; w * h];
+        color[y * w + x] = [40.0, 40.0, 40.0, 1.0];
+        depths[y * w + x] = depth as f32;
+        let g = GBuffer::from_planes(w, h, color, Some(depths), None).expect("g");
+        let draw = |scaled_blends: bool| {
+            let options = SynthOptions {
+                classify: ClassifyOptions {
+                    scaled_blends,
+                    ..ClassifyOptions::default()
+                },
+                ..SynthOptions::default()
+            };
+            synthesize(&g, &cam, &set(db), &options).expect("synth").0
+        };
+        let ((r_one, rim_one), (r_two, rim_two)) = (measure(&draw(true)), measure(&draw(false)));
+        println!(
+            "{place}: cell {cell}, depth {depth:.4}: scaled, RMS {r_one:.3} px, rim {rim_one:.4}; \
+             mixed as they are, RMS {r_two:.3} px, rim {rim_two:.4}"
+        );
+        assert!(
+            (r_one / r_two - 1.0).abs() < 0.03,
+            "{place}: RMS radius {r_one} against {r_two}"
+        );
+        assert!(
+            rim_one > steeper * rim_two,
+            "{place}: rim {rim_one} against {rim_two}"
+        );
+    }
+}
+
 /// A bright drop far off axis and far out of focus, over a dim backdrop seen through a real
 /// lens: the drop's cat's-eye bokeh is drawn with its PSF's residue clamped (the dense twin),
 /// so no pixel within 30 px of it is darker than 0.8 times the backdrop it lies on, let alone

@@ -94,6 +94,11 @@ pub(crate) struct SynthArgs {
     /// then shows a line at each cell boundary; for comparison).
     #[arg(long)]
     pub(crate) nearest_cell: bool,
+    /// Through a real lens, mix the PSFs of two neighbouring depth cells as they are, not each
+    /// scaled onto the pixel's own depth first (the bokeh then has two rims a cell's blur
+    /// apart; for comparison).
+    #[arg(long)]
+    pub(crate) unscaled_blends: bool,
     /// Draw moving pixels with the lens-motion database's PSF of their cell (turned onto the
     /// motion, blended with the neighbouring cell) instead of the thin-lens PSF of their CoC
     /// smeared along their own motion (for comparison: streak ends are then soft over a
@@ -163,6 +168,7 @@ impl SynthArgs {
                 frame_edges: self.frame_edges,
                 fill_hidden: !self.no_hidden_fill,
                 continuous_lookup: !self.nearest_cell,
+                scaled_blends: !self.unscaled_blends,
                 smear_motion: !self.motion_database,
                 coarse_above_px: self.coarse_above.unwrap_or(f32::INFINITY),
                 continue_layers: !self.no_layer_continuation,

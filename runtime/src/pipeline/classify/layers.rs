@@ -566,7 +566,11 @@ pub fn classify_fragments(
     if options.shared_turns && model == Some(PsfModel::PhysicalLens) {
         let frame_db = classified.database.clone();
         if let Some(base) = frame_db.as_deref().or(dbs.combined.as_ref()) {
-            let defocus = super::turned::lens_defocus(dbs, base.psf_count());
+            let defocus = if options.scaled_blends {
+                super::turned::lens_defocus(dbs, base.psf_count())
+            } else {
+                vec![f32::NAN; base.psf_count()]
+            };
             let turned =
                 super::turned::draw_shared_turns_upright(&mut classified, base, &defocus)?;
             classified.counts.turned += turned;

@@ -185,6 +185,11 @@ pub struct ClassifyOptions {
     /// instead of four bilinear taps, and turned with a sharper cubic), the turn quantised so
     /// that the PSF's rim is at most 1/4 px from the record's own turn (`turned`). Off: every record drawn at its own turn.
     pub shared_turns: bool,
+    /// Through a real lens, scale each of a premixed pair's two PSFs onto the blend's own
+    /// defocus before they are mixed, where both cells lie far enough from the focus plane
+    /// (`turned`): the bokeh keeps one rim. Off: the two are mixed as they are, and their rims
+    /// lie a cell's blur apart.
+    pub scaled_blends: bool,
 }
 
 impl Default for ClassifyOptions {
@@ -205,6 +210,7 @@ impl Default for ClassifyOptions {
             coarse_above_px: f32::INFINITY,
             continue_layers: true,
             shared_turns: true,
+            scaled_blends: true,
         }
     }
 }

@@ -148,24 +148,23 @@ struct PairKey {
     hi_step: u32,
 }
 
-/// Least distance from the focus plane, in cells' widths along inverse depth, of both PSFs of
-/// a pair that is morphed ([`morph_scales`]): each PSF is then scaled by at most 4/3 or 3/4.
-pub const MORPH_MIN_CELLS_FROM_FOCUS: f32 = 3.0;
-
 /// The scales that give the two PSFs of pair `p` the size of the blend's own depth before they
 /// are mixed, `[lower, higher]`. `defocus[i]` is PSF `i`'s inverse depth less the focus
 /// plane's (1 / scene units; NaN where it has none). A lens's blur grows in proportion to it,
 /// so at the blend's defocus `d = (1 - s) d_lo + s d_hi` the two PSFs scaled by `d / d_lo` and
 /// `d / d_hi` have their rims where the blend's depth has its rim: mixed, the rim stays sharp
 /// (mixed unscaled, two rims a cell's blur apart). `[1, 1]` near the focus plane (within
-/// [`MORPH_MIN_CELLS_FROM_FOCUS`] cells) or across it, where the blur does not scale so.
+/// [`psf_db::space::SCALED_BLEND_MIN_CELLS_FROM_FOCUS`] cells, whose PSFs the precompute
+/// pre-filters over their inverse depths instead) or across it, where the blur does not scale
+/// so.
 fn morph_scales(defocus: &[f32], p: &PairKey) -> [f32; 2] {
     let at = |i: u32| defocus.get(i as usize).copied().unwrap_or(f32::NAN);
     let (d_lo, d_hi) = (at(p.lo), at(p.hi));
     let width = (d_hi - d_lo).abs();
     let nearest = d_lo.abs().min(d_hi.abs());
     // NaN fails every comparison: no scaling.
-    if !(d_lo * d_hi > 0.0 && nearest >= MORPH_MIN_CELLS_FROM_FOCUS * width && width > 0.0) {
+    let least = psf_db::space::SCALED_BLEND_MIN_CELLS_FROM_FOCUS as f32;
+    if !(d_lo * d_hi > 0.0 && nearest >= least * width && width > 0.0) {
         return [1.0, 1.0];
     }
     let s = p.share_step as f32 / PAIR_SHARE_STEPS as f32;
