@@ -1185,8 +1185,6 @@ mod tests {
         assert!((after.1[0] - before.1[0]).abs() < 1e-3 && (after.1[1] - before.1[1]).abs() < 1e-3);
     }
 
-    /// Turning keeps the sum and moves the centroid and the spread as a rotation does: a box
-    /// off centre turned a quarter turn lands where the quarter turn puts it.
     /// A disk of radius 8 px scaled by 9/8 has the RMS radius of a disk of 9 px (to the
     /// pixel lattice's rounding), keeps its sum, and stays where it was; its rim is as steep
     /// as the larger disk's, where mixing the two disks would leave a step of half height.
@@ -1219,6 +1217,8 @@ mod tests {
         assert!(at(&scaled, 8) > 0.8 * level && at(&scaled, 10) < 0.05 * level);
     }
 
+    /// Turning keeps the sum and moves the centroid and the spread as a rotation does: a box
+    /// off centre turned a quarter turn lands where the quarter turn puts it.
     #[test]
     fn turning_moves_a_psf_as_a_rotation_does() {
         let mut data = vec![0f32; 9 * 5];
