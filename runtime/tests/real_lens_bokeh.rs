@@ -68,7 +68,9 @@ fn moments(
 /// that drew one channel's PSF for all would fail. Measured: the radii within 0.5 % (the far
 /// drop's blue 3 %); the centroids 0.2 px further in than the traced ones (3.7-3.9 %), as the
 /// database's PSF of the drop's eccentricity box is traced at the box's middle, 0.2 mm further
-/// out, where the distortion is larger.
+/// out, where the distortion is larger. A third drop, 0.45 m on the axis (the rotational
+/// averages of two cells' PSFs, scaled and premixed): its radii within 5 % (measured 0.6 %),
+/// its centroid within 0.1 px of the pinhole image.
 #[test]
 fn a_corner_drops_colour_fringes_match_its_light_traced_psf() {
     let mut cfg = BuildConfig::new(PsfModel::PhysicalLens, Profile::Test);
@@ -95,7 +97,12 @@ fn a_corner_drops_colour_fringes_match_its_light_traced_psf() {
     };
     let ppm = WIDTH as f64 / lens.sensor_width_mm;
     let dbs = DbSet::single(db.clone()).expect("set");
-    for (depth, (x, y)) in [(0.45, (8usize, 10usize)), (3.0, (WIDTH - 9, 10))] {
+    for (depth, (x, y)) in [
+        (0.45, (8usize, 10usize)),
+        (3.0, (WIDTH - 9, 10)),
+        (0.45, (WIDTH / 2, HEIGHT / 2)),
+    ] {
+        let on_axis = x == WIDTH / 2;
         let far = 1200.0f32;
         let mut color = vec![[0.0, 0.0, 0.0, 1.0]; WIDTH * HEIGHT];
         let mut depths = vec![far; WIDTH * HEIGHT];
@@ -140,6 +147,13 @@ fn a_corner_drops_colour_fringes_match_its_light_traced_psf() {
                 (dr / tr - 1.0).abs() < 0.05,
                 "{depth} m, channel {c}: RMS radius {dr:.3} px against {tr:.3}"
             );
+            if on_axis {
+                assert!(
+                    (d_off - t_off).abs() < 0.1,
+                    "on the axis: centroid {dc:?} against {tc:?}"
+                );
+                continue;
+            }
             assert!(
                 (d_off - t_off).abs() < 0.05 * t_off,
                 "{depth} m, channel {c}: centroid {d_off:.3} px off against {t_off:.3}"
