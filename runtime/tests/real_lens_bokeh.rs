@@ -4,13 +4,14 @@
 //! corner of the frame, where vignetting cuts it to a cat's eye and the lens's lateral colour
 //! pulls its channels apart.
 
+mod support;
+
 use precompute::optics::Prescription;
 use precompute::prefilter::ParamBox;
 use precompute::sampler::psf_rng;
 use precompute::trace::{trace_psf, RayCount};
 use precompute::{BuildConfig, BuildPlan, LensOptions, Profile};
 use psf_db::PsfModel;
-use spreadlet::camera::Camera;
 use spreadlet::dbset::DbSet;
 use spreadlet::gbuffer::GBuffer;
 use spreadlet::synth::{synthesize, SynthOptions};
@@ -80,21 +81,7 @@ fn a_corner_drops_colour_fringes_match_its_light_traced_psf() {
     let raw = precompute::build_database(&cfg, false).expect("build").0;
     let db = spreadlet::condition::condition(&raw).expect("condition").0;
     let lens = db.header().lens.clone().expect("prescription");
-    let cam = Camera {
-        width: WIDTH as u32,
-        height: HEIGHT as u32,
-        focal_length_mm: lens.focal_length_mm,
-        sensor_width_mm: lens.sensor_width_mm,
-        f_stop: Some(2.1),
-        focus_distance: Some(lens.focus_distance),
-        aperture_blades: 0,
-        aperture_rotation_deg: 0.0,
-        aperture_ratio: 1.0,
-        aperture_image: None,
-        lens: None,
-        shutter_frames: 0.0,
-        scene_unit_mm: lens.scene_unit_mm,
-    };
+    let cam = support::physical_camera(&db, HEIGHT);
     let ppm = WIDTH as f64 / lens.sensor_width_mm;
     let dbs = DbSet::single(db.clone()).expect("set");
     for (depth, (x, y)) in [

@@ -15,7 +15,7 @@ use spreadlet::pipeline::{
     SplatOptions, SplatPath,
 };
 use spreadlet::synth::{synthesize, SynthOptions, SynthStats};
-use support::{camera, depth_for_coc, one_pixel, raw_test_db, test_db};
+use support::{camera, depth_for_coc, one_pixel, physical_camera, raw_test_db, test_db};
 
 /// A set of one database.
 fn set(db: &PsfDatabase) -> DbSet {
@@ -404,26 +404,6 @@ fn a_few_sparse_records_are_drawn_from_turned_images() {
         shared.pixels.iter().all(|p| p.iter().all(|&v| v >= 0.0)),
         "no pixel below zero around the drops"
     );
-}
-
-/// A camera for the physical-lens test database: its lens, sensor and focus, `h` rows.
-fn physical_camera(db: &PsfDatabase, h: usize) -> Camera {
-    let lens = db.header().lens.clone().expect("prescription");
-    Camera {
-        width: lens.image_width_px,
-        height: h as u32,
-        focal_length_mm: lens.focal_length_mm,
-        sensor_width_mm: lens.sensor_width_mm,
-        f_stop: Some(4.0),
-        focus_distance: Some(lens.focus_distance),
-        aperture_blades: 0,
-        aperture_rotation_deg: 0.0,
-        aperture_ratio: 1.0,
-        aperture_image: None,
-        lens: None,
-        shutter_frames: 0.0,
-        scene_unit_mm: lens.scene_unit_mm,
-    }
 }
 
 /// A uniform grey surface out of focus seen through a real lens stays even on the optical axis.

@@ -142,3 +142,23 @@ pub fn gbuffer_of(g: &scene::GBuffer) -> GBuffer {
     .and_then(|g2| g2.with_acceleration(g.acceleration_plane()))
     .expect("a valid scene G-buffer")
 }
+
+/// A camera for the physical-lens database `db`: its lens, sensor and focus, `h` rows.
+pub fn physical_camera(db: &PsfDatabase, h: usize) -> Camera {
+    let lens = db.header().lens.clone().expect("prescription");
+    Camera {
+        width: lens.image_width_px,
+        height: h as u32,
+        focal_length_mm: lens.focal_length_mm,
+        sensor_width_mm: lens.sensor_width_mm,
+        f_stop: Some(4.0),
+        focus_distance: Some(lens.focus_distance),
+        aperture_blades: 0,
+        aperture_rotation_deg: 0.0,
+        aperture_ratio: 1.0,
+        aperture_image: None,
+        lens: None,
+        shutter_frames: 0.0,
+        scene_unit_mm: lens.scene_unit_mm,
+    }
+}
