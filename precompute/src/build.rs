@@ -129,7 +129,7 @@ impl BuildPlan {
                 notes.push(("lens".into(), system.prescription.name.clone()));
                 let [near, far] = opts.depth_range;
                 let ranges = [[1.0 / far, 1.0 / near], [0.0, opts.max_eccentricity_mm]];
-                let space = physical_lens_space(ranges, count)?;
+                let space = physical_lens_space(ranges, count, opts.eccentricity_boxes)?;
                 let presc = opts.prescription(&system, tracer.pinhole_distance_mm, width_px);
                 (space, Box::new(tracer), Some(presc))
             }
@@ -452,14 +452,19 @@ const PHYSICAL_DEPTH_PER_ECCENTRICITY: f64 = 1.6;
 /// the model's beta (below 1), so boxes narrow towards the corners, where vignetting cuts the
 /// cat's eye fastest. A nested grid's boxes are widest where both coordinates are large, a near
 /// object in a corner: there a PSF stood for blurs 47 % apart and eccentricities 3 mm apart.
+/// `eccentricity_boxes` sets the boxes across eccentricity instead.
 pub fn physical_lens_space(
     ranges: [[f64; 2]; 2],
     count: u32,
+    eccentricity_boxes: Option<u32>,
 ) -> Result<ParamSpace, psf_db::SpaceError> {
-    let across = (f64::from(count) / PHYSICAL_DEPTH_PER_ECCENTRICITY)
-        .sqrt()
-        .round()
-        .max(1.0) as u32;
+    let across = eccentricity_boxes.unwrap_or_else(|| {
+        (f64::from(count) / PHYSICAL_DEPTH_PER_ECCENTRICITY)
+            .sqrt()
+            .round()
+            .max(1.0) as u32
+    });
+    let across = across.clamp(1, count.max(1));
     let along = count.div_ceil(across).max(1);
     let dims = ranges
         .iter()

@@ -164,6 +164,12 @@ pub struct LensOptions {
     /// of blur radius per box through the double Gauss at 512 px).
     #[serde(default)]
     pub prefilter_inverse_depth: bool,
+    /// Eccentricity boxes of the grid; `None` takes them from the PSF count (about `sqrt(count
+    /// / 1.6)`). One box with a tiny `max_eccentricity_mm` traces a PSF on the optical axis per
+    /// inverse-depth box: the runtime's rotational averages near the axis
+    /// (`spreadlet::dbcache::axis_config`).
+    #[serde(default)]
+    pub eccentricity_boxes: Option<u32>,
 }
 
 impl Default for LensOptions {
@@ -187,6 +193,7 @@ impl Default for LensOptions {
             max_eccentricity_mm: 18.0,
             prefilter_eccentricity: false,
             prefilter_inverse_depth: false,
+            eccentricity_boxes: None,
         }
     }
 }

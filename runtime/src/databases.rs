@@ -200,7 +200,15 @@ pub fn load(
                 built_now: false,
                 lens: db.header().lens.as_ref().map(|l| l.lens.name.clone()),
             });
-            DbSet::single(prepare(db)?)?
+            // A physical-lens database's PSFs on the axis, where the cache keeps them beside it.
+            let at = dbcache::axis_path(path);
+            if db.model() == PsfModel::PhysicalLens && at.is_file() {
+                let axis = dbcache::explicit_database(&at, PsfModel::PhysicalLens)?;
+                let main = prepare(db)?;
+                DbSet::physical(main, Some(prepare(axis)?))?
+            } else {
+                DbSet::single(prepare(db)?)?
+            }
         }
         Source::Cache { dir, profile } if request.lens.is_some() => {
             // One physical-lens database serves still and moving pixels: a moving pixel's PSF
@@ -211,13 +219,29 @@ pub fn load(
                 cfg = adjust(cfg);
             }
             let (db, source) = dbcache::cached_database(&cfg, dir, request.progress, on_event)?;
+            let axis_at = dbcache::axis_path(&source.path);
             used.push(DbUsed {
                 model: PsfModel::PhysicalLens.name(),
                 path: source.path,
                 built_now: source.built,
                 lens: db.header().lens.as_ref().map(|l| l.lens.name.clone()),
             });
-            DbSet::single(prepare(db)?)?
+            // The lens's PSFs on the axis, for the rotational averages drawn near it.
+            let axis_cfg = dbcache::axis_config(&cfg, &db);
+            let main = prepare(db)?;
+            let axis = match axis_cfg {
+                Some(axis_cfg) => {
+                    let (axis, _) = dbcache::cached_database_at(
+                        &axis_cfg,
+                        &axis_at,
+                        request.progress,
+                        on_event,
+                    )?;
+                    Some(prepare(axis)?)
+                }
+                None => None,
+            };
+            DbSet::physical(main, axis)?
         }
         Source::Cache { dir, profile } => {
             let mut loaded = Vec::new();

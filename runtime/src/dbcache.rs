@@ -171,6 +171,33 @@ pub fn build_config(model: PsfModel, profile: Profile, blades: u32) -> BuildConf
     cfg
 }
 
+/// Eccentricity of the PSFs a physical-lens database's rotational averages on the axis are
+/// drawn from ([`axis_config`]), mm: a micrometre, on the axis to the pixel.
+pub const AXIS_ECCENTRICITY_MM: f64 = 1e-3;
+
+/// The build settings of the lens's PSFs on the optical axis that go with the physical-lens
+/// database `main` built from `cfg`: one per inverse-depth box of `main` (its cells that start
+/// at eccentricity 0), over the same depths, in one eccentricity box
+/// [`AXIS_ECCENTRICITY_MM`] wide, each stored dense (the runtime averages their images over
+/// turns: spreadlets would only approximate them). `None` for any other model. The runtime
+/// draws their rotational averages near the axis ([`crate::dbset::DbSet::physical`]).
+pub fn axis_config(cfg: &BuildConfig, main: &PsfDatabase) -> Option<BuildConfig> {
+    if cfg.model != PsfModel::PhysicalLens {
+        return None;
+    }
+    let boxes = (0..main.psf_count() as u32)
+        .filter(|&i| main.space().cell_box(i).is_some_and(|b| b.min[1] <= 0.0))
+        .count() as u32;
+    let mut lens = cfg.lens.clone().unwrap_or_default();
+    lens.max_eccentricity_mm = AXIS_ECCENTRICITY_MM;
+    lens.eccentricity_boxes = Some(1);
+    let mut axis = cfg.clone();
+    axis.psf_count = Some(boxes.max(1));
+    axis.dense_up_to_support = u32::MAX;
+    axis.lens = Some(lens);
+    Some(axis)
+}
+
 /// PSFs of the thin-lens database the runtime builds with the quick profile.
 pub const THIN_LENS_QUICK_PSFS: u32 = 64;
 
@@ -222,7 +249,26 @@ pub fn cached_database(
     progress: bool,
     on_event: &(dyn Fn(CacheEvent) + Sync),
 ) -> Result<(PsfDatabase, DbSource), CacheError> {
-    let path = dir.join(cache_file_name(cfg));
+    cached_database_at(cfg, &dir.join(cache_file_name(cfg)), progress, on_event)
+}
+
+/// Where the lens's PSFs on the axis ([`axis_config`]) are kept beside the physical-lens
+/// database at `main`: `NAME.axis.sprdlt` for `NAME.sprdlt`. A database named by hand
+/// (`--db`) finds them there too, so it draws what the cache draws.
+pub fn axis_path(main: &Path) -> PathBuf {
+    main.with_extension("axis.sprdlt")
+}
+
+/// [`cached_database`] at the file `path`: read when it holds a database of `cfg`'s model,
+/// else built from `cfg` and written there.
+pub fn cached_database_at(
+    cfg: &BuildConfig,
+    path: &Path,
+    progress: bool,
+    on_event: &(dyn Fn(CacheEvent) + Sync),
+) -> Result<(PsfDatabase, DbSource), CacheError> {
+    let path = path.to_path_buf();
+    let dir = path.parent().unwrap_or(Path::new("."));
     if path.exists() {
         match PsfDatabase::read(&path) {
             Ok(db) if db.model() == cfg.model => {

@@ -97,6 +97,39 @@ impl DbSet {
 
     /// A set of one or two databases. `thin_lens` must be a thin-lens database (or `None`).
     pub fn new(thin_lens: Option<PsfDatabase>, main: Option<PsfDatabase>) -> Result<Self, DbError> {
+        Self::with_axis(thin_lens, main, None)
+    }
+
+    /// A physical-lens database `main` and `axis`, its lens's PSFs on the optical axis, one
+    /// per inverse-depth box of `main` (`dbcache::axis_config`): the pixels near the axis draw
+    /// the rotational average of those ([`DbSet::axis_round`]) instead of that of their first
+    /// eccentricity box's PSF, traced off the axis at the box's middle.
+    pub fn physical(main: PsfDatabase, axis: Option<PsfDatabase>) -> Result<Self, DbError> {
+        if let Some(axis) = &axis {
+            let depths = |db: &PsfDatabase| db.space().dims().first().map(|d| (d.min, d.max));
+            let boxes = |db: &PsfDatabase| {
+                (0..db.psf_count() as u32)
+                    .filter(|&i| db.space().cell_box(i).is_some_and(|b| b.min[1] <= 0.0))
+                    .count()
+            };
+            let matches = main.model() == PsfModel::PhysicalLens
+                && axis.model() == PsfModel::PhysicalLens
+                && depths(&main) == depths(axis)
+                && boxes(&main) == axis.psf_count();
+            if !matches {
+                return Err(DbError::Invalid(
+                    "the PSFs on the axis are not of the physical-lens database's depths".into(),
+                ));
+            }
+        }
+        Self::with_axis(None, Some(main), axis.as_ref())
+    }
+
+    fn with_axis(
+        thin_lens: Option<PsfDatabase>,
+        main: Option<PsfDatabase>,
+        axis: Option<&PsfDatabase>,
+    ) -> Result<Self, DbError> {
         if let Some(t) = &thin_lens {
             if t.model() != PsfModel::ThinLens {
                 return Err(DbError::Invalid(format!(
@@ -145,7 +178,7 @@ impl DbSet {
         // The rotational averages of the physical-lens PSFs on the axis.
         let mut axis_round = vec![NO_TWIN; base];
         if let Some(m) = main.as_ref().filter(|m| m.model() == PsfModel::PhysicalLens) {
-            for (i, image) in round_on_axis(m).into_iter().enumerate() {
+            for (i, image) in round_on_axis(m, axis).into_iter().enumerate() {
                 if let Some(image) = image {
                     axis_round[main_offset as usize + i] = (base + twins.len()) as u32;
                     twins.push(image);
@@ -434,8 +467,12 @@ fn physical_twins(db: &PsfDatabase) -> Vec<Option<(TwinCell, Vec<DenseImage>)>> 
 const AXIS_TURNS: u32 = 8;
 
 /// For each PSF of a physical-lens `db` whose cell starts at eccentricity 0: its average over
-/// [`AXIS_TURNS`] turns (each by [`crate::motion_smear::turn`]), over the union of their boxes.
-fn round_on_axis(db: &PsfDatabase) -> Vec<Option<DenseImage>> {
+/// [`AXIS_TURNS`] turns (each by [`crate::motion_smear::turn`]), over the union of their boxes;
+/// with `axis` (the lens's PSFs on the axis, one per inverse-depth box), the average of the PSF
+/// of `axis` at the cell's inverse depth instead. A PSF traced at the first box's middle (2.7
+/// mm off axis through the double Gauss at 512 px) is lopsided already, and its average drew
+/// an axial drop's rim 0.5 px softer than the lens does.
+fn round_on_axis(db: &PsfDatabase, axis: Option<&PsfDatabase>) -> Vec<Option<DenseImage>> {
     use crate::motion_smear::{psf_image, turn, PsfImage};
     use rayon::prelude::*;
     (0..db.psf_count())
@@ -445,7 +482,14 @@ fn round_on_axis(db: &PsfDatabase) -> Vec<Option<DenseImage>> {
             if !on_axis {
                 return None;
             }
-            let psf = psf_image(db, i)?;
+            let psf = match axis {
+                Some(axis) => {
+                    let centre = db.space().cell_center(i as u32)?;
+                    let (k, _) = axis.space().lookup([centre[0] as f32, 0.0]);
+                    psf_image(axis, k as usize)?
+                }
+                None => psf_image(db, i)?,
+            };
             let turned: Vec<PsfImage> = (0..AXIS_TURNS)
                 .map(|k| turn(&psf, k as f32 * std::f32::consts::TAU / AXIS_TURNS as f32))
                 .collect();
