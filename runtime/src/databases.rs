@@ -205,7 +205,14 @@ pub fn load(
             if db.model() == PsfModel::PhysicalLens && at.is_file() {
                 let axis = dbcache::explicit_database(&at, PsfModel::PhysicalLens)?;
                 let main = prepare(db)?;
-                DbSet::physical(main, Some(prepare(axis)?))?
+                DbSet::physical(main, Some(prepare(axis)?)).map_err(|e| {
+                    let why = match e {
+                        psf_db::DbError::Invalid(why) => why,
+                        other => other.to_string(),
+                    };
+                    let at = at.display();
+                    psf_db::DbError::Invalid(format!("{at}: {why} (move it away to draw without it)"))
+                })?
             } else {
                 DbSet::single(prepare(db)?)?
             }
