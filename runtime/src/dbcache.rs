@@ -185,9 +185,7 @@ pub fn axis_config(cfg: &BuildConfig, main: &PsfDatabase) -> Option<BuildConfig>
     if cfg.model != PsfModel::PhysicalLens {
         return None;
     }
-    let boxes = (0..main.psf_count() as u32)
-        .filter(|&i| main.space().cell_box(i).is_some_and(|b| b.min[1] <= 0.0))
-        .count() as u32;
+    let boxes = crate::dbset::on_axis_cells(main) as u32;
     let mut lens = cfg.lens.clone().unwrap_or_default();
     lens.max_eccentricity_mm = AXIS_ECCENTRICITY_MM;
     lens.eccentricity_boxes = Some(1);

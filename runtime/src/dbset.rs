@@ -107,15 +107,10 @@ impl DbSet {
     pub fn physical(main: PsfDatabase, axis: Option<PsfDatabase>) -> Result<Self, DbError> {
         if let Some(axis) = &axis {
             let depths = |db: &PsfDatabase| db.space().dims().first().map(|d| (d.min, d.max));
-            let boxes = |db: &PsfDatabase| {
-                (0..db.psf_count() as u32)
-                    .filter(|&i| db.space().cell_box(i).is_some_and(|b| b.min[1] <= 0.0))
-                    .count()
-            };
             let matches = main.model() == PsfModel::PhysicalLens
                 && axis.model() == PsfModel::PhysicalLens
                 && depths(&main) == depths(axis)
-                && boxes(&main) == axis.psf_count();
+                && on_axis_cells(&main) == axis.psf_count();
             if !matches {
                 return Err(DbError::Invalid(
                     "the PSFs on the axis are not of the physical-lens database's depths".into(),
@@ -466,6 +461,19 @@ fn physical_twins(db: &PsfDatabase) -> Vec<Option<(TwinCell, Vec<DenseImage>)>> 
 /// pays when it loads the database (14 ms -> 4 ms on 2 cores).
 const AXIS_TURNS: u32 = 8;
 
+/// Whether cell `i` of a physical-lens `db` starts at eccentricity 0 (its first eccentricity
+/// box, whose PSFs are drawn as rotational averages near the axis).
+pub fn starts_on_axis(db: &PsfDatabase, i: u32) -> bool {
+    db.space().cell_box(i).is_some_and(|b| b.min[1] <= 0.0)
+}
+
+/// How many cells of a physical-lens `db` start at eccentricity 0: one per inverse-depth box.
+pub fn on_axis_cells(db: &PsfDatabase) -> usize {
+    (0..db.psf_count() as u32)
+        .filter(|&i| starts_on_axis(db, i))
+        .count()
+}
+
 /// For each PSF of a physical-lens `db` whose cell starts at eccentricity 0: its average over
 /// [`AXIS_TURNS`] turns (each by [`crate::motion_smear::turn`]), over the union of their boxes;
 /// with `axis` (the lens's PSFs on the axis, one per inverse-depth box), the average of the PSF
@@ -478,8 +486,7 @@ fn round_on_axis(db: &PsfDatabase, axis: Option<&PsfDatabase>) -> Vec<Option<Den
     (0..db.psf_count())
         .into_par_iter()
         .map(|i| {
-            let on_axis = db.space().cell_box(i as u32).is_some_and(|b| b.min[1] <= 0.0);
-            if !on_axis {
+            if !starts_on_axis(db, i as u32) {
                 return None;
             }
             let psf = match axis {
