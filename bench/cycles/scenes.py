@@ -1,0 +1,38 @@
+"""Scenes of our own for Blender Cycles, in the builder style of ../shared/tools/blender_refs.py.
+
+`cycles_frames.sh` runs this file inside a copy of blender_refs.py (before its scene table),
+so `bpy`, `math` and the builder's helpers (`sun`, `mat`, `add`, `animate`, `camera`) are in
+scope, and adds `EXTRA_SCENES` to the table. Units are the builder's: it scales every scene
+by 0.1 (a miniature), so 8.0 here is a focus distance of 0.8 m.
+"""
+
+def area(loc, size, energy, rot=(0, 0, 0)):
+    bpy.ops.object.light_add(type='AREA', location=loc, rotation=rot)
+    o = bpy.context.object; o.data.size = size; o.data.energy = energy
+    return o
+
+def street(scn):
+    # Night street: textured ground and facade, a soft area light (soft shadows, one bounce
+    # on the ground), a pillar and a ball in focus, two cars passing with lamps at two depths.
+    sun(0.2)
+    area((2.5, -6, 6), 4.0, 3.0, rot=(math.radians(25), math.radians(15), 0))
+    bpy.ops.mesh.primitive_plane_add(size=60, location=(0, 10, 0))
+    add(bpy.context.object, mat("asphalt", (0.35, 0.33, 0.3), checker=60))
+    bpy.ops.mesh.primitive_plane_add(size=60, location=(0, 10, 0), rotation=(math.radians(90), 0, 0))
+    add(bpy.context.object, mat("facade", (0.7, 0.45, 0.3), checker=60))
+    bpy.ops.mesh.primitive_cube_add(size=1.0, location=(-1.3, -2, 1.25))
+    o = bpy.context.object; o.scale = (0.4, 0.4, 2.5); add(o, mat("pillar", (0.8, 0.8, 0.75), checker=8))
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.5, location=(1.0, -2, 0.5))
+    add(bpy.context.object, mat("ball", (0.2, 0.5, 0.8)))
+    for i, (x, y, d, body, lamp, sx) in enumerate([(-0.5, -4.5, (1.2, 0, 0), (0.6, 0.1, 0.1), (1, .95, .8), 1),
+                                                   (1.0, 5.0, (-2.0, 0, 0), (0.2, 0.3, 0.5), (1, .2, .1), -1)]):
+        bpy.ops.mesh.primitive_cube_add(size=1.0, location=(x, y, 0.6))
+        car = bpy.context.object; car.scale = (2.0, 0.8, 0.6); add(car, mat(f"car{i}", body, checker=6))
+        animate(car, delta=d)
+        for k in (0.45, 0.75):
+            bpy.ops.mesh.primitive_uv_sphere_add(radius=0.08, location=(x + sx * 1.02, y - 0.42, k))
+            o = bpy.context.object; add(o, mat(f"lamp{i}{k}", lamp, emit=120)); animate(o, delta=d)
+    return camera(scn, fstop=1.8, focus=8.0), dict(dof=True, motion=True)
+
+
+EXTRA_SCENES = dict(street=street)
