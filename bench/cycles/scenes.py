@@ -35,4 +35,42 @@ def street(scn):
     return camera(scn, fstop=1.8, focus=8.0), dict(dof=True, motion=True)
 
 
-EXTRA_SCENES = dict(street=street)
+def lights(scn):
+    # A still with large bokeh: a checkered cube and a ball in focus on a table, and a string
+    # of small lamps far behind them, under a soft area light.
+    sun(0.3)
+    area((-3, -8, 5), 3.0, 2.5, rot=(math.radians(50), math.radians(-20), 0))
+    bpy.ops.mesh.primitive_plane_add(size=60, location=(0, 10, 0))
+    add(bpy.context.object, mat("table", (0.5, 0.4, 0.3), checker=80))
+    bpy.ops.mesh.primitive_plane_add(size=60, location=(0, 25, 0), rotation=(math.radians(90), 0, 0))
+    add(bpy.context.object, mat("backdrop", (0.25, 0.3, 0.35), checker=30))
+    bpy.ops.mesh.primitive_cube_add(size=1.0, location=(-0.7, -4, 0.5), rotation=(0, 0, math.radians(30)))
+    add(bpy.context.object, mat("cube", (0.85, 0.8, 0.7), checker=5))
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.45, location=(0.7, -4.2, 0.45))
+    add(bpy.context.object, mat("ball", (0.7, 0.25, 0.2)))
+    for i in range(9):
+        x = -4.0 + i
+        z = 1.6 + 0.35 * math.sin(i * 1.3)
+        c = [(1, .8, .4), (.4, .7, 1), (1, .4, .6)][i % 3]
+        bpy.ops.mesh.primitive_uv_sphere_add(radius=0.06, location=(x, 14 + 2 * (i % 2), z))
+        add(bpy.context.object, mat(f"bulb{i}", c, emit=150))
+    return camera(scn, fstop=1.4, focus=6.0), dict(dof=True, motion=False)
+
+def disc(scn):
+    # A textured disc spinning 30 degrees per frame in front of a wall, no emitters.
+    sun(2.0)
+    area((3, -6, 5), 2.0, 1.5, rot=(math.radians(40), math.radians(25), 0))
+    bpy.ops.mesh.primitive_plane_add(size=60, location=(0, 6, 0), rotation=(math.radians(90), 0, 0))
+    add(bpy.context.object, mat("wall", (0.6, 0.6, 0.55), checker=40))
+    bpy.ops.mesh.primitive_cylinder_add(radius=2.0, depth=0.1, location=(0, 0, 1.5), rotation=(math.radians(90), 0, 0))
+    d = bpy.context.object; add(d, mat("disc", (0.9, 0.6, 0.1), checker=8))
+    p = d.location.copy(); r = d.rotation_euler.copy()
+    for f, sgn in ((0, -0.5), (2, 0.5)):
+        d.rotation_euler = (r[0], r[1] + sgn * math.radians(60), r[2])
+        d.keyframe_insert("rotation_euler", frame=f)
+    for fc in d.animation_data.action.fcurves:
+        for k in fc.keyframe_points: k.interpolation = 'LINEAR'
+    d.rotation_euler = r
+    return camera(scn, fstop=2.8, focus=10.0), dict(dof=True, motion=True)
+
+EXTRA_SCENES = dict(street=street, lights=lights, disc=disc)
