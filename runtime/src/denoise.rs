@@ -861,6 +861,7 @@ mod tests {
                     q: [x as f32 + 0.5, y as f32 + 0.5],
                     coc: 0.0,
                     motion: [0.0; 2],
+                    bend: 0.0,
                 }));
             }
         }
@@ -1030,6 +1031,7 @@ mod tests {
                         q: [x as f32 + jitter[0], y as f32 + jitter[1]],
                         coc: 0.0,
                         motion: [0.0; 2],
+                        bend: 0.0,
                     }));
                 }
             }
@@ -1119,6 +1121,7 @@ mod tests {
                         q: [x as f32 + jitter[0], y as f32 + jitter[1]],
                         coc: 0.0,
                         motion: [0.0; 2],
+                        bend: 0.0,
                     }));
                 }
             }
@@ -1191,6 +1194,7 @@ mod tests {
                 q,
                 coc: 0.0,
                 motion: [0.0; 2],
+                bend: 0.0,
             });
         }
         let guides = frames.guides.clone().expect("guides");

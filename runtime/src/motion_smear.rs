@@ -55,10 +55,12 @@ pub const MAX_SMEAR_PX: f32 = 512.0;
 /// Largest smeared PSF image, pixels: its width times height. Beyond it the smear's taps are
 /// what costs, not the memory; a frame that needs more is an error rather than a slow crawl.
 const MAX_SMEARED_PIXELS: usize = 4 << 20;
-/// Most pixels of smeared PSF images one frame builds, summed (each pixel holds a value per
-/// channel: 768 MB of RGB): a frame beyond it is an error, not an unbounded allocation. A
-/// camera pan through the double Gauss at 512 px runs in 0.24 GB in all.
-pub const MAX_FRAME_SMEARED_PIXELS: usize = 64 << 20;
+/// Most values (pixels times channels) of smeared PSF images one frame builds, summed (768
+/// MB of f32: 64 Mi pixels of RGB, three times as many of grey): a frame beyond it is an
+/// error, not an unbounded allocation. A camera pan through the double Gauss at 512 px runs
+/// in 0.24 GB in all; a spinning disc reconstructed from 4 spp, its streaks bent along arcs,
+/// in 0.6 GB.
+pub const MAX_FRAME_SMEARED_VALUES: usize = 3 * (64 << 20);
 
 /// Which smeared PSF a moving fragment uses: its physical-lens cell (index in the set's
 /// combined database), the turn of that PSF onto the fragment's radial direction, and its
@@ -251,15 +253,17 @@ pub enum SmearError {
     },
     /// The frame's smeared PSFs together would be larger than the renderer builds per frame.
     #[error(
-        "the frame's moving pixels call for {keys} smeared PSFs of about {pixels} pixels in \
-         all, more than the {MAX_FRAME_SMEARED_PIXELS} built per frame: shorten the shutter \
-         or render the frame in tiles"
+        "the frame's moving pixels call for {keys} smeared PSFs of about {pixels} pixels of \
+         {channels} channel(s) in all, more than the {MAX_FRAME_SMEARED_VALUES} values built \
+         per frame: shorten the shutter or render the frame in tiles"
     )]
     FrameTooLarge {
         /// Distinct smeared PSFs.
         keys: usize,
         /// Their estimated pixels, summed.
         pixels: usize,
+        /// Values per pixel (1 grey, 3 RGB).
+        channels: usize,
     },
 }
 

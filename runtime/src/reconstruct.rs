@@ -138,8 +138,12 @@ pub struct MovedSample {
     pub q: [f32; 2],
     /// Signed CoC radius at the sample's depth, pixels.
     pub coc: f32,
-    /// Its motion, pixels per frame (zero when the frame calls for no motion blur).
+    /// Its motion at the shutter centre, pixels per frame (zero when the frame calls for no
+    /// motion blur).
     pub motion: [f32; 2],
+    /// How far its path bends across the motion, px per frame squared ([`Fragment::bend`] in
+    /// frame units): a spinning surface's points travel arcs.
+    pub bend: f32,
 }
 
 /// Every sample moved back to the lens and shutter centre (`docs/STOCHASTIC.md`), in the order
@@ -151,6 +155,8 @@ pub fn moved_samples(
     effects: Effects,
 ) -> Vec<Option<MovedSample>> {
     let lens = camera.thin_lens();
+    let field = effects.motion.then(|| PixelMotionField::of(frames));
+    let bends = field.as_ref().map(PixelMotionField::bends);
     frames
         .samples
         .par_iter()
@@ -177,13 +183,108 @@ pub fn moved_samples(
             let motion = if effects.motion { s.motion } else { [0.0; 2] };
             // Continuous sensor position (pixel centres at +0.5), moved back to the lens centre
             // and the shutter centre.
-            let q = [
+            let mut q = [
                 px + 0.5 + s.jitter[0] - coc * s.lens[0] - motion[0] * s.time,
                 py + 0.5 + s.jitter[1] - coc * s.lens[1] - motion[1] * s.time,
             ];
-            Some(MovedSample { q, coc, motion })
+            // Along a bent path `p(t) = p0 + t m0 + t^2 a / 2` the label holds the motion at
+            // the sample's own time, `m(t) = m0 + t a`: so `p0 = p(t) - t m(t) + t^2 a / 2`,
+            // and the motion at the shutter centre is `m(t) - t a`.
+            let bend = bends.as_ref().map_or(0.0, |b| b[pixel]);
+            let mut motion = motion;
+            if bend != 0.0 {
+                if let Some(across) = field.as_ref().and_then(|f| f.across(pixel)) {
+                    let a = [bend * across[0], bend * across[1]];
+                    let t = s.time;
+                    q[0] += 0.5 * t * t * a[0];
+                    q[1] += 0.5 * t * t * a[1];
+                    motion = [motion[0] - t * a[0], motion[1] - t * a[1]];
+                }
+            }
+            Some(MovedSample {
+                q,
+                coc,
+                motion,
+                bend,
+            })
         })
         .collect()
+}
+
+/// Each pixel's motion as its nearest surface's samples hold it (their mean, and their mean
+/// depth), the field whose turning bends the paths ([`crate::pipeline::classify::path_bends`]):
+/// a spinning disc's samples carry the tangent at their own time, and moved back or smeared
+/// along it their light leaves the disc's outline.
+struct PixelMotionField {
+    width: usize,
+    height: usize,
+    motion: Vec<[f32; 2]>,
+    depth: Vec<f32>,
+    coverage: Vec<[f32; 4]>,
+}
+
+/// Samples of a pixel within this relative depth of its nearest are of its nearest surface.
+const FIELD_SAME_SURFACE_DEPTH: f32 = 0.03;
+
+impl PixelMotionField {
+    fn of(frames: &StochasticFrames) -> Self {
+        let spp = frames.spp.max(1);
+        let usable = |s: &&formats::Sample| {
+            s.color[3] > 0.0
+                && s.depth.is_finite()
+                && s.depth > 0.0
+                && s.motion.iter().chain([&s.time]).all(|v| v.is_finite())
+        };
+        let per_pixel: Vec<([f32; 2], f32, f32)> = frames
+            .samples
+            .par_chunks(spp)
+            .map(|pixel| {
+                let nearest = pixel
+                    .iter()
+                    .filter(usable)
+                    .map(|s| s.depth)
+                    .fold(f32::INFINITY, f32::min);
+                if !nearest.is_finite() {
+                    return ([0.0; 2], f32::INFINITY, 0.0);
+                }
+                let limit = nearest * (1.0 + FIELD_SAME_SURFACE_DEPTH);
+                let (mut m, mut d, mut n) = ([0.0f32; 2], 0.0f32, 0.0f32);
+                for s in pixel.iter().filter(usable).filter(|s| s.depth <= limit) {
+                    m[0] += s.motion[0];
+                    m[1] += s.motion[1];
+                    d += s.depth;
+                    n += 1.0;
+                }
+                ([m[0] / n, m[1] / n], d / n, 1.0)
+            })
+            .collect();
+        PixelMotionField {
+            width: frames.width,
+            height: frames.height,
+            motion: per_pixel.iter().map(|p| p.0).collect(),
+            depth: per_pixel.iter().map(|p| p.1).collect(),
+            coverage: per_pixel.iter().map(|p| [0.0, 0.0, 0.0, p.2]).collect(),
+        }
+    }
+
+    /// Every pixel's path bend, px per frame squared.
+    fn bends(&self) -> Vec<f32> {
+        crate::pipeline::classify::path_bends(
+            self.width,
+            self.height,
+            &self.motion,
+            Some(&self.depth),
+            &self.coverage,
+        )
+    }
+
+    /// The unit vector a positive bend points along at `pixel`: its motion turned a quarter
+    /// turn, `(-m_y, m_x) / |m|`.
+    fn across(&self, pixel: usize) -> Option<[f32; 2]> {
+        let m = self.motion.get(pixel)?;
+        let len = m[0].hypot(m[1]);
+        (len > 0.0 && len.is_finite()).then(|| [-m[1] / len, m[0] / len])
+    }
 }
 
 /// The samples of stochastic frames as reconstruction places them: moved back to the lens and
@@ -358,8 +459,8 @@ impl<'a> PlacedSamples<'a> {
             parallax: 1.0 / s.depth,
             depth: s.depth,
             motion: [motion[0] * self.shutter, motion[1] * self.shutter],
-            // A sample's own path is not known: its label holds one instant of it.
-            bend: 0.0,
+            // Over the shutter a path's bend scales with the shutter's square.
+            bend: self.moved[k].map_or(0.0, |m| m.bend) * self.shutter * self.shutter,
             source: 0,
         }
     }
@@ -818,6 +919,81 @@ mod tests {
         assert!(fragments(&frame(dim, 1.0, [0.1, 0.0])).len() <= 4);
         assert!(fragments(&frame([4.0, 3.0, 2.0, 1.0], 1.0, [0.0; 2])).len() <= 4);
         assert!(fragments(&frame(dim, blurred_depth, [0.0; 2])).len() <= 4);
+    }
+
+    /// Samples of a disc turning `theta` per frame about the frame's centre, each labelled with
+    /// the motion at its own time (the tangent there, as a renderer's vector pass gives it),
+    /// are moved back along their arcs: each lands where its point was at the shutter centre
+    /// (along the tangent it would land up to `r (1 - cos(theta t))` outside), carries the
+    /// motion at the shutter centre, and bends towards the centre by `theta |m|`.
+    #[test]
+    fn a_turning_surfaces_samples_move_back_along_their_arcs() {
+        let cam = camera();
+        let (w, spp) = (48usize, 4usize);
+        let theta = 0.4f32;
+        let centre = [24.0f32, 24.0];
+        let turn = |v: [f32; 2], a: f32| {
+            let (sin, cos) = a.sin_cos();
+            [cos * v[0] - sin * v[1], sin * v[0] + cos * v[1]]
+        };
+        let mut samples = vec![Sample::default(); w * w * spp];
+        for (k, s) in samples.iter_mut().enumerate() {
+            let pixel = k / spp;
+            let jitter = [0.1 + 0.2 * (k % 4) as f32, 0.7 - 0.2 * (k % 4) as f32];
+            let p = [
+                (pixel % w) as f32 + 0.5 + jitter[0] - 0.5,
+                (pixel / w) as f32 + 0.5 + jitter[1] - 0.5,
+            ];
+            let r = [p[0] - centre[0], p[1] - centre[1]];
+            *s = Sample {
+                color: [0.5, 0.5, 0.5, 1.0],
+                depth: 1.0, // in focus: no lens offset
+                lens: [0.0; 2],
+                time: ((k * 7 + pixel * 3) % 9) as f32 / 9.0 - 0.45,
+                // y down: a positive turn is clockwise on screen, m = theta (-r_y, r_x).
+                motion: [-theta * r[1], theta * r[0]],
+                jitter: [jitter[0] - 0.5, jitter[1] - 0.5],
+            };
+        }
+        let frames = StochasticFrames::new(w, w, spp, samples);
+        let effects = effects_of(&cam, &frames);
+        let moved = moved_samples(&frames, &cam, effects);
+        let (mut worst, mut checked) = (0.0f32, 0);
+        for (k, m) in moved.iter().enumerate() {
+            let s = &frames.samples[k];
+            let pixel = k / spp;
+            let p = [
+                (pixel % w) as f32 + 0.5 + s.jitter[0],
+                (pixel / w) as f32 + 0.5 + s.jitter[1],
+            ];
+            let r = [p[0] - centre[0], p[1] - centre[1]];
+            let radius = r[0].hypot(r[1]);
+            // The field's fit needs a window of the surface round the pixel.
+            let (x, y) = (pixel % w, pixel / w);
+            if !(4..w - 4).contains(&x) || !(4..w - 4).contains(&y) || radius < 4.0 {
+                continue;
+            }
+            let m = m.expect("a finite sample moves back");
+            let r0 = turn(r, -theta * s.time);
+            let p0 = [centre[0] + r0[0], centre[1] + r0[1]];
+            worst = worst.max((m.q[0] - p0[0]).hypot(m.q[1] - p0[1]));
+            let m0 = [-theta * r0[1], theta * r0[0]];
+            let speed = m0[0].hypot(m0[1]);
+            assert!(
+                (m.motion[0] - m0[0]).hypot(m.motion[1] - m0[1]) < 0.02 * speed + 0.05,
+                "motion {:?} against {m0:?}",
+                m.motion
+            );
+            assert!(
+                (m.bend - theta * speed).abs() < 0.05 * theta * speed + 0.05,
+                "bend {} against {}",
+                m.bend,
+                theta * speed
+            );
+            checked += 1;
+        }
+        assert!(checked > 1000, "{checked} samples checked");
+        assert!(worst < 0.05, "a moved sample lies {worst} px from its arc's centre point");
     }
 
     /// One opaque sample at depth `depth` with jitter `jitter`, in pixel (6, 9) of a 16x16 frame.

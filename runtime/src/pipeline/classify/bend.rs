@@ -45,7 +45,7 @@ const MIN_FIT_DETERMINANT: f32 = 1.0;
 /// Every pixel's path bend (px, `Fragment::bend`, for the motion given) of a `w x h` frame
 /// whose pixel `i` moves `motion[i]` px at planar depth `depth[i]` (none: no depth pass, one
 /// surface) with coverage `color[i][3]`. Uncovered and slow pixels get 0.
-pub(super) fn path_bends(
+pub(crate) fn path_bends(
     w: usize,
     h: usize,
     motion: &[[f32; 2]],

@@ -807,7 +807,7 @@ struct SmearedPsfs {
 impl SmearedPsfs {
     /// The smeared PSFs of the fragments' keys (`None`: not smeared), from the lens PSFs of
     /// `all` (whose PSFs reach `reach` px); the frame's smeared images are bounded by
-    /// [`crate::motion_smear::MAX_FRAME_SMEARED_PIXELS`].
+    /// [`crate::motion_smear::MAX_FRAME_SMEARED_VALUES`].
     fn build(
         fragment_keys: &[Option<(SmearKey, bool)>],
         all: &PsfDatabase,
@@ -877,10 +877,14 @@ impl SmearedPsfs {
                 k.estimated_pixels(r)
             })
             .sum();
-        if pixels > crate::motion_smear::MAX_FRAME_SMEARED_PIXELS {
+        // The bound is on memory: a grey lens PSF's smeared images hold one value per pixel
+        // where an RGB one holds three.
+        let channels = all.channels().max(1);
+        if pixels.saturating_mul(channels) > crate::motion_smear::MAX_FRAME_SMEARED_VALUES {
             return Err(crate::motion_smear::SmearError::FrameTooLarge {
                 keys: unique.len(),
                 pixels,
+                channels,
             }
             .into());
         }

@@ -38,6 +38,7 @@ mod turned;
 
 use psf_db::PsfModel;
 
+pub(crate) use bend::path_bends;
 pub(crate) use deep::classify_deep_with;
 pub use deep::{check_deep_size, classify_deep, deep_effects, deep_fragments};
 pub use fragments::Fragment;
@@ -103,8 +104,8 @@ pub enum ClassifyError {
     /// A physical-lens database describes another camera or lacks its prescription.
     #[error("physical-lens database: {0}")]
     PhysicalLens(String),
-    /// A moving pixel's physical-lens PSF could not be smeared along its motion.
-    #[error("motion blur through a real lens: {0}")]
+    /// A moving pixel's lens PSF could not be smeared along its motion.
+    #[error("motion blur: {0}")]
     MotionSmear(#[from] crate::motion_smear::SmearError),
 }
 
