@@ -190,7 +190,12 @@ pub fn moved_samples(
             // Along a bent path `p(t) = p0 + t m0 + t^2 a / 2` the label holds the motion at
             // the sample's own time, `m(t) = m0 + t a`: so `p0 = p(t) - t m(t) + t^2 a / 2`,
             // and the motion at the shutter centre is `m(t) - t a`.
-            let bend = bends.as_ref().map_or(0.0, |b| b[pixel]);
+            // The pixel's bend is its nearest surface's: a sample of a farther one (the wall
+            // seen past a spinning disc's rim) keeps its straight path.
+            let bend = match (&field, &bends) {
+                (Some(field), Some(bends)) if field.holds(pixel, s.depth) => bends[pixel],
+                _ => 0.0,
+            };
             let mut motion = motion;
             if bend != 0.0 {
                 if let Some(across) = field.as_ref().and_then(|f| f.across(pixel)) {
@@ -276,6 +281,14 @@ impl PixelMotionField {
             Some(&self.depth),
             &self.coverage,
         )
+    }
+
+    /// Whether a sample at `depth` in `pixel` is of the surface whose motion the field holds
+    /// there.
+    fn holds(&self, pixel: usize, depth: f32) -> bool {
+        self.depth.get(pixel).is_some_and(|&d| {
+            d.is_finite() && (depth - d).abs() <= 2.0 * FIELD_SAME_SURFACE_DEPTH * d
+        })
     }
 
     /// The unit vector a positive bend points along at `pixel`: its motion turned a quarter
@@ -994,6 +1007,18 @@ mod tests {
         }
         assert!(checked > 1000, "{checked} samples checked");
         assert!(worst < 0.05, "a moved sample lies {worst} px from its arc's centre point");
+
+        // A still wall behind, seen in one sample of a turning pixel, is not bent with it.
+        let mut frames = frames;
+        let (x, y) = (34usize, 20usize);
+        let wall = (y * w + x) * spp + 1;
+        frames.samples[wall].depth = 3.0;
+        frames.samples[wall].motion = [0.0; 2];
+        frames.samples[wall].time = 0.4;
+        let moved = moved_samples(&frames, &cam, effects);
+        let m = moved[wall].expect("the wall sample moves back");
+        assert_eq!(m.motion, [0.0; 2]);
+        assert_eq!(m.bend, 0.0);
     }
 
     /// One opaque sample at depth `depth` with jitter `jitter`, in pixel (6, 9) of a 16x16 frame.
