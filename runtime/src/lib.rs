@@ -76,6 +76,7 @@ internal_modules!(
     prepare,
     reconstruct,
     renderer,
+    sample_density,
     sample_merge,
     synth,
 );

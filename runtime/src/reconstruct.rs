@@ -14,8 +14,10 @@
 //! pixel share its weight (1 / spp). Each moved sample is spread over the pixels around `q0`
 //! ([`SamplePlacement`]: at low sample counts a Gaussian footprint, so that neighbouring
 //! samples overlap, stretched along the frame's edges by [`crate::edge_field`]), always with
-//! its own PSF. Layering, splatting, integration and compositing are the synthesis stages,
-//! unchanged; [`normalize_density`] then divides by the coverage.
+//! its own PSF. Below 16 spp the weights of a blurred surface's fragments are evened out over
+//! its pixels ([`crate::sample_density`]), so that where samples happened to clump counts no
+//! more than where they are sparse. Layering, splatting, integration and compositing are the
+//! synthesis stages, unchanged; [`normalize_density`] then divides by the coverage.
 
 use formats::StochasticFrames;
 use rayon::prelude::*;
@@ -659,6 +661,15 @@ pub(crate) fn classify_samples(
         },
         |x, y, k, share| placed.fragment(k as usize, x, y, share),
     );
+    let mut fragments = fragments;
+    if frames.spp < crate::sample_density::EVEN_BELOW_SPP {
+        let (coc_scale, focus) = camera.thin_lens().map_or((0.0, 0.0), |l| {
+            (l.coc_scale_px as f32, l.focus_distance as f32)
+        });
+        crate::sample_density::even_out(&mut fragments, frames.width, frames.height, |f| {
+            coc_scale * (1.0 - focus * f.parallax)
+        });
+    }
     let counts = PathCounts {
         dropped: placed.dropped,
         ..PathCounts::default()
