@@ -666,7 +666,8 @@ pub(crate) fn classify_samples(
         let (coc_scale, focus) = camera.thin_lens().map_or((0.0, 0.0), |l| {
             (l.coc_scale_px as f32, l.focus_distance as f32)
         });
-        crate::sample_density::even_out(&mut fragments, frames.width, frames.height, |f| {
+        let reach = crate::sample_density::reach_px(frames.spp);
+        crate::sample_density::even_out(&mut fragments, frames.width, frames.height, reach, |f| {
             coc_scale * (1.0 - focus * f.parallax)
         });
     }

@@ -9,16 +9,18 @@
 //! defocused floor. The converged frame weighs every point of the surface alike.
 //!
 //! Each blurred fragment's weight is therefore spread over the pixels around it that hold
-//! fragments of the same surface, by a 3 x 3 tent normalised over those pixels only:
+//! fragments of the same surface, by a tent (5 x 5 below 8 spp, 3 x 3 from it, [`reach_px`])
+//! normalised over those pixels only:
 //!
 //! ```text
 //! W'(p) = sum over q near p of  W(q) k(p - q) / sum over r near q, r of the surface, of k(r - q)
 //! ```
 //!
-//! where `W(q)` is the surface's weight on pixel `q` and `k` the tent `(2 - |dx|) (2 - |dy|)`.
+//! where `W(q)` is the surface's weight on pixel `q` and `k` the tent
+//! `(r + 1 - |dx|) (r + 1 - |dy|)` of reach `r`.
 //! A surface's weight never moves onto a pixel it does not reach, so its sum is kept exactly
 //! (its coverage, which composites it with the layers behind, stays where it was) and a thin
-//! bar keeps its weight; inside the surface the counts' grain averages out over nine pixels.
+//! bar keeps its weight; inside the surface the counts' grain averages out.
 //!
 //! Only fragments whose PSF is wider than a pixel are evened out: an in-focus fragment is its
 //! own pixel's colour, and its weight against its neighbours' is the pixel filter. A light's
@@ -44,18 +46,32 @@ pub const SAME_SURFACE_PARALLAX: f32 = 0.05;
 /// A fragment with a channel above this (linear) is a light's, and keeps its weight.
 const BRIGHT: f32 = 1.0;
 
-/// Reach of the tent, pixels.
-const RADIUS: i64 = 1;
+/// Below this many samples per pixel the tent reaches 2 pixels, from it 1 ([`reach_px`]).
+pub const WIDE_TENT_BELOW_SPP: usize = 8;
+
+/// How far the tent reaches at `spp` samples per pixel, pixels: 2 (a 5 x 5 tent) below
+/// [`WIDE_TENT_BELOW_SPP`], 1 (3 x 3) from it. At 1 to 4 spp the wider tent did better on
+/// every Cycles and built-in frame but `fence` at 4 spp (FLIP mean +0.0002); at 8 spp it cost
+/// FLIP p99 on `studio` (0.1777 -> 0.1791).
+pub fn reach_px(spp: usize) -> i64 {
+    if spp < WIDE_TENT_BELOW_SPP {
+        2
+    } else {
+        1
+    }
+}
 
 /// Evens out the weights of the blurred fragments of a `w` x `h` frame in place (see the
-/// module's text). `coc_px(f)` is a fragment's signed CoC radius, pixels. Fragments outside
+/// module's text), with a tent reaching `reach_px` pixels ([`reach_px`]). `coc_px(f)` is a fragment's signed CoC radius, pixels. Fragments outside
 /// the frame, lights' fragments and those of blur under [`MIN_BLUR_PX`] keep their weights.
 pub fn even_out(
     fragments: &mut [Fragment],
     w: usize,
     h: usize,
+    reach_px: i64,
     coc_px: impl Fn(&Fragment) -> f32 + Sync,
 ) {
+    let radius = reach_px.max(0);
     let pixel_of = |f: &Fragment| -> Option<usize> {
         (f.x >= 0 && f.y >= 0 && (f.x as usize) < w && (f.y as usize) < h)
             .then(|| f.y as usize * w + f.x as usize)
@@ -95,7 +111,7 @@ pub fn even_out(
             .map(|&(weight, _)| weight)
             .sum()
     };
-    let tent = |dx: i64, dy: i64| ((RADIUS + 1 - dx.abs()) * (RADIUS + 1 - dy.abs())) as f32;
+    let tent = |dx: i64, dy: i64| ((radius + 1 - dx.abs()) * (radius + 1 - dy.abs())) as f32;
     // First each fragment's weight per unit of the tent over its surface's pixels around it
     // (0 for one that keeps its weight), in the order of `by_pixel`.
     let mut per_tent = vec![0.0f32; by_pixel.len()];
@@ -117,8 +133,8 @@ pub fn even_out(
                 }
                 let (x, y) = ((pixel % w) as i64, (pixel / w) as i64);
                 let mut spread = 0.0f32;
-                for dy in -RADIUS..=RADIUS {
-                    for dx in -RADIUS..=RADIUS {
+                for dy in -radius..=radius {
+                    for dx in -radius..=radius {
                         if surface_weight(x + dx, y + dy, parallax) > 0.0 {
                             spread += tent(dx, dy);
                         }
@@ -130,8 +146,8 @@ pub fn even_out(
     // What the pixels of fragment `f`'s surface around it give its pixel.
     let received = |f: &Fragment| -> f32 {
         let mut sum = 0.0f32;
-        for dy in -RADIUS..=RADIUS {
-            for dx in -RADIUS..=RADIUS {
+        for dy in -radius..=radius {
+            for dx in -radius..=radius {
                 let (x, y) = (i64::from(f.x) + dx, i64::from(f.y) + dy);
                 if x < 0 || y < 0 || x >= w as i64 || y >= h as i64 {
                     continue;
@@ -207,7 +223,7 @@ mod tests {
         frags.push(fragment(6, 6, 8.0, 0.5, 0.7)); // another surface
         frags.push(fragment(-3, 4, 2.0, 0.5, 0.9)); // outside the frame
         let before = frags.clone();
-        even_out(&mut frags, w, h, |f| coc_of_depth(f.depth));
+        even_out(&mut frags, w, h, 1, |f| coc_of_depth(f.depth));
         let sum = |fs: &[Fragment]| fs[..blurred].iter().map(|f| f.weight).sum::<f32>();
         assert!((sum(&frags) - sum(&before)).abs() < 1e-4, "the surface's weight is kept");
         for f in &frags[..blurred] {
@@ -235,7 +251,7 @@ mod tests {
             .map(|y| fragment(4, y, 2.0, 0.5, if y % 2 == 0 { 0.25 } else { 1.0 }))
             .collect();
         let before: f32 = frags.iter().map(|f| f.weight).sum();
-        even_out(&mut frags, 8, 8, |_| 3.0);
+        even_out(&mut frags, 8, 8, 2, |_| 3.0);
         let after: f32 = frags.iter().map(|f| f.weight).sum();
         assert!((after - before).abs() < 1e-5);
         assert!(frags.iter().all(|f| f.x == 4 && f.weight > 0.25));
