@@ -14,9 +14,9 @@
 //! pixel share its weight (1 / spp). Each moved sample is spread over the pixels around `q0`
 //! ([`SamplePlacement`]: at low sample counts a Gaussian footprint, so that neighbouring
 //! samples overlap, stretched along the frame's edges by [`crate::edge_field`]), always with
-//! its own PSF. Below 16 spp the weights of a blurred surface's fragments are evened out over
-//! its pixels ([`crate::sample_density`]), so that where samples happened to clump counts no
-//! more than where they are sparse. Layering, splatting, integration and compositing are the
+//! its own PSF. The weights of a blurred surface's fragments are then evened out over its
+//! pixels ([`crate::sample_density`]), so that where samples happened to clump counts no more
+//! than where they are sparse. Layering, splatting, integration and compositing are the
 //! synthesis stages, unchanged; [`normalize_density`] then divides by the coverage.
 
 use formats::StochasticFrames;
@@ -648,7 +648,7 @@ pub(crate) fn classify_samples(
     // Each sample's fragments merged with those of its surface on each pixel as they are
     // placed: the frame's millions of unmerged fragments are never held at once.
     let placed = PlacedSamples::new(frames, camera, effects, placement);
-    let fragments = crate::sample_merge::merge_placed(
+    let mut fragments = crate::sample_merge::merge_placed(
         frames.width,
         frames.height,
         camera,
@@ -661,16 +661,13 @@ pub(crate) fn classify_samples(
         },
         |x, y, k, share| placed.fragment(k as usize, x, y, share),
     );
-    let mut fragments = fragments;
-    if frames.spp < crate::sample_density::EVEN_BELOW_SPP {
-        let (coc_scale, focus) = camera.thin_lens().map_or((0.0, 0.0), |l| {
-            (l.coc_scale_px as f32, l.focus_distance as f32)
-        });
-        let reach = crate::sample_density::reach_px(frames.spp);
-        crate::sample_density::even_out(&mut fragments, frames.width, frames.height, reach, |f| {
-            coc_scale * (1.0 - focus * f.parallax)
-        });
-    }
+    let (coc_scale, focus) = camera.thin_lens().map_or((0.0, 0.0), |l| {
+        (l.coc_scale_px as f32, l.focus_distance as f32)
+    });
+    let reach = crate::sample_density::reach_px(frames.spp);
+    crate::sample_density::even_out(&mut fragments, frames.width, frames.height, reach, |f| {
+        coc_scale * (1.0 - focus * f.parallax)
+    });
     let counts = PathCounts {
         dropped: placed.dropped,
         ..PathCounts::default()

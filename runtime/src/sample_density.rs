@@ -8,32 +8,31 @@
 //! with the grain of those counts: streaks along a spinning disc's arcs, blotches on a
 //! defocused floor. The converged frame weighs every point of the surface alike.
 //!
-//! Each blurred fragment's weight is therefore spread over the pixels around it that hold
-//! fragments of the same surface, by a tent (5 x 5 below 8 spp, 3 x 3 from it, [`reach_px`])
-//! normalised over those pixels only:
+//! So the weights of a blurred surface's pixels are diffused towards each other: every two
+//! pixels `p`, `q` of the surface within the tent's reach exchange a share of the difference
+//! of their weights,
 //!
 //! ```text
-//! W'(p) = sum over q near p of  W(q) k(p - q) / sum over r near q, r of the surface, of k(r - q)
+//! W'(p) = W(p) + sum over q near p of  k(p - q) (W(q) - W(p)) / K
 //! ```
 //!
-//! where `W(q)` is the surface's weight on pixel `q` and `k` the tent
-//! `(r + 1 - |dx|) (r + 1 - |dy|)` of reach `r`.
-//! A surface's weight never moves onto a pixel it does not reach, so its sum is kept exactly
-//! (its coverage, which composites it with the layers behind, stays where it was) and a thin
-//! bar keeps its weight; inside the surface the counts' grain averages out.
+//! with `W` the surface's weight on a pixel, `k` the tent `(r + 1 - |dx|) (r + 1 - |dy|)` of
+//! reach `r` ([`reach_px`]: 2 below 8 spp, 1 from it) and `K = (r + 1)^4` its sum. Inside the
+//! surface this is the tent's mean of the weights. What one pixel gains its neighbour loses,
+//! so the surface's weight (its coverage, which composites it with the layers behind) is kept
+//! exactly, and an even surface stays even.
+//!
+//! Only pixels inside the surface trade: those whose eight neighbours all hold it. At its rim
+//! a pixel's weight also says how much of the pixel the surface covers, which evening would
+//! blur: a thin defocused bar in front of a sharp background came out a little more opaque
+//! (FLIP mean +0.001 on the built-in `occluder`), and a spinning object's outline lost SSIM.
 //!
 //! Only fragments whose PSF is wider than a pixel are evened out: an in-focus fragment is its
 //! own pixel's colour, and its weight against its neighbours' is the pixel filter. A light's
-//! fragment (a channel above 1) keeps its weight, as it stays unmerged. From
-//! [`EVEN_BELOW_SPP`] samples per pixel the counts are even enough: there the step made
-//! sharp edges slightly softer and is left out.
+//! fragment (a channel above 1) keeps its weight, as it stays unmerged.
 
 use crate::pipeline::classify::Fragment;
 use rayon::prelude::*;
-
-/// Frames with fewer samples per pixel than this have their blurred fragments' weights evened
-/// out. At 16 spp it cost FLIP p99 on the built-in `studio` scene and a Cycles disc.
-pub const EVEN_BELOW_SPP: usize = 16;
 
 /// A fragment is evened out when its PSF's radius is at least this, pixels: the larger of its
 /// CoC radius and half its motion over the shutter.
@@ -50,9 +49,8 @@ const BRIGHT: f32 = 1.0;
 pub const WIDE_TENT_BELOW_SPP: usize = 8;
 
 /// How far the tent reaches at `spp` samples per pixel, pixels: 2 (a 5 x 5 tent) below
-/// [`WIDE_TENT_BELOW_SPP`], 1 (3 x 3) from it. At 1 to 4 spp the wider tent did better on
-/// every Cycles and built-in frame but `fence` at 4 spp (FLIP mean +0.0002); at 8 spp it cost
-/// FLIP p99 on `studio` (0.1777 -> 0.1791).
+/// [`WIDE_TENT_BELOW_SPP`], 1 (3 x 3) from it. Sparser samples clump at a larger scale; at 8
+/// spp the wider tent cost FLIP p99 on the built-in `studio` scene (0.1777 -> 0.1791).
 pub fn reach_px(spp: usize) -> i64 {
     if spp < WIDE_TENT_BELOW_SPP {
         2
@@ -62,8 +60,9 @@ pub fn reach_px(spp: usize) -> i64 {
 }
 
 /// Evens out the weights of the blurred fragments of a `w` x `h` frame in place (see the
-/// module's text), with a tent reaching `reach_px` pixels ([`reach_px`]). `coc_px(f)` is a fragment's signed CoC radius, pixels. Fragments outside
-/// the frame, lights' fragments and those of blur under [`MIN_BLUR_PX`] keep their weights.
+/// module's text), with a tent reaching `reach_px` pixels ([`reach_px`]). `coc_px(f)` is a
+/// fragment's signed CoC radius, pixels. Fragments outside the frame, lights' fragments,
+/// those of blur under [`MIN_BLUR_PX`] and those on their surface's rim keep their weights.
 pub fn even_out(
     fragments: &mut [Fragment],
     w: usize,
@@ -111,73 +110,71 @@ pub fn even_out(
             .map(|&(weight, _)| weight)
             .sum()
     };
-    let tent = |dx: i64, dy: i64| ((radius + 1 - dx.abs()) * (radius + 1 - dy.abs())) as f32;
-    // First each fragment's weight per unit of the tent over its surface's pixels around it
-    // (0 for one that keeps its weight), in the order of `by_pixel`.
-    let mut per_tent = vec![0.0f32; by_pixel.len()];
-    per_tent
-        .par_chunks_mut(w.max(1))
-        .zip(by_pixel.par_chunks(w.max(1)))
-        .enumerate()
-        .for_each(|(chunk, (out, entries))| {
-            // Entries of one chunk lie on consecutive pixels; find each one's pixel by walking
-            // `starts` along with it.
-            let first = chunk * w.max(1);
-            let mut pixel = starts.partition_point(|&s| s <= first) - 1;
-            for (i, (o, &(weight, parallax))) in out.iter_mut().zip(entries).enumerate() {
-                while starts[pixel + 1] <= first + i {
-                    pixel += 1;
-                }
-                if weight <= 0.0 {
-                    continue;
-                }
-                let (x, y) = ((pixel % w) as i64, (pixel / w) as i64);
-                let mut spread = 0.0f32;
-                for dy in -radius..=radius {
-                    for dx in -radius..=radius {
-                        if surface_weight(x + dx, y + dy, parallax) > 0.0 {
-                            spread += tent(dx, dy);
-                        }
-                    }
-                }
-                *o = weight / spread;
-            }
-        });
-    // What the pixels of fragment `f`'s surface around it give its pixel.
-    let received = |f: &Fragment| -> f32 {
-        let mut sum = 0.0f32;
-        for dy in -radius..=radius {
-            for dx in -radius..=radius {
-                let (x, y) = (i64::from(f.x) + dx, i64::from(f.y) + dy);
-                if x < 0 || y < 0 || x >= w as i64 || y >= h as i64 {
-                    continue;
-                }
-                let p = y as usize * w + x as usize;
-                let given: f32 = (starts[p]..starts[p + 1])
-                    .filter(|&j| {
-                        let other = by_pixel[j].1;
-                        (other - f.parallax).abs() <= SAME_SURFACE_PARALLAX * f.parallax.abs()
+    // Whether each entry's surface holds all eight pixels round it: only such pixels trade
+    // weight, so a surface's rim, where its weight also says how much of a pixel it covers,
+    // and a bar two pixels wide keep their samples' weights.
+    let same = |a: f32, b: f32| (a - b).abs() <= SAME_SURFACE_PARALLAX * b.abs();
+    let interior: Vec<bool> = (0..w * h)
+        .into_par_iter()
+        .flat_map_iter(|p| {
+            let (x, y) = ((p % w) as i64, (p / w) as i64);
+            by_pixel[starts[p]..starts[p + 1]].iter().map(move |&(weight, parallax)| {
+                weight > 0.0
+                    && (-1..=1).all(|dy| {
+                        (-1..=1).all(|dx| surface_weight(x + dx, y + dy, parallax) > 0.0)
                     })
-                    .map(|j| per_tent[j])
-                    .sum();
-                sum += tent(dx, dy) * given;
+            })
+        })
+        .collect();
+    // The weight of the surface of parallax `parallax` on pixel (x, y) where that pixel is
+    // inside it, else 0.
+    let inner_weight = |x: i64, y: i64, parallax: f32| -> f32 {
+        if x < 0 || y < 0 || x >= w as i64 || y >= h as i64 {
+            return 0.0;
+        }
+        let p = y as usize * w + x as usize;
+        let mut sum = 0.0f32;
+        for j in starts[p]..starts[p + 1] {
+            let (weight, other) = by_pixel[j];
+            if same(other, parallax) {
+                if !interior[j] && weight > 0.0 {
+                    return 0.0;
+                }
+                sum += weight;
             }
         }
         sum
     };
+    let tent = |dx: i64, dy: i64| ((radius + 1 - dx.abs()) * (radius + 1 - dy.abs())) as f32;
+    // The whole tent's sum, `(r + 1)^4`: every pair of pixels exchanges `k / K` of the
+    // difference of their weights, so that an even surface stays even at its edges.
+    let tent_sum = ((radius + 1) * (radius + 1)).pow(2) as f32;
     let weights: Vec<f32> = fragments
         .par_iter()
         .map(|f| {
             if pixel_of(f).is_none() || !evened(f) {
                 return f.weight;
             }
-            let own = surface_weight(i64::from(f.x), i64::from(f.y), f.parallax);
+            let (x, y) = (i64::from(f.x), i64::from(f.y));
+            let own = inner_weight(x, y, f.parallax);
             if own <= 0.0 {
                 return f.weight;
             }
-            // The pixel's fragments of this surface share what it receives as they shared
-            // its weight.
-            f.weight * received(f) / own
+            let mut exchanged = 0.0f32;
+            for dy in -radius..=radius {
+                for dx in -radius..=radius {
+                    if (dx, dy) == (0, 0) {
+                        continue;
+                    }
+                    let other = inner_weight(x + dx, y + dy, f.parallax);
+                    if other > 0.0 {
+                        exchanged += tent(dx, dy) * (other - own);
+                    }
+                }
+            }
+            // The pixel's fragments of this surface share the new weight as they shared the
+            // old.
+            f.weight * (own + exchanged / tent_sum) / own
         })
         .collect();
     for (f, weight) in fragments.iter_mut().zip(weights) {
@@ -204,8 +201,9 @@ mod tests {
     }
 
     /// A defocused surface whose samples landed unevenly (weights 0.5 and 1.5 in a checker)
-    /// comes out even inside, keeps its whole weight, and moves none onto pixels it does not
-    /// reach; an in-focus surface, a light and a surface at another depth keep theirs.
+    /// comes out even inside and keeps its whole weight; its rim keeps its samples' weights,
+    /// and an in-focus surface, a light, another surface and a fragment outside the frame keep
+    /// theirs.
     #[test]
     fn a_surfaces_uneven_counts_even_out_and_its_weight_is_kept() {
         let (w, h) = (12usize, 12usize);
@@ -226,10 +224,13 @@ mod tests {
         even_out(&mut frags, w, h, 1, |f| coc_of_depth(f.depth));
         let sum = |fs: &[Fragment]| fs[..blurred].iter().map(|f| f.weight).sum::<f32>();
         assert!((sum(&frags) - sum(&before)).abs() < 1e-4, "the surface's weight is kept");
-        for f in &frags[..blurred] {
-            // Pixels two or more from the edge see only the surface's checker around them.
+        for (f, b) in frags[..blurred].iter().zip(&before) {
+            let rim = f.x == 2 || f.x == 9 || f.y == 2 || f.y == 9;
+            // Pixels two or more from the rim trade only with pixels inside the surface.
             let inner = (4..8).contains(&f.x) && (4..8).contains(&f.y);
-            if inner {
+            if rim {
+                assert_eq!(f.weight, b.weight, "the rim ({}, {}) keeps its weight", f.x, f.y);
+            } else if inner {
                 assert!(
                     (f.weight - 1.0).abs() < 1e-5,
                     "inside the surface ({}, {}) evens out: {}",
@@ -244,16 +245,30 @@ mod tests {
         }
     }
 
-    /// A thin bar (one pixel wide) keeps its weight: none of it leaks to the pixels beside it.
+    /// A defocused bar two pixels wide, whose weights across it say how much of each pixel it
+    /// covers, keeps them: no pixel of it is inside it.
     #[test]
-    fn a_thin_bar_keeps_its_weight() {
+    fn a_thin_bar_keeps_its_weights() {
         let mut frags: Vec<Fragment> = (0..8)
-            .map(|y| fragment(4, y, 2.0, 0.5, if y % 2 == 0 { 0.25 } else { 1.0 }))
+            .flat_map(|y| [fragment(4, y, 2.0, 0.5, 1.0), fragment(5, y, 2.0, 0.5, 0.3)])
             .collect();
-        let before: f32 = frags.iter().map(|f| f.weight).sum();
+        let before = frags.clone();
         even_out(&mut frags, 8, 8, 2, |_| 3.0);
-        let after: f32 = frags.iter().map(|f| f.weight).sum();
-        assert!((after - before).abs() < 1e-5);
-        assert!(frags.iter().all(|f| f.x == 4 && f.weight > 0.25));
+        for (a, b) in frags.iter().zip(&before) {
+            assert_eq!(a.weight, b.weight);
+        }
+    }
+
+    /// An evenly sampled surface that fills the frame stays even, at the frame's edges too.
+    #[test]
+    fn an_even_surface_stays_even() {
+        let (w, h) = (10usize, 7usize);
+        let mut frags: Vec<Fragment> = (0..h as i32)
+            .flat_map(|y| (0..w as i32).map(move |x| fragment(x, y, 2.0, 0.5, 0.75)))
+            .collect();
+        even_out(&mut frags, w, h, 2, |_| 3.0);
+        for f in &frags {
+            assert!((f.weight - 0.75).abs() < 1e-6, "({}, {}): {}", f.x, f.y, f.weight);
+        }
     }
 }
