@@ -55,12 +55,12 @@ pub const MAX_SMEAR_PX: f32 = 512.0;
 /// Largest smeared PSF image, pixels: its width times height. Beyond it the smear's taps are
 /// what costs, not the memory; a frame that needs more is an error rather than a slow crawl.
 const MAX_SMEARED_PIXELS: usize = 4 << 20;
-/// Most values (pixels times channels) of smeared PSF images one frame builds, summed (768
-/// MB of f32: 64 Mi pixels of RGB, three times as many of grey): a frame beyond it is an
-/// error, not an unbounded allocation. A camera pan through the double Gauss at 512 px runs
-/// in 0.24 GB in all; a spinning disc reconstructed from 4 spp, its streaks bent along arcs,
-/// in 0.6 GB.
-pub const MAX_FRAME_SMEARED_VALUES: usize = 3 * (64 << 20);
+/// Most values (pixels times channels) of smeared PSF images one frame builds, summed (1 GiB
+/// of f32: 64 Mi pixels of RGBA, four times as many of grey): a frame beyond it is an error,
+/// not an unbounded allocation. A camera pan through the double Gauss at 512 px runs in 0.24
+/// GB in all; a Cycles disc spinning 30 degrees a frame, reconstructed from 16 spp along its
+/// arcs, builds 202 M values (0.81 GB).
+pub const MAX_FRAME_SMEARED_VALUES: usize = 4 * (64 << 20);
 
 /// Which smeared PSF a moving fragment uses: its physical-lens cell (index in the set's
 /// combined database), the turn of that PSF onto the fragment's radial direction, and its

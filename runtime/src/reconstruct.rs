@@ -159,6 +159,7 @@ pub fn moved_samples(
     let lens = camera.thin_lens();
     let field = effects.motion.then(|| PixelMotionField::of(frames));
     let bends = field.as_ref().map(PixelMotionField::bends);
+    let central_differences = field.is_some() && from_pinhole_sub_renders(frames);
     frames
         .samples
         .par_iter()
@@ -182,7 +183,18 @@ pub fn moved_samples(
                 return None;
             }
             let coc = lens.map_or(0.0, |l| l.signed_coc_px(f64::from(s.depth)) as f32);
-            let motion = if effects.motion { s.motion } else { [0.0; 2] };
+            let mut motion = if effects.motion { s.motion } else { [0.0; 2] };
+            // The pixel's bend is its nearest surface's: a sample of a farther one (the wall
+            // seen past a spinning disc's rim) keeps its straight path.
+            let mut bend = match (&field, &bends) {
+                (Some(field), Some(bends)) if field.holds(pixel, s.depth) => bends[pixel],
+                _ => 0.0,
+            };
+            if bend != 0.0 && central_differences {
+                let f = central_difference_speedup(bend, motion);
+                motion = [motion[0] * f, motion[1] * f];
+                bend *= f * f;
+            }
             // Continuous sensor position (pixel centres at +0.5), moved back to the lens centre
             // and the shutter centre.
             let mut q = [
@@ -192,13 +204,6 @@ pub fn moved_samples(
             // Along a bent path `p(t) = p0 + t m0 + t^2 a / 2` the label holds the motion at
             // the sample's own time, `m(t) = m0 + t a`: so `p0 = p(t) - t m(t) + t^2 a / 2`,
             // and the motion at the shutter centre is `m(t) - t a`.
-            // The pixel's bend is its nearest surface's: a sample of a farther one (the wall
-            // seen past a spinning disc's rim) keeps its straight path.
-            let bend = match (&field, &bends) {
-                (Some(field), Some(bends)) if field.holds(pixel, s.depth) => bends[pixel],
-                _ => 0.0,
-            };
-            let mut motion = motion;
             if bend != 0.0 {
                 if let Some(across) = field.as_ref().and_then(|f| f.across(pixel)) {
                     let a = [bend * across[0], bend * across[1]];
@@ -216,6 +221,35 @@ pub fn moved_samples(
             })
         })
         .collect()
+}
+
+/// Whether the frames come from Blender's pinhole sub-renders
+/// (`../shared/examples/comets/stochastic/README.md`), recognised by every sample lying at its
+/// pixel centre (jitter zero). Such frames carry no pixel filter, and their motion labels are
+/// central differences of the Vector pass over a frame on each side, `(p(t + 1) - p(t - 1)) /
+/// 2`, rather than the derivative the format asks for: along a straight path the two agree,
+/// along an arc the label is a chord, shorter than the path.
+pub fn from_pinhole_sub_renders(frames: &StochasticFrames) -> bool {
+    frames.samples.par_iter().all(|s| s.jitter == [0.0; 2])
+}
+
+/// Most of a half turn per frame a central difference is read as (`sin` of the angle, where
+/// the arc's chord stops growing).
+const MAX_CENTRAL_DIFFERENCE_SINE: f32 = 0.99;
+
+/// What a central-difference motion label of a path bending by `bend` (px per frame squared,
+/// from the labels themselves) is scaled by to give the speed along the path: over a circle of
+/// radius `R` turning `w` radians a frame the label is `R sin w` long and the bend
+/// `R sin^2 w`, so `x = |bend| / |label| = sin w` and the speed `R w` is the label times
+/// `asin(x) / x` (the bend, `R w^2`, that squared). 1 for a straight path.
+pub fn central_difference_speedup(bend: f32, label: [f32; 2]) -> f32 {
+    let speed = label[0].hypot(label[1]);
+    let x = (bend.abs() / speed).min(MAX_CENTRAL_DIFFERENCE_SINE);
+    if x > 0.0 && x.is_finite() {
+        x.asin() / x
+    } else {
+        1.0
+    }
 }
 
 /// Each pixel's motion as its nearest surface's samples hold it (their mean, and their mean
@@ -363,7 +397,7 @@ impl<'a> PlacedSamples<'a> {
             }
             _ => None,
         };
-        let point_sampled = frames.samples.par_iter().all(|s| s.jitter == [0.0; 2]);
+        let point_sampled = from_pinhole_sub_renders(frames);
         PlacedSamples {
             frames,
             moved,
@@ -1028,6 +1062,73 @@ mod tests {
         let m = moved[wall].expect("the wall sample moves back");
         assert_eq!(m.motion, [0.0; 2]);
         assert_eq!(m.bend, 0.0);
+    }
+
+    /// Blender's pinhole sub-renders label a turning point with the central difference of its
+    /// path, a chord `sin w / w` of its speed: such frames (every sample at its pixel centre)
+    /// have the label scaled back to the speed along the arc, so their samples still move back
+    /// to the arc's centre point.
+    #[test]
+    fn central_difference_labels_of_a_turning_surface_are_read_as_its_speed() {
+        assert_eq!(central_difference_speedup(0.0, [30.0, 0.0]), 1.0);
+        let w = 0.5f32;
+        let f = central_difference_speedup(20.0 * w.sin().powi(2), [20.0 * w.sin(), 0.0]);
+        assert!((f - w / w.sin()).abs() < 1e-5, "{f}");
+
+        let cam = camera();
+        let (size, spp) = (48usize, 4usize);
+        let theta = 0.6f32;
+        let centre = [24.0f32, 24.0];
+        let turn = |v: [f32; 2], a: f32| {
+            let (sin, cos) = a.sin_cos();
+            [cos * v[0] - sin * v[1], sin * v[0] + cos * v[1]]
+        };
+        let mut samples = vec![Sample::default(); size * size * spp];
+        for (k, s) in samples.iter_mut().enumerate() {
+            let pixel = k / spp;
+            let p = [(pixel % size) as f32 + 0.5, (pixel / size) as f32 + 0.5];
+            let r = [p[0] - centre[0], p[1] - centre[1]];
+            *s = Sample {
+                color: [0.5, 0.5, 0.5, 1.0],
+                depth: 1.0,
+                lens: [0.0; 2],
+                time: ((k * 7 + pixel * 3) % 9) as f32 / 9.0 - 0.45,
+                // (p(t + 1) - p(t - 1)) / 2 on the circle: the tangent, sin(theta) r long.
+                motion: [-theta.sin() * r[1], theta.sin() * r[0]],
+                jitter: [0.0; 2],
+            };
+        }
+        let frames = StochasticFrames::new(size, size, spp, samples);
+        assert!(from_pinhole_sub_renders(&frames));
+        let moved = moved_samples(&frames, &cam, effects_of(&cam, &frames));
+        let (mut worst, mut checked) = (0.0f32, 0);
+        for (k, m) in moved.iter().enumerate() {
+            let s = &frames.samples[k];
+            let pixel = k / spp;
+            let (x, y) = (pixel % size, pixel / size);
+            let r = [x as f32 + 0.5 - centre[0], y as f32 + 0.5 - centre[1]];
+            if !(4..size - 4).contains(&x) || !(4..size - 4).contains(&y) || r[0].hypot(r[1]) < 4.0
+            {
+                continue;
+            }
+            let m = m.expect("a finite sample moves back");
+            let r0 = turn(r, -theta * s.time);
+            let err = (m.q[0] - centre[0] - r0[0]).hypot(m.q[1] - centre[1] - r0[1]);
+            worst = worst.max(err);
+            let m0 = [-theta * r0[1], theta * r0[0]];
+            let speed = m0[0].hypot(m0[1]);
+            // The shutter centre's motion is `m(t) - t a`, the arc taken as a parabola: 3.6 %
+            // long where the sample's time is 0.27 radians of turn from the centre.
+            assert!(
+                (m.motion[0] - m0[0]).hypot(m.motion[1] - m0[1]) < 0.05 * speed + 0.05,
+                "motion {:?} against {m0:?}",
+                m.motion
+            );
+            checked += 1;
+        }
+        assert!(checked > 1000, "{checked} samples checked");
+        // Read as the speed, the chords left samples up to 0.5 px short of their arc's centre.
+        assert!(worst < 0.15, "a moved sample lies {worst} px from its arc's centre point");
     }
 
     /// One opaque sample at depth `depth` with jitter `jitter`, in pixel (6, 9) of a 16x16 frame.

@@ -106,7 +106,15 @@ pub enum ClassifyError {
     PhysicalLens(String),
     /// A moving pixel's lens PSF could not be smeared along its motion.
     #[error("motion blur: {0}")]
-    MotionSmear(#[from] crate::motion_smear::SmearError),
+    MotionSmear(crate::motion_smear::SmearError),
+}
+
+// Not `#[from]`: that would make the smear error this one's source as well as its text, and a
+// chain of errors printed in full would say it twice.
+impl From<crate::motion_smear::SmearError> for ClassifyError {
+    fn from(e: crate::motion_smear::SmearError) -> Self {
+        ClassifyError::MotionSmear(e)
+    }
 }
 
 /// Knobs of classification.
@@ -491,6 +499,20 @@ pub fn resolve_model(
 mod tests {
     use super::*;
     use crate::pipeline::types::SplatPath;
+
+    /// A frame whose smears are too large says so once, however its chain of errors is printed.
+    #[test]
+    fn a_smear_error_is_told_once() {
+        let e = ClassifyError::from(crate::motion_smear::SmearError::FrameTooLarge {
+            keys: 3,
+            pixels: 1 << 30,
+            channels: 1,
+        });
+        assert!(std::error::Error::source(&e).is_none());
+        let text = e.to_string();
+        assert!(text.starts_with("motion blur: "), "{text}");
+        assert_eq!(text.matches("smeared PSFs").count(), 1, "{text}");
+    }
 
     fn camera(w: u32, h: u32, lens: bool, shutter: f64) -> Camera {
         Camera {
