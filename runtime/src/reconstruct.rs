@@ -191,7 +191,9 @@ pub fn moved_samples(
                 _ => 0.0,
             };
             if bend != 0.0 && central_differences {
-                let f = central_difference_speedup(bend, motion);
+                // The bend was read from the pixel's mean motion: so is its ratio.
+                let speed = field.as_ref().map_or(0.0, |f| f.speed(pixel));
+                let f = central_difference_speedup(bend, speed);
                 motion = [motion[0] * f, motion[1] * f];
                 bend *= f * f;
             }
@@ -233,23 +235,23 @@ pub fn from_pinhole_sub_renders(frames: &StochasticFrames) -> bool {
     frames.samples.par_iter().all(|s| s.jitter == [0.0; 2])
 }
 
-/// Most of a half turn per frame a central difference is read as (`sin` of the angle, where
-/// the arc's chord stops growing).
+/// Largest `x = |bend| / |label|` (the sine of the turn per frame) a central difference is read
+/// with: towards a quarter turn a frame `asin` grows without bound, and so would the speed.
 const MAX_CENTRAL_DIFFERENCE_SINE: f32 = 0.99;
 
 /// What a central-difference motion label of a path bending by `bend` (px per frame squared,
-/// from the labels themselves) is scaled by to give the speed along the path: over a circle of
-/// radius `R` turning `w` radians a frame the label is `R sin w` long and the bend
-/// `R sin^2 w`, so `x = |bend| / |label| = sin w` and the speed `R w` is the label times
-/// `asin(x) / x` (the bend, `R w^2`, that squared). 1 for a straight path.
-pub fn central_difference_speedup(bend: f32, label: [f32; 2]) -> f32 {
-    let speed = label[0].hypot(label[1]);
-    let x = (bend.abs() / speed).min(MAX_CENTRAL_DIFFERENCE_SINE);
-    if x > 0.0 && x.is_finite() {
-        x.asin() / x
-    } else {
-        1.0
+/// read from the labels) is scaled by to give the speed along the path, for labels `speed` px
+/// per frame long: over a circle of radius `R` turning `w` radians a frame the label is
+/// `R sin w` long and the bend `R sin^2 w`, so `x = |bend| / speed = sin w` and the speed
+/// `R w` is the label times `asin(x) / x` (the bend, `R w^2`, that squared). 1 for a straight
+/// path or a still one.
+pub fn central_difference_speedup(bend: f32, speed: f32) -> f32 {
+    let x = bend.abs() / speed;
+    if !(x > 0.0 && x.is_finite()) {
+        return 1.0;
     }
+    let x = x.min(MAX_CENTRAL_DIFFERENCE_SINE);
+    x.asin() / x
 }
 
 /// Each pixel's motion as its nearest surface's samples hold it (their mean, and their mean
@@ -325,6 +327,11 @@ impl PixelMotionField {
         self.depth.get(pixel).is_some_and(|&d| {
             d.is_finite() && (depth - d).abs() <= 2.0 * FIELD_SAME_SURFACE_DEPTH * d
         })
+    }
+
+    /// The length of the pixel's motion, px per frame (0 outside the frame).
+    fn speed(&self, pixel: usize) -> f32 {
+        self.motion.get(pixel).map_or(0.0, |m| m[0].hypot(m[1]))
     }
 
     /// The unit vector a positive bend points along at `pixel`: its motion turned a quarter
@@ -1070,9 +1077,10 @@ mod tests {
     /// to the arc's centre point.
     #[test]
     fn central_difference_labels_of_a_turning_surface_are_read_as_its_speed() {
-        assert_eq!(central_difference_speedup(0.0, [30.0, 0.0]), 1.0);
+        assert_eq!(central_difference_speedup(0.0, 30.0), 1.0);
+        assert_eq!(central_difference_speedup(3.0, 0.0), 1.0, "a still path");
         let w = 0.5f32;
-        let f = central_difference_speedup(20.0 * w.sin().powi(2), [20.0 * w.sin(), 0.0]);
+        let f = central_difference_speedup(20.0 * w.sin().powi(2), 20.0 * w.sin());
         assert!((f - w / w.sin()).abs() < 1e-5, "{f}");
 
         let cam = camera();
