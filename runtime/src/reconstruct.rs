@@ -156,10 +156,21 @@ pub fn moved_samples(
     camera: &Camera,
     effects: Effects,
 ) -> Vec<Option<MovedSample>> {
+    moved_samples_of(frames, camera, effects, from_pinhole_sub_renders(frames))
+}
+
+/// [`moved_samples`], told whether the frames come from pinhole sub-renders
+/// ([`from_pinhole_sub_renders`], a pass over every sample that [`PlacedSamples`] makes once).
+fn moved_samples_of(
+    frames: &StochasticFrames,
+    camera: &Camera,
+    effects: Effects,
+    pinhole_sub_renders: bool,
+) -> Vec<Option<MovedSample>> {
     let lens = camera.thin_lens();
     let field = effects.motion.then(|| PixelMotionField::of(frames));
     let bends = field.as_ref().map(PixelMotionField::bends);
-    let central_differences = field.is_some() && from_pinhole_sub_renders(frames);
+    let central_differences = field.is_some() && pinhole_sub_renders;
     frames
         .samples
         .par_iter()
@@ -372,7 +383,8 @@ impl<'a> PlacedSamples<'a> {
         effects: Effects,
         placement: SamplePlacement,
     ) -> Self {
-        let moved = moved_samples(frames, camera, effects);
+        let point_sampled = from_pinhole_sub_renders(frames);
+        let moved = moved_samples_of(frames, camera, effects, point_sampled);
         let dropped = moved
             .par_iter()
             .zip(&frames.samples)
@@ -404,7 +416,6 @@ impl<'a> PlacedSamples<'a> {
             }
             _ => None,
         };
-        let point_sampled = from_pinhole_sub_renders(frames);
         PlacedSamples {
             frames,
             moved,

@@ -98,6 +98,7 @@ pub fn even_out(
         }
     }
     drop(fill);
+    let same = |a: f32, b: f32| (a - b).abs() <= SAME_SURFACE_PARALLAX * b.abs();
     // The weight of the surface of parallax `parallax` on pixel (x, y); 0 outside the frame.
     let surface_weight = |x: i64, y: i64, parallax: f32| -> f32 {
         if x < 0 || y < 0 || x >= w as i64 || y >= h as i64 {
@@ -106,14 +107,13 @@ pub fn even_out(
         let p = y as usize * w + x as usize;
         by_pixel[starts[p]..starts[p + 1]]
             .iter()
-            .filter(|&&(_, other)| (other - parallax).abs() <= SAME_SURFACE_PARALLAX * parallax.abs())
+            .filter(|&&(_, other)| same(other, parallax))
             .map(|&(weight, _)| weight)
             .sum()
     };
     // Whether each entry's surface holds all eight pixels round it: only such pixels trade
     // weight, so a surface's rim, where its weight also says how much of a pixel it covers,
     // and a bar two pixels wide keep their samples' weights.
-    let same = |a: f32, b: f32| (a - b).abs() <= SAME_SURFACE_PARALLAX * b.abs();
     let interior: Vec<bool> = (0..w * h)
         .into_par_iter()
         .flat_map_iter(|p| {
