@@ -47,14 +47,6 @@ pub fn classify_fragments(
             (a.min(f.parallax), b.max(f.parallax))
         });
     let span = if pmax > pmin { pmax - pmin } else { 0.0 };
-    // Layer coordinate: 0 at the far edge, n at the near edge.
-    let layer_coord = |p: f32| -> f32 {
-        if span > 0.0 {
-            ((p - pmin) / span * n_layers as f32).clamp(0.0, n_layers as f32)
-        } else {
-            0.0
-        }
-    };
 
     // One input surface per pixel of each source (render layer), the background continued
     // behind occluders and veils aside. Through a real lens a pixel's PSF changes over the
@@ -67,17 +59,26 @@ pub fn classify_fragments(
         .iter()
         .filter(input_source)
         .all(|f| Some(f.source) == first_source);
+    // A fragment's blur, pixels: its CoC radius and half its motion.
+    let blur_of = |f: &Fragment| {
+        let coc = signed_coc(f.depth).abs();
+        let m = f.motion;
+        coc + 0.5 * (m[0] * m[0] + m[1] * m[1]).sqrt()
+    };
+    let edges = LayerEdges::new(
+        (pmin, span),
+        n_layers,
+        (!one_source).then_some(&fragments[..]),
+        &blur_of,
+    );
+    // Layer coordinate: 0 at the far edge, n at the near edge.
+    let layer_coord = |p: f32| -> f32 { edges.coord(p) };
     let continue_layers = options.continue_layers
         && matches!(model, Some(PsfModel::ThinLens | PsfModel::LensMotion))
         && n_layers > 1;
     if continue_layers {
         let layer_of = |f: &Fragment| {
             (layer_coord(f.parallax).floor() as usize).min(n_layers - 1)
-        };
-        let blur_of = |f: &Fragment| {
-            let coc = signed_coc(f.depth).abs();
-            let m = f.motion;
-            coc + 0.5 * (m[0] * m[0] + m[1] * m[1]).sqrt()
         };
         let continued = if one_source {
             continue_across_layers(&fragments, (w, h), &layer_of, &blur_of, options.hdr_dense_threshold)
@@ -525,7 +526,7 @@ pub fn classify_fragments(
         combined,
         options,
         counts,
-        (pmin, span),
+        &edges.edges,
     );
     drop(fine);
     for (level, chunks) in levels {
@@ -548,7 +549,7 @@ pub fn classify_fragments(
             combined,
             options,
             PathCounts::default(),
-            (pmin, span),
+            &edges.edges,
         );
         merge_coincident(&mut coarse);
         let c = &mut classified.counts;
@@ -952,8 +953,8 @@ impl SmearedPsfs {
 /// in fragment order): overscan records that cannot reach the frame dropped, the data's border
 /// extended outwards as [`ClassifyOptions::frame_edges`] says, row order within each layer
 /// (stable: what a stable sort of the layer's records by row, then column, gives), the padding
-/// every PSF needs, and the layers' summaries. `parallax` is the far edge and the span of the
-/// layers.
+/// every PSF needs, and the layers' summaries. `edges` are the layers' parallax edges, far to
+/// near ([`LayerEdges`]).
 ///
 /// Each layer is written once, into its place in the frame's list: copied where its records
 /// are in row order already (a flat frame's pixels, row by row), else counted into its rows
@@ -969,9 +970,8 @@ pub(super) fn assemble_layers(
     combined: Option<&PsfDatabase>,
     options: &ClassifyOptions,
     mut counts: PathCounts,
-    parallax: (f32, f32),
+    edges: &[f32],
 ) -> Classified {
-    let (pmin, span) = parallax;
     // Beyond the data: records of the outermost pixels, repeated outwards (or nothing).
     let reach: Vec<i32> = combined.map_or_else(Vec::new, psf_reach);
     let reach_of = |r: &SplatRecord| -> i32 {
@@ -1056,8 +1056,8 @@ pub(super) fn assemble_layers(
     let mut first_record = 0;
     for (l, plan) in plans.iter().enumerate() {
         let info = LayerInfo {
-            parallax_min: pmin + span * l as f32 / n_layers as f32,
-            parallax_max: pmin + span * (l + 1) as f32 / n_layers as f32,
+            parallax_min: edges[l],
+            parallax_max: edges[l + 1],
             first_record,
             ..plan.info
         };
@@ -1231,6 +1231,110 @@ pub(super) fn occlusion_within_layers(
     Some(kept)
 }
 
+/// The parallax edges of the depth layers, far to near: `n + 1` of them, the first and last
+/// the frame's parallax range.
+///
+/// Evenly spaced for a frame of one source. Where several sources share pixels (render
+/// layers), each inner edge moves, within half a layer of its even place, to where the fewest
+/// blurred fragments that cover another source lie: the edge crosses such a surface at the
+/// cost of a seam. Its two parts, hard-layered, are each smeared or defocused with a soft
+/// edge where the layer edge cut them, and "over" of the two lets the source behind show
+/// through along the cut (a ball passing in a camera pan, split across its middle, showed the
+/// road through its lower half). Where the range allows, the edge passes the surface by.
+pub(super) struct LayerEdges {
+    /// The parallax of each edge, far to near.
+    pub(super) edges: Vec<f32>,
+    /// Whether the edges are evenly spaced (the layer coordinate is then one expression).
+    even: bool,
+    pmin: f32,
+    span: f32,
+}
+
+/// Cells of the parallax histogram per layer, where [`LayerEdges`] looks for a place to cut.
+const EDGE_CELLS_PER_LAYER: usize = 32;
+
+/// The least blur (CoC radius plus half the motion, pixels) of a fragment that an edge of the
+/// layers avoids crossing: a sharper surface's two parts barely spread over each other.
+const EDGE_AVOIDS_BLUR_PX: f32 = 1.0;
+
+impl LayerEdges {
+    /// The edges of `n` layers over `(pmin, span)`; `several_sources` holds the fragments when
+    /// they come from several sources, `blur_of` gives a fragment's blur in pixels.
+    pub(super) fn new(
+        (pmin, span): (f32, f32),
+        n: usize,
+        several_sources: Option<&[Fragment]>,
+        blur_of: &dyn Fn(&Fragment) -> f32,
+    ) -> Self {
+        let even_edges: Vec<f32> = (0..=n).map(|l| pmin + span * l as f32 / n as f32).collect();
+        let mut edges = LayerEdges {
+            edges: even_edges,
+            even: true,
+            pmin,
+            span,
+        };
+        let Some(fragments) = several_sources.filter(|_| n > 1 && span > 0.0) else {
+            return edges;
+        };
+        let Some(sources) = Ceilings::nearest_sources(fragments) else {
+            return edges;
+        };
+        let cells = n * EDGE_CELLS_PER_LAYER;
+        let mut mass = vec![0.0f64; cells];
+        for f in fragments {
+            if f.weight > 0.0 && sources.covers_another(f) && blur_of(f) >= EDGE_AVOIDS_BLUR_PX {
+                let u = (f.parallax - pmin) / span * cells as f32;
+                if u.is_finite() {
+                    mass[(u.max(0.0) as usize).min(cells - 1)] += f64::from(f.weight);
+                }
+            }
+        }
+        // Edge `i` may sit on any cell boundary `c` within half a layer of its even place
+        // (`i * EDGE_CELLS_PER_LAYER`); crossing there costs the mass of the two cells beside
+        // it. The cheapest wins, the nearest to the even place among equals.
+        let half = EDGE_CELLS_PER_LAYER / 2;
+        for i in 1..n {
+            let even = i * EDGE_CELLS_PER_LAYER;
+            let cost = |c: usize| mass[c - 1] + mass[c];
+            let mut best = (cost(even), 0usize, even);
+            for c in (even + 1 - half)..(even + half) {
+                let candidate = (cost(c), c.abs_diff(even), c);
+                if (candidate.0, candidate.1) < (best.0, best.1) {
+                    best = candidate;
+                }
+            }
+            if best.2 != even {
+                edges.edges[i] = pmin + span * best.2 as f32 / cells as f32;
+                edges.even = false;
+            }
+        }
+        edges
+    }
+
+    /// The layer coordinate of parallax `p`: 0 at the far edge, `n` at the near edge, linear
+    /// within each layer.
+    pub(super) fn coord(&self, p: f32) -> f32 {
+        let n = self.edges.len() - 1;
+        if self.span <= 0.0 {
+            return 0.0;
+        }
+        if self.even {
+            return ((p - self.pmin) / self.span * n as f32).clamp(0.0, n as f32);
+        }
+        // NaN as the far edge.
+        if p.is_nan() || p <= self.edges[0] {
+            return 0.0;
+        }
+        if p >= self.edges[n] {
+            return n as f32;
+        }
+        // The layer whose edges enclose `p`: the last edge at or below it.
+        let l = self.edges.partition_point(|&e| e <= p).saturating_sub(1).min(n - 1);
+        let (a, b) = (self.edges[l], self.edges[l + 1]);
+        l as f32 + if b > a { (p - a) / (b - a) } else { 0.0 }
+    }
+}
+
 /// Per pixel holding fragments of several sources (a render layer over another, a deep
 /// image's samples, the background continued behind an occluder), its nearest source and
 /// that source's farthest depth layer there: the farther sources' fragments of the pixel go
@@ -1261,6 +1365,14 @@ impl Ceilings {
         fragments: &[Fragment],
         targets_of: &dyn Fn(&Fragment) -> LayerTargets,
     ) -> Option<Self> {
+        let mut ceilings = Self::nearest_sources(fragments)?;
+        ceilings.lay(fragments, targets_of);
+        Some(ceilings)
+    }
+
+    /// Each pixel's nearest source and whether another lies behind it, without the ceilings
+    /// ([`Ceilings::covers_another`] answers, [`Ceilings::lower`] keeps every target).
+    pub(super) fn nearest_sources(fragments: &[Fragment]) -> Option<Self> {
         let counts = |f: &Fragment| f.weight > 0.0 && f.source != super::hidden::VEIL_SOURCE;
         let first_source = fragments.iter().find(|f| counts(f))?.source;
         // Only a pixel holding a fragment of another source than the first has two.
@@ -1301,6 +1413,14 @@ impl Ceilings {
                 }
             }
         }
+        Some(ceilings)
+    }
+
+    /// Sets each mixed pixel's ceiling: the farthest of `targets_of` its nearest source's
+    /// fragments there.
+    fn lay(&mut self, fragments: &[Fragment], targets_of: &dyn Fn(&Fragment) -> LayerTargets) {
+        let counts = |f: &Fragment| f.weight > 0.0 && f.source != super::hidden::VEIL_SOURCE;
+        let ceilings = self;
         // Only the pixels holding two sources need their nearest source's layers: on a flat
         // frame the few along its silhouettes.
         for f in fragments.iter().filter(|f| counts(f)) {
@@ -1314,7 +1434,6 @@ impl Ceilings {
                 ceilings.ceiling[cell] = ceilings.ceiling[cell].min(farthest);
             }
         }
-        Some(ceilings)
     }
 
     /// Whether `f` belongs to its pixel's nearest source and another source lies behind it
