@@ -14,6 +14,7 @@ each against the faster Blender; spreadlet's per-stage breakdown (from its --sta
 result's SSIM and FLIP against the reference.
 
     python3 bench/against_blender.py --out target/against-blender [--rounds 3] [--ref-spp 256] \
+        [--cycles OUT] \
         [--bpy target/bpy-env/bin/python]
 
 Needs `target/release/{spreadlet,spreadlet-scene}` (cargo build --release), Blender
@@ -79,6 +80,14 @@ def inputs(args, bin_dir, work):
                  str(args.size), "--height", str(args.size), "--gbuffer", g, "--reference", ref,
                  "--ref-spp", str(args.ref_spp), "--camera-out", cam, "--quiet"])
         found.append((name, g, cam, ref))
+    # Cycles scenes of our own (bench/cycles/cycles_frames.sh): each folder's pinhole input.exr,
+    # camera.json and reference.exr.
+    for d in sorted(os.listdir(args.cycles)) if args.cycles else []:
+        d = os.path.join(args.cycles, d)
+        files = [os.path.join(d, f) for f in ("input.exr", "camera.json", "reference.exr")]
+        name = "cycles-" + os.path.basename(d)
+        if all(os.path.exists(f) for f in files) and wanted(name):
+            found.append((name, *files))
     return found
 
 
@@ -151,6 +160,9 @@ def main():
     p.add_argument("--blender", default="blender")
     p.add_argument("--bpy", help="a Python with the bpy module (Blender 5.x) to time as well")
     p.add_argument("--only", help="comma-separated input names to run (default: all)")
+    p.add_argument("--cycles", help="a folder of Cycles scenes (bench/cycles/cycles_frames.sh's "
+                   "OUT): each SCENE/ with input.exr, camera.json and reference.exr joins as "
+                   "cycles-SCENE")
     p.add_argument("--bin", default=os.path.join(ROOT, "target", "release"))
     p.add_argument("--shared", default=os.path.join(ROOT, "..", "shared", "examples"))
     args = p.parse_args()
