@@ -68,7 +68,7 @@ pub fn classify_fragments(
     let edges = LayerEdges::new(
         (pmin, span),
         n_layers,
-        (!one_source).then_some(&fragments[..]),
+        &fragments,
         &blur_of,
     );
     // Layer coordinate: 0 at the far edge, n at the near edge.
@@ -1234,13 +1234,14 @@ pub(super) fn occlusion_within_layers(
 /// The parallax edges of the depth layers, far to near: `n + 1` of them, the first and last
 /// the frame's parallax range.
 ///
-/// Evenly spaced for a frame of one source. Where several sources share pixels (render
-/// layers), each inner edge moves, within half a layer of its even place, to where the fewest
-/// blurred fragments that cover another source lie: the edge crosses such a surface at the
-/// cost of a seam. Its two parts, hard-layered, are each smeared or defocused with a soft
-/// edge where the layer edge cut them, and "over" of the two lets the source behind show
-/// through along the cut (a ball passing in a camera pan, split across its middle, showed the
-/// road through its lower half). Where the range allows, the edge passes the surface by.
+/// Where several sources share pixels (render layers; a flat frame's surfaces over the
+/// background continued behind them), each inner edge moves, within half a layer of its even
+/// place, to where the fewest blurred fragments that cover another source lie: the edge crosses
+/// such a surface at the cost of a seam. Its two parts are each smeared or defocused with a
+/// soft edge where the layer edge cut them, and "over" of the two lets what lies behind show
+/// through along the cut (a ball passing in a camera pan, hard-layered in its own view layer
+/// and split across its middle, showed the road through its lower half). Where the range
+/// allows, the edge passes the surface by. Without such fragments the edges are evenly spaced.
 pub(super) struct LayerEdges {
     /// The parallax of each edge, far to near.
     pub(super) edges: Vec<f32>,
@@ -1258,12 +1259,12 @@ const EDGE_CELLS_PER_LAYER: usize = 32;
 const EDGE_AVOIDS_BLUR_PX: f32 = 1.0;
 
 impl LayerEdges {
-    /// The edges of `n` layers over `(pmin, span)`; `several_sources` holds the fragments when
-    /// they come from several sources, `blur_of` gives a fragment's blur in pixels.
+    /// The edges of `n` layers over `(pmin, span)` for `fragments`; `blur_of` gives a
+    /// fragment's blur in pixels.
     pub(super) fn new(
         (pmin, span): (f32, f32),
         n: usize,
-        several_sources: Option<&[Fragment]>,
+        fragments: &[Fragment],
         blur_of: &dyn Fn(&Fragment) -> f32,
     ) -> Self {
         let even_edges: Vec<f32> = (0..=n).map(|l| pmin + span * l as f32 / n as f32).collect();
@@ -1273,9 +1274,9 @@ impl LayerEdges {
             pmin,
             span,
         };
-        let Some(fragments) = several_sources.filter(|_| n > 1 && span > 0.0) else {
+        if n < 2 || span <= 0.0 {
             return edges;
-        };
+        }
         let Some(sources) = Ceilings::nearest_sources(fragments) else {
             return edges;
         };
