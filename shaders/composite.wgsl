@@ -27,15 +27,19 @@ const RESTORE_OCCLUDED: u32 = 8u;
 // runtime::pipeline::composite::FILL_MIN_HIDDEN
 const FILL_MIN_HIDDEN: f32 = 1e-3;
 
+// runtime::pipeline::composite::SMOOTH_OCCLUDERS_SHARPNESS
+const SMOOTH_OCCLUDERS_SHARPNESS: f32 = 0.05;
+
 // runtime::pipeline::composite::hidden_fill_share
 fn hidden_fill_share(occluders: f32, hidden: f32) -> f32 {
     if occluders <= 0.0 {
         return 1.0;
     }
+    let least = max(1.0 - occluders / SMOOTH_OCCLUDERS_SHARPNESS, 0.0);
     if hidden <= 0.0 {
-        return 0.0;
+        return least;
     }
-    return clamp(0.5 + 0.5 * log2(hidden / occluders), 0.0, 1.0);
+    return max(clamp(0.5 + 0.5 * log2(hidden / occluders), 0.0, 1.0), least);
 }
 
 @compute @workgroup_size(16, 16, 1)

@@ -38,7 +38,14 @@
 //! log2(s_hid / s_occ) / 2, 0, 1)` of the gap is filled with the hidden colour: all of it where
 //! the hidden layers are at least twice as sharp as what hid them (a blurred emitter over a
 //! wall), none where the occluders are (a sharp sphere over a defocused wall). The rest is left
-//! for the division by coverage, which fills a layer's own holes with its own colour. Choosing
+//! for the division by coverage, which fills a layer's own holes with its own colour. Only a
+//! sharp layer has holes of its own, though: where the occluders are blurred beyond
+//! [`SMOOTH_OCCLUDERS_SHARPNESS`] (a mean reach of about 3.5 px), the gap is the hidden
+//! layers' whatever their sharpness, and at least `1 - s_occ / SMOOTH_OCCLUDERS_SHARPNESS` of
+//! it is filled. A wall that moves (as in a camera pan, where every pixel does) is smeared as
+//! far as a defocused emitter before it, so by sharpness alone the two shared its dip, and the
+//! division scaled the emitter up with its half: the lamps of a Blender camera pan came out with
+//! 6 % more light than the frame's samples hold. Choosing
 //! between the two colours, rather than mixing them by weight, matters: an emitter a thousand
 //! times brighter than the wall would dominate any weighted mean of the two.
 //!
@@ -58,17 +65,26 @@ pub const FILL_MIN_HIDDEN: f32 = 1e-3;
 
 /// The share of a pixel's missing coverage that [`CompositeOptions::restore_occluded`] fills
 /// with the hidden colour, from the sharpness of the layers that hid (`occluders`) and of what
-/// they hid (`hidden`): `clamp(1/2 + log2(hidden / occluders) / 2, 0, 1)`, all of it where the
-/// occluders have no sharpness.
+/// they hid (`hidden`): `clamp(1/2 + log2(hidden / occluders) / 2, 0, 1)`, and at least
+/// `1 - occluders / SMOOTH_OCCLUDERS_SHARPNESS`; all of it where the occluders have no
+/// sharpness.
 pub fn hidden_fill_share(occluders: f32, hidden: f32) -> f32 {
     if occluders <= 0.0 {
         return 1.0;
     }
+    // Occluders this blurred have no holes of their own.
+    let least = (1.0 - occluders / SMOOTH_OCCLUDERS_SHARPNESS).max(0.0);
     if hidden <= 0.0 {
-        return 0.0;
+        return least;
     }
-    (0.5 + 0.5 * (hidden / occluders).log2()).clamp(0.0, 1.0)
+    (0.5 + 0.5 * (hidden / occluders).log2()).clamp(0.0, 1.0).max(least)
 }
+
+/// The sharpness ([`layer_sharpness`]) below which occluders are too blurred to have holes of
+/// their own: `1 / (1 + r)^2` for a mean PSF reach `r` of about 3.5 px, where neighbouring
+/// samples' footprints overlap at any sample count. The share [`hidden_fill_share`] gives the
+/// hidden colour is at least `1 - s_occ / SMOOTH_OCCLUDERS_SHARPNESS`.
+pub const SMOOTH_OCCLUDERS_SHARPNESS: f32 = 0.05;
 
 /// The sharpness of each layer (index 0 = farthest) for [`CompositeOptions::restore_occluded`]:
 /// `1 / (1 + r)^2`, with `r` the mean reach of its records' PSFs (px, [`psf_reach`]; weighted
