@@ -713,13 +713,14 @@ pub(crate) fn classify_samples(
         },
         |x, y, k, share| placed.fragment(k as usize, x, y, share),
     );
-    let (coc_scale, focus) = camera.thin_lens().map_or((0.0, 0.0), |l| {
-        (l.coc_scale_px as f32, l.focus_distance as f32)
-    });
     let reach = crate::sample_density::reach_px(frames.spp);
-    crate::sample_density::even_out(&mut fragments, frames.width, frames.height, reach, |f| {
-        coc_scale * (1.0 - focus * f.parallax)
-    });
+    crate::sample_density::even_out(
+        &mut fragments,
+        frames.width,
+        frames.height,
+        reach,
+        crate::sample_merge::signed_coc_of(camera),
+    );
     let counts = PathCounts {
         dropped: placed.dropped,
         ..PathCounts::default()

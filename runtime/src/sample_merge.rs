@@ -144,6 +144,15 @@ pub fn merge_alike(
     )
 }
 
+/// A fragment's signed CoC radius through `camera`'s thin lens, pixels (0 without a lens),
+/// from its parallax: the CoC is affine in it, `coc_scale (1 - focus parallax)`.
+pub(crate) fn signed_coc_of(camera: &Camera) -> impl Fn(&Fragment) -> f32 + Copy + Sync {
+    let (coc_scale, focus) = camera.thin_lens().map_or((0.0, 0.0), |l| {
+        (l.coc_scale_px as f32, l.focus_distance as f32)
+    });
+    move |f: &Fragment| coc_scale * (1.0 - focus * f.parallax)
+}
+
 /// [`merge_alike`] over fragments made on demand from `items` producers (samples):
 /// `produce(range, emit)` calls `emit(x, y, index, share)` once per fragment of the items in
 /// `range`, in the same order each time it is called, and `fragment_of(x, y, index, share)`
@@ -159,12 +168,7 @@ pub fn merge_placed(
     produce: impl Fn(std::ops::Range<usize>, &mut dyn FnMut(i32, i32, u32, f32)) + Sync,
     fragment_of: impl Fn(i32, i32, u32, f32) -> Fragment + Sync,
 ) -> Vec<Fragment> {
-    let lens = camera.thin_lens();
-    // The signed CoC is affine in the parallax: `coc_scale (1 - focus parallax)`.
-    let (coc_scale, focus) = lens.map_or((0.0, 0.0), |l| {
-        (l.coc_scale_px as f32, l.focus_distance as f32)
-    });
-    let coc_of = |f: &Fragment| coc_scale * (1.0 - focus * f.parallax);
+    let coc_of = signed_coc_of(camera);
     let (bw, bh) = (w as i64 + 2 * MARGIN_PX, h as i64 + 2 * MARGIN_PX);
     let cell_of = |x: i32, y: i32| -> Option<usize> {
         let (x, y) = (i64::from(x) + MARGIN_PX, i64::from(y) + MARGIN_PX);
