@@ -211,6 +211,7 @@ pub fn scene_frame(
         layers: infos,
         counts,
         database: None,
+        packed: None,
         coarse: Vec::new(),
     }
 }

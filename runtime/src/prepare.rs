@@ -137,6 +137,13 @@ impl<'a> Plan<'a> {
         &self.options
     }
 
+    /// The plan with the frame's own PSF images kept packed
+    /// ([`crate::pipeline::ClassifyOptions::pack_images`]), for the CPU splat.
+    pub(crate) fn with_images_packed(mut self) -> Self {
+        self.options.classify.pack_images = true;
+        self
+    }
+
     /// Classifies the input with `dbs` (which must serve [`Plan::model`]; not touched when
     /// nothing needs simulating) and starts the frame's statistics and its clock.
     pub fn prepare(self, dbs: &DbSet) -> Result<PreparedFrame, Error> {

@@ -389,7 +389,11 @@ impl Renderer {
         let selected = self.databases_for(plan.effects(), plan.camera(), smear_motion)?;
         // The device is picked once per renderer (probing for a GPU takes tens of ms), before
         // the frame's clock starts: the frame's times are its own.
-        self.device()?;
+        let plan = match self.device()? {
+            Device::Cpu => plan.with_images_packed(),
+            #[cfg(feature = "gpu")]
+            Device::Gpu(_) => plan,
+        };
         let prepared = plan.prepare(&selected.set)?;
         self.run(prepared, selected)
     }

@@ -154,6 +154,7 @@ fn classified(
         layers: infos,
         counts,
         database: None,
+        packed: None,
         coarse: Vec::new(),
     }
 }

@@ -483,6 +483,7 @@ fn stacked(n: usize, path: SplatPath, pad: u32, color: impl Fn(usize) -> f32) ->
         layers: vec![info],
         counts: PathCounts::default(),
         database: None,
+        packed: None,
         coarse: Vec::new(),
     }
 }

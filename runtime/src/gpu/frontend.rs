@@ -48,6 +48,13 @@ pub fn render_gpu(
         }
         Content::Records(classified) => classified,
     };
+    if classified.packed.is_some() {
+        return Err(GpuError::Input(
+            "the frame was classified with its PSF images packed, which only the CPU splat \
+             draws: classify it with `pack_images` off"
+                .into(),
+        ));
+    }
     let db = classified.database_or(dbs.combined.as_ref());
     gpu.check_database(db)?;
     gpu.apply_call_options(&options);

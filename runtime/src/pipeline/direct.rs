@@ -45,7 +45,7 @@ pub fn splat_composite(
     let frame = classified.frame;
     let (w, h) = (frame.width as usize, frame.height as usize);
     let (pw, pad) = (frame.padded_width as usize, frame.pad as usize);
-    let drawing = Drawing::new(frame, db, splat);
+    let drawing = Drawing::new(classified, db, splat);
     let mut out = RgbaImage::new(w, h);
     if w == 0 {
         return out;

@@ -15,6 +15,7 @@ pub mod classify;
 pub mod composite;
 pub mod direct;
 pub mod integrate;
+pub mod packed;
 pub mod splat;
 pub mod types;
 

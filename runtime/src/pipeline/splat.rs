@@ -16,6 +16,7 @@ use poisson::Plane;
 use psf_db::PsfDatabase;
 use rayon::prelude::*;
 
+use super::packed::{PackedImage, PackedImages};
 use super::types::{psf_reach, Classified, FrameParams, SplatPath, SplatRecord};
 
 /// Rows per band of the deterministic parallel splat. A pixel sums its records in record
@@ -150,7 +151,7 @@ pub fn splat(
     let (pw, ph) = (frame.padded_width as usize, frame.padded_height as usize);
     let bands = ph.div_ceil(BAND_ROWS);
     let n_layers = frame.layers as usize;
-    let drawing = Drawing::new(frame, db, options);
+    let drawing = Drawing::new(classified, db, options);
 
     // Per (layer, kind), with kind 0 = Laplacian, 1 = direct: whether any record draws in it.
     let present = |l: usize, kind: usize| {
@@ -268,18 +269,25 @@ pub(super) struct Drawing<'a> {
     pub extent: i32,
     /// Whether `db`'s spreadlets are in row order.
     pub in_row_order: bool,
+    /// The images of `db` kept packed, drawn from here.
+    pub packed: Option<&'a PackedImages>,
     /// Splat options.
     pub options: SplatOptions,
 }
 
 impl<'a> Drawing<'a> {
-    /// What drawing `frame`'s records from `db` needs.
-    pub(super) fn new(frame: FrameParams, db: Option<&'a PsfDatabase>, options: &SplatOptions) -> Self {
+    /// What drawing `classified`'s records from `db` needs.
+    pub(super) fn new(
+        classified: &'a Classified,
+        db: Option<&'a PsfDatabase>,
+        options: &SplatOptions,
+    ) -> Self {
         Drawing {
             db,
             reach: db.map_or_else(Vec::new, psf_reach),
-            extent: frame.pad as i32 + 2,
+            extent: classified.frame.pad as i32 + 2,
             in_row_order: db.is_some_and(PsfDatabase::spreadlets_in_row_order),
+            packed: classified.packed.as_deref(),
             options: *options,
         }
     }
@@ -301,8 +309,10 @@ pub(super) fn draw_band(
         ref reach,
         extent,
         in_row_order,
+        packed,
         ref options,
     } = *drawing;
+    let packed_image = |r: &SplatRecord| packed.and_then(|p| p.get(r.psf_index));
     // Records are in row order within a layer: the ones that can reach the band.
     let lo = recs.partition_point(|r| r.center_y < y0 - extent);
     let hi = recs.partition_point(|r| r.center_y < y1 + extent);
@@ -346,11 +356,17 @@ pub(super) fn draw_band(
                 }
             }
             (Planes::Direct, p) if p == SplatPath::Dense as u32 => {
+                if let Some(image) = packed_image(r) {
+                    splat_packed(band, r, image, options.rotation);
+                    continue;
+                }
                 let Some(db) = db else { continue };
                 // Two dense records at one centre and one rotation (a fragment blended across
                 // a cell boundary, or a split pixel's two parts): drawn as one image, their
                 // sum.
-                let next = recs.get(i).filter(|next| drawn_together(r, next));
+                let next = recs
+                    .get(i)
+                    .filter(|next| drawn_together(r, next) && packed_image(next).is_none());
                 if next.is_some() {
                     i += 1;
                 }
@@ -718,9 +734,7 @@ fn splat_dense_upright(
 }
 
 /// One grey or RGB dense image `v` weighted by `colour`, drawn upright centred on `centre`
-/// (band coordinates): each row's non-zero span, each pixel one four-wide multiply and add
-/// (`Vec4` is a SIMD register where the target has one). A PSF's rows are short, so the rows
-/// are walked together with the band's, with no per-row lookups beyond the span.
+/// (band coordinates): [`splat_upright_spans`] of its rows' non-zero spans.
 fn splat_upright_rows(
     band: &mut Band,
     colour: [f32; 4],
@@ -728,28 +742,50 @@ fn splat_upright_rows(
     v: &psf_db::DenseView,
 ) {
     let ch = v.channels;
-    let (x0, y0) = (centre.0 + v.origin[0], centre.1 + v.origin[1]);
-    let (top, bottom) = (y0.max(band.y0), (y0 + v.height as i32).min(band.y1));
-    if top >= bottom || v.width == 0 {
+    if v.width == 0 {
+        return;
+    }
+    let rows = v.data.chunks_exact(v.width * ch).zip(v.row_spans).map(|(row, &span)| {
+        let [first, end] = span.map(usize::from);
+        (span, &row[first * ch..end * ch])
+    });
+    let top_left = (centre.0 + v.origin[0], centre.1 + v.origin[1]);
+    splat_upright_spans(band, colour, top_left, v.height, ch, rows);
+}
+
+/// A grey or RGB image of `height` rows weighted by `colour`, drawn upright with its box's
+/// top-left pixel at `top_left` (band coordinates): per row its span `[first, end)` of
+/// columns and their values, each pixel one four-wide multiply and add (`Vec4` is a SIMD
+/// register where the target has one). A PSF's rows are short, so the rows are walked together
+/// with the band's, with no per-row lookups beyond the span.
+fn splat_upright_spans<'v>(
+    band: &mut Band,
+    colour: [f32; 4],
+    top_left: (i32, i32),
+    height: usize,
+    ch: usize,
+    rows: impl Iterator<Item = ([u16; 2], &'v [f32])>,
+) {
+    let (x0, y0) = top_left;
+    let (top, bottom) = (y0.max(band.y0), (y0 + height as i32).min(band.y1));
+    if top >= bottom {
         return;
     }
     let width = band.width as usize;
     let first_row = (top - y0) as usize;
-    let rows = (bottom - top) as usize;
+    let count = (bottom - top) as usize;
     let band_rows = band.data[(top - band.y0) as usize * width..].chunks_exact_mut(width);
-    let image_rows = v.data.chunks_exact(v.width * ch).skip(first_row);
-    let spans = v.row_spans.iter().skip(first_row);
     let colour4 = glam::Vec4::from_array(colour);
     // Red, green and blue by the colour, alpha by the mean of the three weights, as `weighted`
     // does.
     let rgb_weights = glam::Vec4::new(colour[0], colour[1], colour[2], colour[3] / 3.0);
-    for ((row, image_row), span) in band_rows.zip(image_rows).zip(spans).take(rows) {
-        let [first, end] = span.map(i32::from);
-        let (lo, hi) = ((x0 + first).max(0), (x0 + end).min(band.width));
+    for (row, (span, values)) in band_rows.zip(rows.skip(first_row)).take(count) {
+        let start = x0 + i32::from(span[0]);
+        let (lo, hi) = (start.max(0), (x0 + i32::from(span[1])).min(band.width));
         if lo >= hi {
             continue;
         }
-        let values = &image_row[(lo - x0) as usize * ch..(hi - x0) as usize * ch];
+        let values = &values[(lo - start) as usize * ch..(hi - start) as usize * ch];
         let pixels = &mut row[lo as usize..hi as usize];
         if ch == 1 {
             for (px, &v) in pixels.iter_mut().zip(values) {
@@ -763,6 +799,30 @@ fn splat_upright_rows(
             }
         }
     }
+}
+
+/// A dense record whose image is packed ([`PackedImage`]): upright from its rows' spans, as
+/// [`splat_upright_rows`] draws the same image from the database; turned (no packed image is
+/// today) from its box.
+fn splat_packed(band: &mut Band, r: &SplatRecord, image: &PackedImage, sampling: RotationSampling) {
+    let ch = image.channels;
+    let height = image.spans.len();
+    if is_identity(r) && (ch == 1 || ch == 3) {
+        let top_left = (r.center_x + image.origin[0], r.center_y + image.origin[1]);
+        splat_upright_spans(band, r.color, top_left, height, ch, image.rows());
+        return;
+    }
+    let boxed = image.unpacked_box();
+    let dense = DenseImage {
+        origin: image.origin,
+        width: image.width,
+        height,
+    };
+    draw_dense(band, r, dense, sampling, |u, v| {
+        let at = (v * image.width + u) * ch;
+        let vals = &boxed[at..at + ch];
+        (!vals.iter().all(|&x| x == 0.0)).then(|| weighted(r.color, vals))
+    });
 }
 
 /// Whether `next` can be drawn in one pass with `r`: both dense, at the same centre, turned
@@ -940,6 +1000,7 @@ mod tests {
             records: records.to_vec(),
             counts: PathCounts::default(),
             database: None,
+            packed: None,
             coarse: Vec::new(),
         }
     }

@@ -7,6 +7,7 @@ use super::*;
 use crate::camera::Camera;
 use crate::dbset::{DbSet, NO_TWIN};
 use crate::motion_smear::{PsfImage, SmearKey};
+use crate::pipeline::packed::{PackedImage, PackedImages};
 use crate::pipeline::types::{psf_reach, CoarseLevel, FrameParams, SplatPath, SplatRecord};
 use psf_db::{PsfDatabase, PsfModel};
 use rayon::prelude::*;
@@ -273,7 +274,7 @@ pub fn classify_fragments(
         _ => Vec::new(),
     };
     let smeared = match combined {
-        Some(all) if !smear_keys.is_empty() => SmearedPsfs::build(&smear_keys, all, &reach)?,
+        Some(all) if !smear_keys.is_empty() => SmearedPsfs::build(&smear_keys, all, &reach, options.pack_images)?,
         _ => SmearedPsfs::default(),
     };
     let combined = smeared.database.as_deref().or(combined);
@@ -558,12 +559,14 @@ pub fn classify_fragments(
         c.copied += coarse.counts.copied;
         c.edge_extended += coarse.counts.edge_extended;
         coarse.database = smeared.database.clone();
+        coarse.packed = smeared.packed.clone();
         classified.coarse.push(CoarseLevel {
             scale,
             classified: coarse,
         });
     }
     classified.database = smeared.database;
+    classified.packed = smeared.packed;
     if options.shared_turns && model == Some(PsfModel::PhysicalLens) {
         let frame_db = classified.database.clone();
         if let Some(base) = frame_db.as_deref().or(dbs.combined.as_ref()) {
@@ -801,6 +804,8 @@ fn ordered_dither(x: i32, y: i32) -> f32 {
 #[derive(Default)]
 struct SmearedPsfs {
     database: Option<std::sync::Arc<PsfDatabase>>,
+    /// The images of `database` kept packed ([`PackedImages`]), whose boxes there hold zeros.
+    packed: Option<std::sync::Arc<PackedImages>>,
     /// Sorted, each with its index in `database` (`None`: its lens PSF is empty).
     keys: Vec<(SmearKey, Option<u32>)>,
 }
@@ -808,11 +813,13 @@ struct SmearedPsfs {
 impl SmearedPsfs {
     /// The smeared PSFs of the fragments' keys (`None`: not smeared), from the lens PSFs of
     /// `all` (whose PSFs reach `reach` px); the frame's smeared images are bounded by
-    /// [`crate::motion_smear::MAX_FRAME_SMEARED_VALUES`].
+    /// [`crate::motion_smear::MAX_FRAME_SMEARED_VALUES`]. With `pack`, grey and RGB images are
+    /// kept packed.
     fn build(
         fragment_keys: &[Option<(SmearKey, bool)>],
         all: &PsfDatabase,
         reach: &[i32],
+        pack: bool,
     ) -> Result<Self, ClassifyError> {
         let mut keys: Vec<SmearKey> = fragment_keys.iter().flatten().map(|&(k, _)| k).collect();
         if keys.is_empty() {
@@ -928,16 +935,57 @@ impl SmearedPsfs {
             .map(|(_, _, e)| (e.origin, e.width, e.height))
             .collect();
         let not_built = |e: psf_db::DbError| ClassifyError::PhysicalLens(e.to_string());
+        // Packed images first, each smeared into a box of its thread's that is reused, so
+        // their boxes in the database are never written.
+        let packable = |base: &PsfImage| pack && (base.channels == 1 || base.channels == 3);
+        let packed: Vec<Option<PackedImage>> = drawn
+            .par_iter()
+            .map_init(
+                || (Vec::new(), Vec::new()),
+                |(scratch, rows): &mut (Vec<f32>, Vec<[u16; 2]>), &(k, base, extent)| {
+                    if !packable(base) {
+                        return Ok(None);
+                    }
+                    let len = extent.width * extent.height * base.channels;
+                    if scratch.len() < len {
+                        scratch.resize(len, 0.0);
+                    }
+                    rows.clear();
+                    rows.resize(extent.height, [0, 0]);
+                    let out = &mut scratch[..len];
+                    let (length, angle, bend) = (k.length_px(), k.angle_rad(), k.bend_px());
+                    crate::motion_smear::smear_within(base, length, angle, bend, extent, out, rows);
+                    PackedImage::pack(extent.origin, extent.width, base.channels, out, rows)
+                        .map(Some)
+                        .ok_or_else(|| {
+                            not_built(psf_db::DbError::OutOfBounds {
+                                what: "a smeared PSF value is not finite".into(),
+                            })
+                        })
+                },
+            )
+            .collect::<Result<_, _>>()?;
         let extension = crate::dbset::extend_with_dense(all, &boxes).map_err(not_built)?;
         let database = extension
             .fill_within(|i, out, written| {
                 let (k, base, extent) = drawn[i];
+                if packable(base) {
+                    written.fill([0, 0]);
+                    return;
+                }
                 let (length, angle, bend) = (k.length_px(), k.angle_rad(), k.bend_px());
                 crate::motion_smear::smear_within(base, length, angle, bend, extent, out, written);
             })
             .map_err(not_built)?;
+        let packed = packed.iter().any(Option::is_some).then(|| {
+            std::sync::Arc::new(PackedImages {
+                first,
+                images: packed,
+            })
+        });
         Ok(Self {
             database: Some(std::sync::Arc::new(database)),
+            packed,
             keys: indexed,
         })
     }
@@ -1129,6 +1177,7 @@ pub(super) fn assemble_layers(
         layers,
         counts,
         database: None,
+        packed: None,
         coarse: Vec::new(),
     }
 }

@@ -194,6 +194,13 @@ pub struct ClassifyOptions {
     /// instead of four bilinear taps, and turned with a sharper cubic), the turn quantised so
     /// that the PSF's rim is at most 1/4 px from the record's own turn (`turned`). Off: every record drawn at its own turn.
     pub shared_turns: bool,
+    /// Keep the frame's own grey and RGB PSF images (the lens PSFs smeared along each moving
+    /// pixel's motion) packed, as their rows' non-zero spans ([`Classified::packed`]), rather
+    /// than in their boxes in the frame's database: a streak's box is mostly zeros, and tens
+    /// of thousands of boxes cost more to fault in than to fill. For the CPU splat alone (the
+    /// GPU path reads the database's images): [`crate::Renderer`] turns it on when it draws on
+    /// the CPU. Off: written into the database.
+    pub pack_images: bool,
     /// Through a real lens, scale each of a premixed pair's two PSFs onto the blend's own
     /// defocus before they are mixed, where both cells lie far enough from the focus plane
     /// (`turned`): the bokeh keeps one rim. Off: the two are mixed as they are, and their rims
@@ -219,6 +226,7 @@ impl Default for ClassifyOptions {
             coarse_above_px: f32::INFINITY,
             continue_layers: true,
             shared_turns: true,
+            pack_images: false,
             scaled_blends: true,
         }
     }

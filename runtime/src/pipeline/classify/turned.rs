@@ -812,6 +812,7 @@ mod tests {
             layers,
             counts: PathCounts::default(),
             database: None,
+            packed: None,
             coarse: Vec::new(),
         };
         split_pairs(&mut classified);
