@@ -23,6 +23,8 @@ pub struct PackedImage {
     pub channels: usize,
     /// Per row, the columns `[first, end)` holding its values (`[0, 0]`: a zero row).
     pub spans: Vec<[u16; 2]>,
+    /// Per row, the index in `values` of its first value.
+    pub starts: Vec<u32>,
     /// The rows' values, in row order (primal PSF values).
     pub values: Vec<f32>,
 }
@@ -46,14 +48,17 @@ impl PackedImage {
                 width,
                 channels,
                 spans: vec![[0, 0]; written.len()],
+                starts: vec![0; written.len()],
                 values: Vec::new(),
             });
         }
         let mut spans = Vec::with_capacity(written.len());
+        let mut starts = Vec::with_capacity(written.len());
         let mut values = Vec::new();
         for (row, w) in box_values.chunks_exact(width * ch).zip(written) {
             let end = usize::from(w[1]).min(width);
             let first = usize::from(w[0]).min(end);
+            starts.push(u32::try_from(values.len()).ok()?);
             let lit = &row[first * ch..end * ch];
             if lit.iter().any(|v| !v.is_finite()) {
                 return None;
@@ -73,20 +78,23 @@ impl PackedImage {
             width,
             channels,
             spans,
+            starts,
             values,
         })
     }
 
+    /// Row `v`'s span and its values.
+    #[inline]
+    pub fn row(&self, v: usize) -> ([u16; 2], &[f32]) {
+        let span = self.spans[v];
+        let start = self.starts[v] as usize;
+        let n = usize::from(span[1].saturating_sub(span[0])) * self.channels;
+        (span, &self.values[start..start + n])
+    }
+
     /// Each row's span and its values, top to bottom.
     pub fn rows(&self) -> impl Iterator<Item = ([u16; 2], &[f32])> + '_ {
-        let ch = self.channels;
-        let mut at = 0;
-        self.spans.iter().map(move |&s| {
-            let n = usize::from(s[1].saturating_sub(s[0])) * ch;
-            let row = &self.values[at..at + n];
-            at += n;
-            (s, row)
-        })
+        (0..self.spans.len()).map(|v| self.row(v))
     }
 
     /// The image's values over its whole box, row-major.
@@ -146,6 +154,7 @@ mod tests {
         let image = PackedImage::pack([-2, -1], 4, 1, &values, &written).expect("finite");
         assert_eq!(image.spans, vec![[1, 3], [0, 0], [0, 0]]);
         assert_eq!(image.values, vec![0.5, 0.25]);
+        assert_eq!(image.starts, vec![0, 2, 2]);
         let rows: Vec<_> = image.rows().collect();
         assert_eq!(rows[0], ([1, 3], &[0.5f32, 0.25][..]));
         assert_eq!(

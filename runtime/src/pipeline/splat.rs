@@ -745,17 +745,20 @@ fn splat_upright_rows(
     if v.width == 0 {
         return;
     }
-    let rows = v.data.chunks_exact(v.width * ch).zip(v.row_spans).map(|(row, &span)| {
+    let row = |y: usize| {
+        let span = v.row_spans[y];
         let [first, end] = span.map(usize::from);
-        (span, &row[first * ch..end * ch])
-    });
+        let at = y * v.width;
+        (span, &v.data[(at + first) * ch..(at + end) * ch])
+    };
     let top_left = (centre.0 + v.origin[0], centre.1 + v.origin[1]);
-    splat_upright_spans(band, colour, top_left, v.height, ch, rows);
+    let height = v.height.min(v.row_spans.len());
+    splat_upright_spans(band, colour, top_left, height, ch, row);
 }
 
 /// A grey or RGB image of `height` rows weighted by `colour`, drawn upright with its box's
-/// top-left pixel at `top_left` (band coordinates): per row its span `[first, end)` of
-/// columns and their values, each pixel one four-wide multiply and add (`Vec4` is a SIMD
+/// top-left pixel at `top_left` (band coordinates): `row(v)` is row `v`'s span `[first, end)`
+/// of columns and their values, each pixel one four-wide multiply and add (`Vec4` is a SIMD
 /// register where the target has one). A PSF's rows are short, so the rows are walked together
 /// with the band's, with no per-row lookups beyond the span.
 fn splat_upright_spans<'v>(
@@ -764,7 +767,7 @@ fn splat_upright_spans<'v>(
     top_left: (i32, i32),
     height: usize,
     ch: usize,
-    rows: impl Iterator<Item = ([u16; 2], &'v [f32])>,
+    row: impl Fn(usize) -> ([u16; 2], &'v [f32]),
 ) {
     let (x0, y0) = top_left;
     let (top, bottom) = (y0.max(band.y0), (y0 + height as i32).min(band.y1));
@@ -779,14 +782,15 @@ fn splat_upright_spans<'v>(
     // Red, green and blue by the colour, alpha by the mean of the three weights, as `weighted`
     // does.
     let rgb_weights = glam::Vec4::new(colour[0], colour[1], colour[2], colour[3] / 3.0);
-    for (row, (span, values)) in band_rows.zip(rows.skip(first_row)).take(count) {
+    for (v, band_row) in (first_row..first_row + count).zip(band_rows) {
+        let (span, values) = row(v);
         let start = x0 + i32::from(span[0]);
         let (lo, hi) = (start.max(0), (x0 + i32::from(span[1])).min(band.width));
         if lo >= hi {
             continue;
         }
         let values = &values[(lo - start) as usize * ch..(hi - start) as usize * ch];
-        let pixels = &mut row[lo as usize..hi as usize];
+        let pixels = &mut band_row[lo as usize..hi as usize];
         if ch == 1 {
             for (px, &v) in pixels.iter_mut().zip(values) {
                 *px = (glam::Vec4::from_array(*px) + colour4 * v).to_array();
@@ -809,7 +813,7 @@ fn splat_packed(band: &mut Band, r: &SplatRecord, image: &PackedImage, sampling:
     let height = image.spans.len();
     if is_identity(r) && (ch == 1 || ch == 3) {
         let top_left = (r.center_x + image.origin[0], r.center_y + image.origin[1]);
-        splat_upright_spans(band, r.color, top_left, height, ch, image.rows());
+        splat_upright_spans(band, r.color, top_left, height, ch, |v| image.row(v));
         return;
     }
     let boxed = image.unpacked_box();
