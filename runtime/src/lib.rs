@@ -78,6 +78,7 @@ internal_modules!(
     renderer,
     sample_density,
     sample_merge,
+    smear_symmetry,
     synth,
 );
 

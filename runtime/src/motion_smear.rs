@@ -191,11 +191,13 @@ impl SmearKey {
     }
 
     /// How many angle steps cover pi at this key's length: at least 1/length radians apart
-    /// (1/(4 length) with [`SmearKey::fine_angles`]).
+    /// (1/(4 length) with [`SmearKey::fine_angles`]), and even, so that a quarter turn is a
+    /// whole number of steps ([`crate::smear_symmetry`]).
     pub fn angle_steps(&self) -> u32 {
         let per_px = if self.fine_angles { 4.0 } else { 1.0 };
         let len = self.length_px();
-        (std::f32::consts::PI * len * per_px).ceil().max(4.0) as u32
+        let steps = (std::f32::consts::PI * len * per_px).ceil().max(4.0) as u32;
+        steps + steps % 2
     }
 
     /// The angle of the motion from +x, radians in `[0, pi)`.
@@ -492,6 +494,22 @@ pub struct SmearExtent {
     pub height: usize,
     /// How far the box reaches beyond the unsmeared PSF's on each side, px per axis.
     grow: [i32; 2],
+}
+
+impl SmearExtent {
+    /// The box that the pixel grid's symmetry `g` moves this one onto
+    /// ([`crate::smear_symmetry`]).
+    pub fn moved(self, g: crate::smear_symmetry::GridSymmetry) -> Self {
+        let (origin, width, height) =
+            crate::smear_symmetry::transform_box(self.origin, self.width, self.height, g);
+        let grow = if g.swaps_axes() { [self.grow[1], self.grow[0]] } else { self.grow };
+        Self {
+            origin,
+            width,
+            height,
+            grow,
+        }
+    }
 }
 
 /// `psf` convolved with a uniform path of `length` px centred on the PSF centre, leaving it

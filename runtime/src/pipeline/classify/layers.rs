@@ -6,7 +6,8 @@ use super::lookup::{front_turns_the_aperture, lookup_psf, Lookup};
 use super::*;
 use crate::camera::Camera;
 use crate::dbset::{DbSet, NO_TWIN};
-use crate::motion_smear::{PsfImage, SmearKey};
+use crate::motion_smear::{PsfImage, SmearExtent, SmearKey};
+use crate::smear_symmetry::{canonical_key, is_grid_symmetric, transform_image, BoxImage, GridSymmetry};
 use crate::pipeline::packed::{PackedImage, PackedImages};
 use crate::pipeline::types::{psf_reach, CoarseLevel, FrameParams, SplatPath, SplatRecord};
 use psf_db::{PsfDatabase, PsfModel};
@@ -896,17 +897,30 @@ impl SmearedPsfs {
             }
             .into());
         }
-        // Each image's box (and the turned lens PSF it smears) first, then all written in
-        // place into the frame's database.
+        // A lens PSF the pixel grid's symmetries keep (a sharp point's) smears along a key
+        // into a symmetry's image of its smear along the least key of the key's orbit: that
+        // one is smeared, the others moved from it.
+        let symmetric: Vec<bool> = bases
+            .par_iter()
+            .map(|b| b.as_ref().is_some_and(is_grid_symmetric))
+            .collect();
+        // Each image's box (and the turned lens PSF it smears, and the orbit it is drawn from)
+        // first, then all written in place into the frame's database.
+        let extent_of = |base: &PsfImage, k: SmearKey| {
+            crate::motion_smear::smear_extent(base, k.length_px(), k.angle_rad(), k.bend_px())
+        };
         let extents = unique
             .par_iter()
             .map(|k| {
-                bases[turn_of(k)]
+                let t = turn_of(k);
+                bases[t]
                     .as_ref()
-                    .map(|base| {
-                        let (length, angle) = (k.length_px(), k.angle_rad());
-                        crate::motion_smear::smear_extent(base, length, angle, k.bend_px())
-                            .map(|extent| (base, extent))
+                    .map(|base| match symmetric[t].then(|| canonical_key(*k)).flatten() {
+                        Some((canonical, g)) => extent_of(base, canonical).map(|e| {
+                            let orbit = SmearOrbit { canonical, symmetry: g, extent: e };
+                            (base, e.moved(g), Some(orbit))
+                        }),
+                        None => extent_of(base, *k).map(|e| (base, e, None)),
                     })
                     .transpose()
             })
@@ -915,8 +929,8 @@ impl SmearedPsfs {
         let mut drawn = Vec::new();
         let mut unique_index = Vec::with_capacity(unique.len());
         for (&key, found) in unique.iter().zip(extents) {
-            let index = found.map(|(base, extent)| {
-                drawn.push((key, base, extent));
+            let index = found.map(|(base, extent, orbit)| {
+                drawn.push((key, base, extent, orbit));
                 first + drawn.len() as u32 - 1
             });
             unique_index.push(index);
@@ -932,49 +946,87 @@ impl SmearedPsfs {
             .collect();
         let boxes: Vec<_> = drawn
             .iter()
-            .map(|(_, _, e)| (e.origin, e.width, e.height))
+            .map(|(_, _, e, _)| (e.origin, e.width, e.height))
             .collect();
         let not_built = |e: psf_db::DbError| ClassifyError::PhysicalLens(e.to_string());
         // Packed images first, each smeared into a box of its thread's that is reused, so
         // their boxes in the database are never written.
         let packable = |base: &PsfImage| pack && (base.channels == 1 || base.channels == 3);
-        let packed: Vec<Option<PackedImage>> = drawn
+        // Each orbit's members in turn, so its smear is built once; an image of its own
+        // (`None`) is an orbit of one.
+        let mut order: Vec<usize> = (0..drawn.len()).collect();
+        let orbit_of = |i: usize| drawn[i].3.map(|o| o.canonical);
+        order.par_sort_unstable_by_key(|&i| (orbit_of(i), i));
+        let orbits: Vec<&[usize]> = order
+            .chunk_by(|&a, &b| orbit_of(a).is_some() && orbit_of(a) == orbit_of(b))
+            .collect();
+        let packed_orbits: Vec<Vec<(usize, PackedImage)>> = orbits
             .par_iter()
-            .map_init(
-                || (Vec::new(), Vec::new()),
-                |(scratch, rows): &mut (Vec<f32>, Vec<[u16; 2]>), &(k, base, extent)| {
-                    if !packable(base) {
-                        return Ok(None);
-                    }
-                    let len = extent.width * extent.height * base.channels;
-                    if scratch.len() < len {
-                        scratch.resize(len, 0.0);
-                    }
-                    rows.clear();
-                    rows.resize(extent.height, [0, 0]);
-                    let out = &mut scratch[..len];
-                    let (length, angle, bend) = (k.length_px(), k.angle_rad(), k.bend_px());
-                    crate::motion_smear::smear_within(base, length, angle, bend, extent, out, rows);
-                    PackedImage::pack(extent.origin, extent.width, base.channels, out, rows)
-                        .map(Some)
-                        .ok_or_else(|| {
-                            not_built(psf_db::DbError::OutOfBounds {
-                                what: "a smeared PSF value is not finite".into(),
-                            })
-                        })
-                },
-            )
-            .collect::<Result<_, _>>()?;
+            .map_init(SmearScratch::default, |scratch, members| {
+                let (key, base, extent, orbit) = drawn[members[0]];
+                if !packable(base) {
+                    return Ok(Vec::new());
+                }
+                let ch = base.channels;
+                let not_finite = || {
+                    not_built(psf_db::DbError::OutOfBounds {
+                        what: "a smeared PSF value is not finite".into(),
+                    })
+                };
+                let Some(orbit) = orbit else {
+                    let smeared = scratch.smear(base, key, extent);
+                    let image = PackedImage::pack(extent.origin, extent.width, ch, smeared.values, smeared.rows);
+                    return Ok(vec![(members[0], image.ok_or_else(not_finite)?)]);
+                };
+                scratch.smear(base, orbit.canonical, orbit.extent);
+                members
+                    .iter()
+                    .map(|&i| {
+                        // An orbit's members all name it and their symmetry.
+                        let g = drawn[i].3.map_or(GridSymmetry::IDENTITY, |o| o.symmetry);
+                        let (transposed, mirrors) = g.as_transpose_and_mirrors();
+                        let (source, extent) = (scratch.smear_or_transpose(transposed), drawn[i].2);
+                        debug_assert_eq!(source.width, extent.width);
+                        let image = PackedImage::pack_flipped(
+                            extent.origin,
+                            extent.width,
+                            ch,
+                            source.values,
+                            source.rows,
+                            mirrors,
+                        );
+                        Ok((i, image.ok_or_else(not_finite)?))
+                    })
+                    .collect()
+            })
+            .collect::<Result<_, ClassifyError>>()?;
+        let mut packed: Vec<Option<PackedImage>> = vec![None; drawn.len()];
+        for (i, image) in packed_orbits.into_iter().flatten() {
+            packed[i] = Some(image);
+        }
         let extension = crate::dbset::extend_with_dense(all, &boxes).map_err(not_built)?;
         let database = extension
             .fill_within(|i, out, written| {
-                let (k, base, extent) = drawn[i];
+                let (k, base, extent, orbit) = drawn[i];
                 if packable(base) {
                     written.fill([0, 0]);
                     return;
                 }
-                let (length, angle, bend) = (k.length_px(), k.angle_rad(), k.bend_px());
-                crate::motion_smear::smear_within(base, length, angle, bend, extent, out, written);
+                let Some(orbit) = orbit else {
+                    let (length, angle, bend) = (k.length_px(), k.angle_rad(), k.bend_px());
+                    crate::motion_smear::smear_within(base, length, angle, bend, extent, out, written);
+                    return;
+                };
+                let mut scratch = SmearScratch::default();
+                scratch.smear(base, orbit.canonical, orbit.extent);
+                let moved = scratch.moved(orbit.symmetry);
+                let ch = base.channels;
+                for (v, (&span, w)) in moved.rows.iter().zip(written.iter_mut()).enumerate() {
+                    let [a, b] = span.map(usize::from);
+                    let row = (v * extent.width + a) * ch..(v * extent.width + b) * ch;
+                    out[row.clone()].copy_from_slice(&moved.values[row]);
+                    *w = span;
+                }
             })
             .map_err(not_built)?;
         let packed = packed.iter().any(Option::is_some).then(|| {
@@ -994,6 +1046,104 @@ impl SmearedPsfs {
     fn index_of(&self, key: SmearKey) -> Option<u32> {
         let i = self.keys.binary_search_by(|(k, _)| k.cmp(&key)).ok()?;
         self.keys[i].1
+    }
+}
+
+/// The orbit a smeared image is moved from ([`crate::smear_symmetry`]): the least key of its
+/// key's orbit, its box, and the symmetry that moves its smear onto the image.
+#[derive(Clone, Copy)]
+struct SmearOrbit {
+    canonical: SmearKey,
+    symmetry: GridSymmetry,
+    extent: SmearExtent,
+}
+
+/// One thread's boxes for smearing: the smear last built, and an image moved from it.
+#[derive(Default)]
+struct SmearScratch {
+    values: Vec<f32>,
+    rows: Vec<[u16; 2]>,
+    extent: Option<SmearExtent>,
+    channels: usize,
+    moved_values: Vec<f32>,
+    moved_rows: Vec<[u16; 2]>,
+    /// Whether the moved image is the last smear transposed.
+    transposed: bool,
+}
+
+/// A box image in [`SmearScratch`]: its width, values and per row the columns outside which
+/// it is zero.
+struct ScratchImage<'a> {
+    width: usize,
+    values: &'a [f32],
+    rows: &'a [[u16; 2]],
+}
+
+impl SmearScratch {
+    /// `base` smeared as `key` says into the box `extent`.
+    fn smear(&mut self, base: &PsfImage, key: SmearKey, extent: SmearExtent) -> ScratchImage<'_> {
+        let len = extent.width * extent.height * base.channels;
+        if self.values.len() < len {
+            self.values.resize(len, 0.0);
+        }
+        self.rows.clear();
+        self.rows.resize(extent.height, [0, 0]);
+        let (length, angle, bend) = (key.length_px(), key.angle_rad(), key.bend_px());
+        let out = &mut self.values[..len];
+        crate::motion_smear::smear_within(base, length, angle, bend, extent, out, &mut self.rows);
+        self.extent = Some(extent);
+        self.channels = base.channels;
+        self.transposed = false;
+        ScratchImage {
+            width: extent.width,
+            values: &self.values[..len],
+            rows: &self.rows,
+        }
+    }
+
+    /// The last smear, or it transposed (built once per smear).
+    fn smear_or_transpose(&mut self, transposed: bool) -> ScratchImage<'_> {
+        if !transposed {
+            return self.moved(GridSymmetry::IDENTITY);
+        }
+        if !self.transposed {
+            self.moved(GridSymmetry::TRANSPOSE);
+            self.transposed = true;
+        }
+        let ch = self.channels;
+        let width = self.extent.map_or(0, |e| e.height);
+        ScratchImage {
+            width,
+            values: &self.moved_values[..width * self.moved_rows.len() * ch],
+            rows: &self.moved_rows,
+        }
+    }
+
+    /// The last smear moved by `g`.
+    fn moved(&mut self, g: GridSymmetry) -> ScratchImage<'_> {
+        self.transposed = false;
+        let extent = self.extent.expect("a smear is built before it is moved");
+        let ch = self.channels;
+        if g == GridSymmetry::IDENTITY {
+            return ScratchImage {
+                width: extent.width,
+                values: &self.values[..extent.width * extent.height * ch],
+                rows: &self.rows,
+            };
+        }
+        let src = BoxImage {
+            origin: extent.origin,
+            width: extent.width,
+            channels: ch,
+            values: &self.values,
+            rows: &self.rows,
+        };
+        let (_, width) = transform_image(&src, g, &mut self.moved_values, &mut self.moved_rows);
+        ScratchImage {
+            width,
+            values: &self.moved_values[..width * self.moved_rows.len() * ch],
+            rows: &self.moved_rows,
+        }
     }
 }
 
