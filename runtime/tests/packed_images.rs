@@ -70,10 +70,7 @@ fn draw_through(
         .expect("prepare");
     let classified = prepared.classified().expect("records");
     assert!(classified.counts.smeared > 100, "{:?}", classified.counts);
-    let packed = classified
-        .packed
-        .as_ref()
-        .map_or(0, |p| p.images.iter().flatten().count());
+    let packed = classified.packed.as_ref().map_or(0, |p| p.count());
     (render_cpu(prepared, dbs).0, packed)
 }
 

@@ -68,7 +68,12 @@ impl PackedImage {
         }
         let mut spans = Vec::with_capacity(written.len());
         let mut starts = Vec::with_capacity(written.len());
-        let mut values = Vec::new();
+        // At most the written columns' values: one allocation rather than one per doubling.
+        let most: usize = written
+            .iter()
+            .map(|w| usize::from(w[1]).min(width).saturating_sub(usize::from(w[0])))
+            .sum();
+        let mut values = Vec::with_capacity(most * ch);
         let mut rows = box_values.chunks_exact(width * ch).zip(written);
         let mut pack_row = |(row, w): (&[f32], &[u16; 2])| -> Option<()> {
             let end = usize::from(w[1]).min(width);
@@ -141,21 +146,97 @@ impl PackedImage {
     }
 }
 
-/// A frame's packed images, by the index of the database PSF each stands for.
+/// A frame's packed images, by the index of the database PSF each stands for. Images that are
+/// one image mirrored (a sharp point's smears along arcs that the grid's mirrors map onto each
+/// other, [`crate::smear_symmetry`]) share it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PackedImages {
-    /// Database index of `images[0]`.
+    /// Database index of `slots[0]`.
     pub first: u32,
-    /// Per PSF from `first` on, its packed image (`None`: stored in the database).
-    pub images: Vec<Option<PackedImage>>,
+    /// The distinct images.
+    pub pool: Vec<PackedImage>,
+    /// Per PSF from `first` on, its image in `pool` and whether it is that image mirrored left
+    /// to right and top to bottom within its box (`None`: stored in the database).
+    pub slots: Vec<Option<(u32, [bool; 2])>>,
 }
 
 impl PackedImages {
     /// The packed image of database PSF `psf`, if it is one.
     #[inline]
-    pub fn get(&self, psf: u32) -> Option<&PackedImage> {
+    pub fn get(&self, psf: u32) -> Option<MirroredImage<'_>> {
         let i = psf.checked_sub(self.first)?;
-        self.images.get(i as usize)?.as_ref()
+        let (index, mirrors) = (*self.slots.get(i as usize)?)?;
+        Some(MirroredImage {
+            image: self.pool.get(index as usize)?,
+            mirrors,
+        })
+    }
+
+    /// How many database PSFs are packed here.
+    pub fn count(&self) -> usize {
+        self.slots.iter().flatten().count()
+    }
+}
+
+/// A packed image as a PSF draws it: mirrored left to right (`mirrors[0]`) and top to bottom
+/// (`mirrors[1]`) within its box.
+#[derive(Clone, Copy, Debug)]
+pub struct MirroredImage<'a> {
+    /// The image as stored.
+    pub image: &'a PackedImage,
+    /// Whether it is drawn mirrored left to right and top to bottom.
+    pub mirrors: [bool; 2],
+}
+
+impl<'a> MirroredImage<'a> {
+    /// Top-left pixel of the drawn box relative to the PSF centre, px: the stored box's
+    /// mirrored about the centre on each mirrored axis.
+    pub fn origin(&self) -> [i32; 2] {
+        let [ox, oy] = self.image.origin;
+        let (w, h) = (self.image.width as i32, self.image.spans.len() as i32);
+        [
+            if self.mirrors[0] { -(ox + w - 1) } else { ox },
+            if self.mirrors[1] { -(oy + h - 1) } else { oy },
+        ]
+    }
+
+    /// Rows of the box.
+    pub fn height(&self) -> usize {
+        self.image.spans.len()
+    }
+
+    /// Row `v`'s span as drawn and its values as stored: right to left where the image is
+    /// mirrored left to right.
+    #[inline]
+    pub fn row(&self, v: usize) -> ([u16; 2], &'a [f32]) {
+        let v = if self.mirrors[1] { self.height() - 1 - v } else { v };
+        let (span, values) = self.image.row(v);
+        if self.mirrors[0] {
+            // Box widths are the format's u16 widths.
+            let w = self.image.width as u16;
+            ([w - span[1], w - span[0]], values)
+        } else {
+            (span, values)
+        }
+    }
+
+    /// The image's values over its drawn box, row-major (zeros where the rows hold none).
+    pub fn unpacked_box(&self) -> Vec<f32> {
+        let stored = self.image.unpacked_box();
+        let (ch, w, h) = (self.image.channels, self.image.width, self.height());
+        if self.mirrors == [false, false] || ch == 0 || w == 0 {
+            return stored;
+        }
+        let mut out = vec![0.0; stored.len()];
+        for (v, row) in out.chunks_exact_mut(w * ch).enumerate() {
+            let from = if self.mirrors[1] { h - 1 - v } else { v };
+            let src = &stored[from * w * ch..(from + 1) * w * ch];
+            for (u, px) in row.chunks_exact_mut(ch).enumerate() {
+                let x = if self.mirrors[0] { w - 1 - u } else { u };
+                px.copy_from_slice(&src[x * ch..(x + 1) * ch]);
+            }
+        }
+        out
     }
 }
 
@@ -198,6 +279,38 @@ mod tests {
         }
         assert_eq!(mirrored, values);
         assert_eq!(image([false, true]).unpacked_box()[..6], values[6..]);
+    }
+
+    #[test]
+    fn a_mirrored_view_draws_what_packing_mirrored_stores() {
+        let values = [1.0, 2.0, 3.0, 4.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 5.0, 6.0];
+        let written = [[0, 3], [0, 3]];
+        let stored = PackedImage::pack([-1, 0], 3, 2, &values, &written).expect("finite");
+        for mirrors in [[false, false], [true, false], [false, true], [true, true]] {
+            let flipped = PackedImage::pack_flipped([0, 0], 3, 2, &values, &written, mirrors).expect("finite");
+            let view = MirroredImage {
+                image: &stored,
+                mirrors,
+            };
+            assert_eq!(view.unpacked_box(), flipped.unpacked_box(), "{mirrors:?}");
+            for v in 0..2 {
+                let (span, vals) = view.row(v);
+                let (want_span, want) = flipped.row(v);
+                assert_eq!(span, want_span);
+                let drawn: Vec<f32> = if mirrors[0] {
+                    vals.chunks_exact(2).rev().flatten().copied().collect()
+                } else {
+                    vals.to_vec()
+                };
+                assert_eq!(drawn, want);
+            }
+        }
+        let view = MirroredImage {
+            image: &stored,
+            mirrors: [true, true],
+        };
+        // The box [-1, 1] x [0, 1] mirrored about the centre: [-1, 1] x [-1, 0].
+        assert_eq!(view.origin(), [-1, -1]);
     }
 
     #[test]

@@ -16,7 +16,7 @@ use poisson::Plane;
 use psf_db::PsfDatabase;
 use rayon::prelude::*;
 
-use super::packed::{PackedImage, PackedImages};
+use super::packed::{MirroredImage, PackedImages};
 use super::types::{psf_reach, Classified, FrameParams, SplatPath, SplatRecord};
 
 /// Rows per band of the deterministic parallel splat. A pixel sums its records in record
@@ -753,20 +753,22 @@ fn splat_upright_rows(
     };
     let top_left = (centre.0 + v.origin[0], centre.1 + v.origin[1]);
     let height = v.height.min(v.row_spans.len());
-    splat_upright_spans(band, colour, top_left, height, ch, row);
+    splat_upright_spans(band, colour, top_left, height, ch, false, row);
 }
 
 /// A grey or RGB image of `height` rows weighted by `colour`, drawn upright with its box's
 /// top-left pixel at `top_left` (band coordinates): `row(v)` is row `v`'s span `[first, end)`
-/// of columns and their values, each pixel one four-wide multiply and add (`Vec4` is a SIMD
-/// register where the target has one). A PSF's rows are short, so the rows are walked together
-/// with the band's, with no per-row lookups beyond the span.
+/// of columns and their values (right to left where `reversed`), each pixel one four-wide
+/// multiply and add (`Vec4` is a SIMD register where the target has one). A PSF's rows are
+/// short, so the rows are walked together with the band's, with no per-row lookups beyond the
+/// span.
 fn splat_upright_spans<'v>(
     band: &mut Band,
     colour: [f32; 4],
     top_left: (i32, i32),
     height: usize,
     ch: usize,
+    reversed: bool,
     row: impl Fn(usize) -> ([u16; 2], &'v [f32]),
 ) {
     let (x0, y0) = top_left;
@@ -789,8 +791,26 @@ fn splat_upright_spans<'v>(
         if lo >= hi {
             continue;
         }
-        let values = &values[(lo - start) as usize * ch..(hi - start) as usize * ch];
         let pixels = &mut band_row[lo as usize..hi as usize];
+        if reversed {
+            // Column `start + i` holds value `n - 1 - i` of the row's `n`.
+            let n = (i32::from(span[1]) - i32::from(span[0])) as usize;
+            let (a, b) = (n - (hi - start) as usize, n - (lo - start) as usize);
+            let values = &values[a * ch..b * ch];
+            if ch == 1 {
+                for (px, &v) in pixels.iter_mut().zip(values.iter().rev()) {
+                    *px = (glam::Vec4::from_array(*px) + colour4 * v).to_array();
+                }
+            } else {
+                for (px, vals) in pixels.iter_mut().zip(values.chunks_exact(3).rev()) {
+                    let (r, g, b) = (vals[0], vals[1], vals[2]);
+                    let value = rgb_weights * glam::Vec4::new(r, g, b, r + g + b);
+                    *px = (glam::Vec4::from_array(*px) + value).to_array();
+                }
+            }
+            continue;
+        }
+        let values = &values[(lo - start) as usize * ch..(hi - start) as usize * ch];
         if ch == 1 {
             for (px, &v) in pixels.iter_mut().zip(values) {
                 *px = (glam::Vec4::from_array(*px) + colour4 * v).to_array();
@@ -808,22 +828,24 @@ fn splat_upright_spans<'v>(
 /// A dense record whose image is packed ([`PackedImage`]): upright from its rows' spans, as
 /// [`splat_upright_rows`] draws the same image from the database; turned (no packed image is
 /// today) from its box.
-fn splat_packed(band: &mut Band, r: &SplatRecord, image: &PackedImage, sampling: RotationSampling) {
-    let ch = image.channels;
-    let height = image.spans.len();
+fn splat_packed(band: &mut Band, r: &SplatRecord, image: MirroredImage, sampling: RotationSampling) {
+    let ch = image.image.channels;
+    let height = image.height();
+    let origin = image.origin();
     if is_identity(r) && (ch == 1 || ch == 3) {
-        let top_left = (r.center_x + image.origin[0], r.center_y + image.origin[1]);
-        splat_upright_spans(band, r.color, top_left, height, ch, |v| image.row(v));
+        let top_left = (r.center_x + origin[0], r.center_y + origin[1]);
+        splat_upright_spans(band, r.color, top_left, height, ch, image.mirrors[0], |v| image.row(v));
         return;
     }
     let boxed = image.unpacked_box();
+    let width = image.image.width;
     let dense = DenseImage {
-        origin: image.origin,
-        width: image.width,
+        origin,
+        width,
         height,
     };
     draw_dense(band, r, dense, sampling, |u, v| {
-        let at = (v * image.width + u) * ch;
+        let at = (v * width + u) * ch;
         let vals = &boxed[at..at + ch];
         (!vals.iter().all(|&x| x == 0.0)).then(|| weighted(r.color, vals))
     });

@@ -7,7 +7,9 @@ use super::*;
 use crate::camera::Camera;
 use crate::dbset::{DbSet, NO_TWIN};
 use crate::motion_smear::{PsfImage, SmearExtent, SmearKey};
-use crate::smear_symmetry::{canonical_key, is_grid_symmetric, transform_image, BoxImage, GridSymmetry};
+use crate::smear_symmetry::{
+    canonical_key, is_grid_symmetric, transform_box, transform_image, BoxImage, GridSymmetry,
+};
 use crate::pipeline::packed::{PackedImage, PackedImages};
 use crate::pipeline::types::{psf_reach, CoarseLevel, FrameParams, SplatPath, SplatRecord};
 use psf_db::{PsfDatabase, PsfModel};
@@ -960,12 +962,15 @@ impl SmearedPsfs {
         let orbits: Vec<&[usize]> = order
             .chunk_by(|&a, &b| orbit_of(a).is_some() && orbit_of(a) == orbit_of(b))
             .collect();
-        let packed_orbits: Vec<Vec<(usize, PackedImage)>> = orbits
+        // Per orbit, its smear packed and, where a member needs it, its transpose; each member
+        // is one of them mirrored.
+        type OrbitImages = (Vec<PackedImage>, Vec<(usize, u32, [bool; 2])>);
+        let packed_orbits: Vec<OrbitImages> = orbits
             .par_iter()
             .map_init(SmearScratch::default, |scratch, members| {
                 let (key, base, extent, orbit) = drawn[members[0]];
                 if !packable(base) {
-                    return Ok(Vec::new());
+                    return Ok((Vec::new(), Vec::new()));
                 }
                 let ch = base.channels;
                 let not_finite = || {
@@ -976,33 +981,45 @@ impl SmearedPsfs {
                 let Some(orbit) = orbit else {
                     let smeared = scratch.smear(base, key, extent);
                     let image = PackedImage::pack(extent.origin, extent.width, ch, smeared.values, smeared.rows);
-                    return Ok(vec![(members[0], image.ok_or_else(not_finite)?)]);
+                    return Ok((vec![image.ok_or_else(not_finite)?], vec![(members[0], 0, [false, false])]));
                 };
                 scratch.smear(base, orbit.canonical, orbit.extent);
-                members
-                    .iter()
-                    .map(|&i| {
-                        // An orbit's members all name it and their symmetry.
-                        let g = drawn[i].3.map_or(GridSymmetry::IDENTITY, |o| o.symmetry);
-                        let (transposed, mirrors) = g.as_transpose_and_mirrors();
-                        let (source, extent) = (scratch.smear_or_transpose(transposed), drawn[i].2);
-                        debug_assert_eq!(source.width, extent.width);
-                        let image = PackedImage::pack_flipped(
-                            extent.origin,
-                            extent.width,
-                            ch,
-                            source.values,
-                            source.rows,
-                            mirrors,
-                        );
-                        Ok((i, image.ok_or_else(not_finite)?))
-                    })
-                    .collect()
+                let mut images = Vec::with_capacity(2);
+                let mut which = [None, None];
+                let mut slots = Vec::with_capacity(members.len());
+                for &i in members.iter() {
+                    // An orbit's members all name it and their symmetry.
+                    let g = drawn[i].3.map_or(GridSymmetry::IDENTITY, |o| o.symmetry);
+                    let (transposed, mirrors) = g.as_transpose_and_mirrors();
+                    let index = match which[usize::from(transposed)] {
+                        Some(index) => index,
+                        None => {
+                            let source = scratch.smear_or_transpose(transposed);
+                            let (origin, width, _) = if transposed {
+                                transform_box(orbit.extent.origin, orbit.extent.width, orbit.extent.height, GridSymmetry::TRANSPOSE)
+                            } else {
+                                (orbit.extent.origin, orbit.extent.width, orbit.extent.height)
+                            };
+                            let image = PackedImage::pack(origin, width, ch, source.values, source.rows);
+                            images.push(image.ok_or_else(not_finite)?);
+                            let index = images.len() as u32 - 1;
+                            which[usize::from(transposed)] = Some(index);
+                            index
+                        }
+                    };
+                    slots.push((i, index, mirrors));
+                }
+                Ok((images, slots))
             })
             .collect::<Result<_, ClassifyError>>()?;
-        let mut packed: Vec<Option<PackedImage>> = vec![None; drawn.len()];
-        for (i, image) in packed_orbits.into_iter().flatten() {
-            packed[i] = Some(image);
+        let mut pool = Vec::new();
+        let mut slots: Vec<Option<(u32, [bool; 2])>> = vec![None; drawn.len()];
+        for (images, members) in packed_orbits {
+            let first_of_orbit = pool.len() as u32;
+            pool.extend(images);
+            for (i, index, mirrors) in members {
+                slots[i] = Some((first_of_orbit + index, mirrors));
+            }
         }
         let extension = crate::dbset::extend_with_dense(all, &boxes).map_err(not_built)?;
         let database = extension
@@ -1029,11 +1046,8 @@ impl SmearedPsfs {
                 }
             })
             .map_err(not_built)?;
-        let packed = packed.iter().any(Option::is_some).then(|| {
-            std::sync::Arc::new(PackedImages {
-                first,
-                images: packed,
-            })
+        let packed = slots.iter().any(Option::is_some).then(|| {
+            std::sync::Arc::new(PackedImages { first, pool, slots })
         });
         Ok(Self {
             database: Some(std::sync::Arc::new(database)),
@@ -1071,10 +1085,9 @@ struct SmearScratch {
     transposed: bool,
 }
 
-/// A box image in [`SmearScratch`]: its width, values and per row the columns outside which
-/// it is zero.
+/// A box image in [`SmearScratch`]: its values and per row the columns outside which it is
+/// zero.
 struct ScratchImage<'a> {
-    width: usize,
     values: &'a [f32],
     rows: &'a [[u16; 2]],
 }
@@ -1095,7 +1108,6 @@ impl SmearScratch {
         self.channels = base.channels;
         self.transposed = false;
         ScratchImage {
-            width: extent.width,
             values: &self.values[..len],
             rows: &self.rows,
         }
@@ -1113,7 +1125,6 @@ impl SmearScratch {
         let ch = self.channels;
         let width = self.extent.map_or(0, |e| e.height);
         ScratchImage {
-            width,
             values: &self.moved_values[..width * self.moved_rows.len() * ch],
             rows: &self.moved_rows,
         }
@@ -1126,7 +1137,6 @@ impl SmearScratch {
         let ch = self.channels;
         if g == GridSymmetry::IDENTITY {
             return ScratchImage {
-                width: extent.width,
                 values: &self.values[..extent.width * extent.height * ch],
                 rows: &self.rows,
             };
@@ -1140,7 +1150,6 @@ impl SmearScratch {
         };
         let (_, width) = transform_image(&src, g, &mut self.moved_values, &mut self.moved_rows);
         ScratchImage {
-            width,
             values: &self.moved_values[..width * self.moved_rows.len() * ch],
             rows: &self.moved_rows,
         }
