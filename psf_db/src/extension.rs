@@ -169,10 +169,15 @@ impl DenseExtension {
                 if image.is_empty() {
                     return None;
                 }
-                for (r, (row, span)) in image.chunks_exact(width * ch).zip(spans).enumerate() {
+                for (r, span) in spans.iter_mut().enumerate() {
                     let end = usize::from(span[1]).min(width);
                     let first = usize::from(span[0]).min(end);
-                    let written = &row[first * ch..end * ch];
+                    // A row left untouched: nothing to read (most of a packed streak's box).
+                    if first == end {
+                        *span = [0, 0];
+                        continue;
+                    }
+                    let written = &image[(r * width + first) * ch..(r * width + end) * ch];
                     if let Some(k) = written.iter().position(|v| !v.is_finite()) {
                         return Some((r * width + first) * ch + k);
                     }

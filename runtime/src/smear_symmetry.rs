@@ -101,7 +101,11 @@ impl GridSymmetry {
     /// symmetries leave unchanged; `None` where `key`'s angle steps are odd (a quarter turn
     /// then falls between two steps).
     pub fn apply_to_key(self, key: SmearKey) -> Option<SmearKey> {
-        let n = key.angle_steps();
+        self.apply_with_steps(key, key.angle_steps())
+    }
+
+    /// [`GridSymmetry::apply_to_key`] for a key of `n` angle steps.
+    fn apply_with_steps(self, key: SmearKey, n: u32) -> Option<SmearKey> {
         if n % 2 == 1 {
             return None;
         }
@@ -126,8 +130,9 @@ impl GridSymmetry {
 /// `symmetry.apply_to_key(canonical)`. `None` where `key`'s angle steps are odd.
 pub fn canonical_key(key: SmearKey) -> Option<(SmearKey, GridSymmetry)> {
     let mut best: Option<(SmearKey, GridSymmetry)> = None;
+    let n = key.angle_steps();
     for g in GridSymmetry::all() {
-        let moved = g.apply_to_key(key)?;
+        let moved = g.apply_with_steps(key, n)?;
         if best.is_none_or(|(b, _)| (moved.angle_step, moved.bend_step) < (b.angle_step, b.bend_step)) {
             best = Some((moved, g));
         }

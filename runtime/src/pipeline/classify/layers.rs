@@ -878,9 +878,23 @@ impl SmearedPsfs {
                 ..*k
             }
         };
-        let mut unique: Vec<SmearKey> = keys.par_iter().map(drawn_as).collect();
-        unique.par_sort_unstable();
-        unique.dedup();
+        // Each key as drawn, with its own index: sorted, the distinct ones and which of them
+        // each key is, in one pass.
+        let mut mapped: Vec<(SmearKey, u32)> = keys
+            .par_iter()
+            .enumerate()
+            .map(|(i, k)| (drawn_as(k), i as u32))
+            .collect();
+        mapped.par_sort_unstable();
+        let mut unique: Vec<SmearKey> = Vec::with_capacity(mapped.len());
+        let mut unique_of_key = vec![0u32; keys.len()];
+        for &(k, i) in &mapped {
+            if unique.last() != Some(&k) {
+                unique.push(k);
+            }
+            unique_of_key[i as usize] = unique.len() as u32 - 1;
+        }
+        drop(mapped);
         let pixels: usize = unique
             .iter()
             .map(|k| {
@@ -938,13 +952,9 @@ impl SmearedPsfs {
             unique_index.push(index);
         }
         let indexed: Vec<(SmearKey, Option<u32>)> = keys
-            .par_iter()
-            .map(|k| {
-                let i = unique
-                    .binary_search(&drawn_as(k))
-                    .expect("every key is drawn as a listed key");
-                (*k, unique_index[i])
-            })
+            .iter()
+            .zip(&unique_of_key)
+            .map(|(k, &u)| (*k, unique_index[u as usize]))
             .collect();
         let boxes: Vec<_> = drawn
             .iter()
@@ -956,9 +966,14 @@ impl SmearedPsfs {
         let packable = |base: &PsfImage| pack && (base.channels == 1 || base.channels == 3);
         // Each orbit's members in turn, so its smear is built once; an image of its own
         // (`None`) is an orbit of one.
-        let mut order: Vec<usize> = (0..drawn.len()).collect();
+        let mut by_orbit: Vec<(Option<SmearKey>, usize)> = drawn
+            .iter()
+            .enumerate()
+            .map(|(i, d)| (d.3.map(|o| o.canonical), i))
+            .collect();
+        by_orbit.par_sort_unstable();
+        let order: Vec<usize> = by_orbit.iter().map(|&(_, i)| i).collect();
         let orbit_of = |i: usize| drawn[i].3.map(|o| o.canonical);
-        order.par_sort_unstable_by_key(|&i| (orbit_of(i), i));
         let orbits: Vec<&[usize]> = order
             .chunk_by(|&a, &b| orbit_of(a).is_some() && orbit_of(a) == orbit_of(b))
             .collect();
