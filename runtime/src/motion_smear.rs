@@ -237,6 +237,19 @@ pub struct PsfImage {
     pub data: Vec<f32>,
 }
 
+impl PsfImage {
+    /// A single lit pixel of value 1, grey: the PSF of an in-focus point.
+    pub fn point() -> Self {
+        Self {
+            origin: [0, 0],
+            width: 1,
+            height: 1,
+            channels: 1,
+            data: vec![1.0],
+        }
+    }
+}
+
 /// Why a smeared PSF could not be built.
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum SmearError {
@@ -926,15 +939,8 @@ mod tests {
         }
     }
 
-    /// A single lit pixel: the PSF of an in-focus point.
     fn point() -> PsfImage {
-        PsfImage {
-            origin: [0, 0],
-            width: 1,
-            height: 1,
-            channels: 1,
-            data: vec![1.0],
-        }
+        PsfImage::point()
     }
 
     fn disk(radius: f32, channels: usize) -> PsfImage {

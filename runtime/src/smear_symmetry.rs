@@ -238,13 +238,7 @@ mod tests {
     use crate::motion_smear::{smear, SmearKey};
 
     fn point() -> PsfImage {
-        PsfImage {
-            origin: [0, 0],
-            width: 1,
-            height: 1,
-            channels: 1,
-            data: vec![1.0],
-        }
+        PsfImage::point()
     }
 
     #[test]

@@ -42,19 +42,6 @@ impl PackedImage {
         box_values: &[f32],
         written: &[[u16; 2]],
     ) -> Option<Self> {
-        Self::pack_flipped(origin, width, channels, box_values, written, [false, false])
-    }
-
-    /// [`PackedImage::pack`] of the box's image mirrored left to right (`flip[0]`) and top to
-    /// bottom (`flip[1]`) within its box, whose origin is then `origin` (px from the centre).
-    pub fn pack_flipped(
-        origin: [i32; 2],
-        width: usize,
-        channels: usize,
-        box_values: &[f32],
-        written: &[[u16; 2]],
-        flip: [bool; 2],
-    ) -> Option<Self> {
         let ch = channels;
         if width == 0 || ch == 0 {
             return Some(Self {
@@ -74,8 +61,7 @@ impl PackedImage {
             .map(|w| usize::from(w[1]).min(width).saturating_sub(usize::from(w[0])))
             .sum();
         let mut values = Vec::with_capacity(most * ch);
-        let mut rows = box_values.chunks_exact(width * ch).zip(written);
-        let mut pack_row = |(row, w): (&[f32], &[u16; 2])| -> Option<()> {
+        for (row, w) in box_values.chunks_exact(width * ch).zip(written) {
             let end = usize::from(w[1]).min(width);
             let first = usize::from(w[0]).min(end);
             starts.push(u32::try_from(values.len()).ok()?);
@@ -86,26 +72,12 @@ impl PackedImage {
             let nonzero = |px: &[f32]| px.iter().any(|&v| v != 0.0);
             let Some(a) = lit.chunks_exact(ch).position(nonzero) else {
                 spans.push([0, 0]);
-                return Some(());
+                continue;
             };
             let b = lit.chunks_exact(ch).rposition(nonzero).map_or(a, |b| b) + 1;
-            let (a, b) = (first + a, first + b);
-            if flip[0] {
-                for px in row[a * ch..b * ch].chunks_exact(ch).rev() {
-                    values.extend_from_slice(px);
-                }
-                // Box widths are the format's u16 widths.
-                spans.push([(width - b) as u16, (width - a) as u16]);
-            } else {
-                values.extend_from_slice(&row[a * ch..b * ch]);
-                spans.push([a as u16, b as u16]);
-            }
-            Some(())
-        };
-        if flip[1] {
-            rows.rev().try_for_each(&mut pack_row)?;
-        } else {
-            rows.try_for_each(&mut pack_row)?;
+            values.extend_from_slice(&lit[a * ch..b * ch]);
+            // Box widths are the format's u16 widths.
+            spans.push([(first + a) as u16, (first + b) as u16]);
         }
         Some(Self {
             origin,
@@ -263,46 +235,37 @@ mod tests {
     }
 
     #[test]
-    fn a_flipped_image_is_packed_mirrored_within_its_box() {
+    fn a_mirrored_view_draws_the_mirrored_box() {
         // 3 x 2, two channels.
-        let values = [1.0, 2.0, 3.0, 4.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 5.0, 6.0];
-        let written = [[0, 3], [0, 3]];
-        let image = |flip| PackedImage::pack_flipped([0, 0], 3, 2, &values, &written, flip).expect("finite");
-        let both = image([true, true]);
-        assert_eq!(both.spans, vec![[0, 1], [1, 3]]);
-        assert_eq!(both.values, vec![5.0, 6.0, 3.0, 4.0, 1.0, 2.0]);
-        let mut mirrored = image([true, false]).unpacked_box();
-        // Mirrored back row by row, the box's own values.
-        for row in mirrored.chunks_exact_mut(6) {
-            let px: Vec<[f32; 2]> = row.chunks_exact(2).rev().map(|p| [p[0], p[1]]).collect();
-            row.copy_from_slice(px.as_flattened());
-        }
-        assert_eq!(mirrored, values);
-        assert_eq!(image([false, true]).unpacked_box()[..6], values[6..]);
-    }
-
-    #[test]
-    fn a_mirrored_view_draws_what_packing_mirrored_stores() {
         let values = [1.0, 2.0, 3.0, 4.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 5.0, 6.0];
         let written = [[0, 3], [0, 3]];
         let stored = PackedImage::pack([-1, 0], 3, 2, &values, &written).expect("finite");
         for mirrors in [[false, false], [true, false], [false, true], [true, true]] {
-            let flipped = PackedImage::pack_flipped([0, 0], 3, 2, &values, &written, mirrors).expect("finite");
+            // The box mirrored pixel by pixel, and packed.
+            let mut box_mirrored = [0.0; 12];
+            for v in 0..2 {
+                for u in 0..3 {
+                    let (x, y) = (if mirrors[0] { 2 - u } else { u }, if mirrors[1] { 1 - v } else { v });
+                    let (to, from) = ((v * 3 + u) * 2, (y * 3 + x) * 2);
+                    box_mirrored[to..to + 2].copy_from_slice(&values[from..from + 2]);
+                }
+            }
+            let want = PackedImage::pack([0, 0], 3, 2, &box_mirrored, &written).expect("finite");
             let view = MirroredImage {
                 image: &stored,
                 mirrors,
             };
-            assert_eq!(view.unpacked_box(), flipped.unpacked_box(), "{mirrors:?}");
+            assert_eq!(view.unpacked_box(), box_mirrored.to_vec(), "{mirrors:?}");
             for v in 0..2 {
                 let (span, vals) = view.row(v);
-                let (want_span, want) = flipped.row(v);
-                assert_eq!(span, want_span);
+                let (want_span, want_values) = want.row(v);
+                assert_eq!(span, want_span, "{mirrors:?} row {v}");
                 let drawn: Vec<f32> = if mirrors[0] {
                     vals.chunks_exact(2).rev().flatten().copied().collect()
                 } else {
                     vals.to_vec()
                 };
-                assert_eq!(drawn, want);
+                assert_eq!(drawn, want_values, "{mirrors:?} row {v}");
             }
         }
         let view = MirroredImage {
