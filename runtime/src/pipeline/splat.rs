@@ -784,6 +784,14 @@ fn splat_upright_spans<'v>(
     // Red, green and blue by the colour, alpha by the mean of the three weights, as `weighted`
     // does.
     let rgb_weights = glam::Vec4::new(colour[0], colour[1], colour[2], colour[3] / 3.0);
+    let add_grey = |px: &mut [f32; 4], v: f32| {
+        *px = (glam::Vec4::from_array(*px) + colour4 * v).to_array();
+    };
+    let add_rgb = |px: &mut [f32; 4], vals: &[f32]| {
+        let (r, g, b) = (vals[0], vals[1], vals[2]);
+        let value = rgb_weights * glam::Vec4::new(r, g, b, r + g + b);
+        *px = (glam::Vec4::from_array(*px) + value).to_array();
+    };
     for (v, band_row) in (first_row..first_row + count).zip(band_rows) {
         let (span, values) = row(v);
         let start = x0 + i32::from(span[0]);
@@ -798,34 +806,22 @@ fn splat_upright_spans<'v>(
             let (a, b) = (n - (hi - start) as usize, n - (lo - start) as usize);
             let values = &values[a * ch..b * ch];
             if ch == 1 {
-                for (px, &v) in pixels.iter_mut().zip(values.iter().rev()) {
-                    *px = (glam::Vec4::from_array(*px) + colour4 * v).to_array();
-                }
+                pixels.iter_mut().zip(values.iter().rev()).for_each(|(px, &v)| add_grey(px, v));
             } else {
-                for (px, vals) in pixels.iter_mut().zip(values.chunks_exact(3).rev()) {
-                    let (r, g, b) = (vals[0], vals[1], vals[2]);
-                    let value = rgb_weights * glam::Vec4::new(r, g, b, r + g + b);
-                    *px = (glam::Vec4::from_array(*px) + value).to_array();
-                }
+                pixels.iter_mut().zip(values.chunks_exact(3).rev()).for_each(|(px, v)| add_rgb(px, v));
             }
             continue;
         }
         let values = &values[(lo - start) as usize * ch..(hi - start) as usize * ch];
         if ch == 1 {
-            for (px, &v) in pixels.iter_mut().zip(values) {
-                *px = (glam::Vec4::from_array(*px) + colour4 * v).to_array();
-            }
+            pixels.iter_mut().zip(values).for_each(|(px, &v)| add_grey(px, v));
         } else {
-            for (px, vals) in pixels.iter_mut().zip(values.chunks_exact(3)) {
-                let (r, g, b) = (vals[0], vals[1], vals[2]);
-                let value = rgb_weights * glam::Vec4::new(r, g, b, r + g + b);
-                *px = (glam::Vec4::from_array(*px) + value).to_array();
-            }
+            pixels.iter_mut().zip(values.chunks_exact(3)).for_each(|(px, v)| add_rgb(px, v));
         }
     }
 }
 
-/// A dense record whose image is packed ([`PackedImage`]): upright from its rows' spans, as
+/// A dense record whose image is packed ([`super::packed::PackedImage`]): upright from its rows' spans, as
 /// [`splat_upright_rows`] draws the same image from the database; turned (no packed image is
 /// today) from its box.
 fn splat_packed(band: &mut Band, r: &SplatRecord, image: MirroredImage, sampling: RotationSampling) {
