@@ -8,7 +8,7 @@ use crate::camera::Camera;
 use crate::dbset::{DbSet, NO_TWIN};
 use crate::motion_smear::{PsfImage, SmearExtent, SmearKey};
 use crate::smear_symmetry::{
-    canonical_key, is_grid_symmetric, transform_box, transform_image, BoxImage, GridSymmetry,
+    canonical_key, is_grid_symmetric, transform_image, BoxImage, GridSymmetry,
 };
 use crate::pipeline::packed::{PackedImage, PackedImages};
 use crate::pipeline::types::{psf_reach, CoarseLevel, FrameParams, SplatPath, SplatRecord};
@@ -1009,13 +1009,10 @@ impl SmearedPsfs {
                     let index = match which[usize::from(transposed)] {
                         Some(index) => index,
                         None => {
-                            let source = scratch.smear_or_transpose(transposed);
-                            let (origin, width, _) = if transposed {
-                                transform_box(orbit.extent.origin, orbit.extent.width, orbit.extent.height, GridSymmetry::TRANSPOSE)
-                            } else {
-                                (orbit.extent.origin, orbit.extent.width, orbit.extent.height)
-                            };
-                            let image = PackedImage::pack(origin, width, ch, source.values, source.rows);
+                            let g = if transposed { GridSymmetry::TRANSPOSE } else { GridSymmetry::IDENTITY };
+                            let source = scratch.moved(g);
+                            let e = orbit.extent.moved(g);
+                            let image = PackedImage::pack(e.origin, e.width, ch, source.values, source.rows);
                             images.push(image.ok_or_else(not_finite)?);
                             let index = images.len() as u32 - 1;
                             which[usize::from(transposed)] = Some(index);
@@ -1096,8 +1093,6 @@ struct SmearScratch {
     channels: usize,
     moved_values: Vec<f32>,
     moved_rows: Vec<[u16; 2]>,
-    /// Whether the moved image is the last smear transposed.
-    transposed: bool,
 }
 
 /// A box image in [`SmearScratch`]: its values and per row the columns outside which it is
@@ -1121,33 +1116,14 @@ impl SmearScratch {
         crate::motion_smear::smear_within(base, length, angle, bend, extent, out, &mut self.rows);
         self.extent = Some(extent);
         self.channels = base.channels;
-        self.transposed = false;
         ScratchImage {
             values: &self.values[..len],
             rows: &self.rows,
         }
     }
 
-    /// The last smear, or it transposed (built once per smear).
-    fn smear_or_transpose(&mut self, transposed: bool) -> ScratchImage<'_> {
-        if !transposed {
-            return self.moved(GridSymmetry::IDENTITY);
-        }
-        if !self.transposed {
-            self.moved(GridSymmetry::TRANSPOSE);
-            self.transposed = true;
-        }
-        let ch = self.channels;
-        let width = self.extent.map_or(0, |e| e.height);
-        ScratchImage {
-            values: &self.moved_values[..width * self.moved_rows.len() * ch],
-            rows: &self.moved_rows,
-        }
-    }
-
     /// The last smear moved by `g`.
     fn moved(&mut self, g: GridSymmetry) -> ScratchImage<'_> {
-        self.transposed = false;
         let extent = self.extent.expect("a smear is built before it is moved");
         let ch = self.channels;
         if g == GridSymmetry::IDENTITY {
