@@ -18,6 +18,7 @@ pub mod integrate;
 pub mod packed;
 pub mod splat;
 pub mod types;
+pub mod wide;
 
 pub use classify::{classify, ClassifyOptions, DataWindow, Effects, FrameEdges};
 pub use composite::{composite, CompositeOptions};

@@ -17,6 +17,7 @@ use psf_db::PsfDatabase;
 use rayon::prelude::*;
 
 use super::packed::{MirroredImage, PackedImages};
+use super::wide::{WideImage, WideImages};
 use super::types::{psf_reach, Classified, FrameParams, SplatPath, SplatRecord};
 
 /// Rows per band of the deterministic parallel splat. A pixel sums its records in record
@@ -271,6 +272,8 @@ pub(super) struct Drawing<'a> {
     pub in_row_order: bool,
     /// The images of `db` kept packed, drawn from here.
     pub packed: Option<&'a PackedImages>,
+    /// The RGB images of `db` many records draw upright, widened to four lanes.
+    pub wide: WideImages,
     /// Splat options.
     pub options: SplatOptions,
 }
@@ -288,6 +291,9 @@ impl<'a> Drawing<'a> {
             extent: classified.frame.pad as i32 + 2,
             in_row_order: db.is_some_and(PsfDatabase::spreadlets_in_row_order),
             packed: classified.packed.as_deref(),
+            wide: db.map_or_else(WideImages::default, |db| {
+                WideImages::for_records(&classified.records, db, classified.packed.as_deref())
+            }),
             options: *options,
         }
     }
@@ -310,6 +316,7 @@ pub(super) fn draw_band(
         extent,
         in_row_order,
         packed,
+        ref wide,
         ref options,
     } = *drawing;
     let packed_image = |r: &SplatRecord| packed.and_then(|p| p.get(r.psf_index));
@@ -369,6 +376,12 @@ pub(super) fn draw_band(
                     .filter(|next| drawn_together(r, next) && packed_image(next).is_none());
                 if next.is_some() {
                     i += 1;
+                }
+                if next.is_none() && is_identity(r) {
+                    if let Some(image) = wide.get(r.psf_index) {
+                        splat_wide(band, r.color, (r.center_x, r.center_y), image);
+                        continue;
+                    }
                 }
                 if is_identity(r) {
                     splat_dense_upright(band, r, next, db);
@@ -817,6 +830,35 @@ fn splat_upright_spans<'v>(
             pixels.iter_mut().zip(values).for_each(|(px, &v)| add_grey(px, v));
         } else {
             pixels.iter_mut().zip(values.chunks_exact(3)).for_each(|(px, v)| add_rgb(px, v));
+        }
+    }
+}
+
+/// An upright record drawn from its widened image ([`WideImage`]): each pixel one four-wide
+/// load, multiply and add, with the values `splat_upright_rows` would compute from the
+/// database's three channels.
+fn splat_wide(band: &mut Band, colour: [f32; 4], centre: (i32, i32), image: &WideImage) {
+    let (x0, y0) = (centre.0 + image.origin[0], centre.1 + image.origin[1]);
+    let (top, bottom) = (y0.max(band.y0), (y0 + image.height() as i32).min(band.y1));
+    if top >= bottom {
+        return;
+    }
+    let width = band.width as usize;
+    let first_row = (top - y0) as usize;
+    let count = (bottom - top) as usize;
+    let band_rows = band.data[(top - band.y0) as usize * width..].chunks_exact_mut(width);
+    let weights = glam::Vec4::new(colour[0], colour[1], colour[2], colour[3] / 3.0);
+    for (v, band_row) in (first_row..first_row + count).zip(band_rows) {
+        let (span, values) = image.row(v);
+        let start = x0 + i32::from(span[0]);
+        let (lo, hi) = (start.max(0), (x0 + i32::from(span[1])).min(band.width));
+        if lo >= hi {
+            continue;
+        }
+        let pixels = &mut band_row[lo as usize..hi as usize];
+        let values = &values[(lo - start) as usize..(hi - start) as usize];
+        for (px, v) in pixels.iter_mut().zip(values) {
+            *px = (glam::Vec4::from_array(*px) + weights * glam::Vec4::from_array(*v)).to_array();
         }
     }
 }
@@ -1270,6 +1312,66 @@ mod tests {
                     "angle {angle}, {rotation:?}: {worst} of {largest}"
                 );
             }
+        }
+    }
+
+    /// Upright records of RGB images drawn many times are drawn from the images widened to
+    /// four lanes ([`super::super::wide`]): bit for bit what drawing each record alone (its
+    /// image then drawn from the database's three channels) adds up to, in record order.
+    #[test]
+    fn widened_rgb_images_draw_what_the_databases_images_draw() {
+        use psf_db::{DatabaseBuilder, DbHeader, ParamSpace, PsfModel};
+        let space = ParamSpace::for_model(PsfModel::PhysicalLens, &[[0.1, 3.0], [0.0, 20.0]], 4)
+            .expect("space");
+        let n = space.psf_count() as usize;
+        let mut header = DbHeader::new(PsfModel::PhysicalLens, space, 32);
+        header.channels = 3;
+        let mut builder = DatabaseBuilder::new(header);
+        for i in 0..n {
+            let (w, h) = (2 + (i % 5) as u16, 1 + 2 * (i % 4) as u16);
+            let data: Vec<f32> = (0..w as usize * h as usize * 3)
+                .map(|k| if (k / 3 + i) % 4 == 0 { 0.0 } else { 0.013 * (1 + k % 11) as f32 })
+                .collect();
+            let origin = [-(w as i16) / 2 - (i % 3) as i16, -(h as i16) / 2];
+            builder.push_dense(origin, w, h, &data).expect("dense");
+        }
+        let db = builder.finish().expect("database");
+        let (w, h, pad) = (30u32, 90u32, 6u32);
+        let records: Vec<SplatRecord> = (0..40)
+            .map(|k: i32| SplatRecord {
+                center_x: (k * 7) % (w as i32 + 12) - 1,
+                center_y: (k * 5) % (h as i32 + 12),
+                // Three images drawn many times, one drawn once.
+                psf_index: if k == 11 { 4 } else { (k % 3) as u32 },
+                layer: 0,
+                rot_cos: 1.0,
+                rot_sin: 0.0,
+                weight: 1.0,
+                path: SplatPath::Dense as u32,
+                color: [0.9 + k as f32 * 0.01, 0.5, 0.2, 0.7],
+            })
+            .collect();
+        let mut sorted = records.clone();
+        sorted.sort_by_key(|r| r.center_y);
+        let classified = one_layer(&sorted, w, h, pad);
+        let wide = WideImages::for_records(&classified.records, &db, None);
+        assert_eq!(wide.count(), 3, "the images drawn many times are widened");
+        let together = splat(&classified, Some(&db), &SplatOptions::default());
+        let mut apart: Vec<Vec<f32>> = together.direct.iter().map(|p| vec![0.0; p.data.len()]).collect();
+        for r in &sorted {
+            let one = splat(&one_layer(&[*r], w, h, pad), Some(&db), &SplatOptions::default());
+            for (sum, plane) in apart.iter_mut().zip(&one.direct) {
+                for (s, v) in sum.iter_mut().zip(&plane.data) {
+                    *s += v;
+                }
+            }
+        }
+        assert!(together.direct[0].data.iter().any(|&v| v > 0.0), "something was drawn");
+        for (plane, sum) in together.direct.iter().zip(&apart) {
+            assert!(
+                plane.data.iter().zip(sum).all(|(a, b)| a.to_bits() == b.to_bits()),
+                "widened images draw other values"
+            );
         }
     }
 
