@@ -569,6 +569,18 @@ fn spread_excess(
     (w, h): (usize, usize),
     step: i64,
 ) -> Vec<[f32; 3]> {
+    // Each pixel's largest excess in any channel of its groups (NaN left out, as the test
+    // below leaves it), so that a group reads nine values to learn whether any tap holds
+    // excess worth weighing.
+    let most: Vec<f32> = (0..w * h)
+        .into_par_iter()
+        .map(|cell| {
+            excess[target_starts[cell]..target_starts[cell + 1]]
+                .iter()
+                .flatten()
+                .fold(f32::NEG_INFINITY, |m, &v| m.max(v))
+        })
+        .collect();
     nodes
         .par_iter()
         .zip(excess.par_iter())
@@ -581,12 +593,7 @@ fn spread_excess(
             // their own light that spreading it could not move it by EXCESS_NEGLIGIBLE.
             let cells = || tent_taps(cx, cy, step, (w, h));
             let negligible = EXCESS_NEGLIGIBLE * me.luminance.max(0.0);
-            let any = cells().any(|(cell, _)| {
-                excess[target_starts[cell]..target_starts[cell + 1]]
-                    .iter()
-                    .any(|e| e.iter().any(|&v| v > negligible))
-            });
-            if !any {
+            if !cells().any(|(cell, _)| most[cell] > negligible) {
                 return mine;
             }
             let inv_depth = 1.0 / (DEPTH_TOLERANCE * me.at.depth);
