@@ -679,6 +679,32 @@ fn splat_dense_upright(
     }
     let ca = r.color;
     let zero = |vals: &[f32]| vals.iter().all(|&x| x == 0.0);
+    // Two records of one image (a reconstructed pixel's samples of one surface that did not
+    // merge): its own spans, each pixel weighted by both colours and the two summed, as the
+    // general pair below sums them, without looking each pixel up in two rows.
+    if let (Some(next), Some((_, cb, _))) = (next, &b) {
+        if next.psf_index == r.psf_index {
+            for y in sa.1.max(band.y0)..sa.3.min(band.y1) {
+                let Some((ax0, n, values)) = row_of(&a, sa, y) else { continue };
+                let (lo, hi) = (ax0.max(x_lo), (ax0 + n as i32).min(x_hi));
+                if lo >= hi {
+                    continue;
+                }
+                let start = (y - band.y0) as usize * width;
+                let pixels = &mut band.data[start + lo as usize..start + hi as usize];
+                let values = &values[(lo - ax0) as usize * ch..(hi - ax0) as usize * ch];
+                for (px, vals) in pixels.iter_mut().zip(values.chunks_exact(ch)) {
+                    if !zero(vals) {
+                        let (p, q) = (weighted(ca, vals), weighted(*cb, vals));
+                        for k in 0..4 {
+                            px[k] += p[k] + q[k];
+                        }
+                    }
+                }
+            }
+            return;
+        }
+    }
     for y in uy0.max(band.y0)..uy1.min(band.y1) {
         let start = (y - band.y0) as usize * width;
         let row = &mut band.data[start..start + width];
@@ -1239,7 +1265,8 @@ mod tests {
     }
 
     /// Two dense records at one centre and rotation are drawn as one image: the same planes as
-    /// drawing each on its own, to rounding, at every rotation sampling, turned or not.
+    /// drawing each on its own, to rounding, at every rotation sampling, turned or not, of two
+    /// PSFs or of one.
     #[test]
     fn a_blended_pair_of_dense_records_draws_what_each_draws() {
         use psf_db::{DatabaseBuilder, DbHeader, ParamSpace, PsfModel};
@@ -1259,11 +1286,13 @@ mod tests {
         let db = builder.finish().expect("database");
         let (w, h, pad) = (40u32, 70u32, 24u32);
         let classified = |records: Vec<SplatRecord>| one_layer(&records, w, h, pad);
-        for angle in [0.0f32, 0.3, 1.9, -2.4] {
+        // The second record of a pair of another PSF, or of the same one (drawn from its
+        // image's own spans).
+        for (angle, second) in [0.0f32, 0.3, 1.9, -2.4].into_iter().flat_map(|a| [(a, 1), (a, 0)]) {
             let mut records = Vec::new();
             for k in 0..5 {
                 let centre = (pad as i32 + 5 + 7 * k, pad as i32 + 9 + 13 * k);
-                for (psf, share) in [(k as u32, 0.7f32), (k as u32 + 1, 0.3)] {
+                for (psf, share) in [(k as u32, 0.7f32), (k as u32 + second, 0.3)] {
                     records.push(SplatRecord {
                         center_x: centre.0,
                         center_y: centre.1,
