@@ -313,6 +313,7 @@ pub fn denoise_samples(
         .map_init(Vec::new, |found, t| filter_with_noise(t, found))
         .collect();
     // Then the wider passes over the groups' filtered illumination.
+    let tn = std::time::Instant::now();
     let mut target_starts = Vec::with_capacity(w * h + 1);
     target_starts.push(0usize);
     for row in &rows {
@@ -320,12 +321,13 @@ pub fn denoise_samples(
             target_starts.push(target_starts[target_starts.len() - 1] + n as usize);
         }
     }
-    let counts = rows.iter().flat_map(|r| r.target_counts.iter().copied());
+    let counts: Vec<f32> = rows.iter().flat_map(|r| r.target_counts.iter().copied()).collect();
+    // Built on every thread: one cache line a group, and its fresh pages faulted in by both.
     let mut nodes: Vec<WideningNode> = targets
-        .iter()
-        .zip(counts)
-        .zip(&filtered)
-        .map(|((&at, count), filtered)| {
+        .par_iter()
+        .zip(counts.par_iter())
+        .zip(filtered.par_iter())
+        .map(|((&at, &count), filtered)| {
             let (light, noise, _) = filtered.unwrap_or(([0.0; 3], 0.0, [0.0; 3]));
             WideningNode {
                 at: Member {
@@ -343,7 +345,7 @@ pub fn denoise_samples(
     // from standing out as a speck or a blob, and this puts its light back as the smooth
     // lift of the surface round it that it converges to.
     let mut excess: Vec<[f32; 3]> = filtered
-        .iter()
+        .par_iter()
         // Light beyond f32's range (sums of samples near its limit) is not spread: one
         // infinite group would reach every group within 62 px.
         .map(|f| match f {
@@ -353,14 +355,18 @@ pub fn denoise_samples(
         .collect();
     drop(filtered);
     // Most frames' caps take nothing (no rare bright samples): nothing to spread.
-    if excess.iter().any(|e| e.iter().any(|&v| v > 0.0)) {
+    if excess.par_iter().any(|e| e.iter().any(|&v| v > 0.0)) {
         for &step in &EXCESS_STEPS_PX {
             excess = spread_excess(&nodes, &excess, &target_starts, (w, h), step);
         }
     }
+    let mut widened = Vec::new();
     for &step in &WIDENING_STEPS_PX {
-        nodes = widen(&nodes, &target_starts, (w, h), step);
+        widen(&nodes, &target_starts, (w, h), step, &mut widened);
+        std::mem::swap(&mut nodes, &mut widened);
     }
+    drop(widened);
+    eprintln!("nprobe {:?}", tn.elapsed());
     let excess_weight = excess_weight(frames.spp);
     let illumination: Vec<Option<[f32; 3]>> = nodes
         .iter()
@@ -446,13 +452,15 @@ struct WideningNode {
 /// groups' member counts, the guides (depth, normal, albedo, as the first filter weighs them)
 /// and how far their illuminations' luminances differ in units of the smaller of the two
 /// groups' noise ([`NOISE_TOLERANCE`]). A group without noise keeps its illumination; one
-/// without illumination stays so and is left out of the others' means.
+/// without illumination stays so and is left out of the others' means. Written into `out`
+/// (its memory reused from pass to pass).
 fn widen(
     nodes: &[WideningNode],
     target_starts: &[usize],
     (w, h): (usize, usize),
     step: i64,
-) -> Vec<WideningNode> {
+    out: &mut Vec<WideningNode>,
+) {
     nodes
         .par_iter()
         .map(|me| {
@@ -509,7 +517,7 @@ fn widen(
                 ..*me
             }
         })
-        .collect()
+        .collect_into_vec(out);
 }
 
 /// The taps of the passes' 3 x 3 tent `step` pixels apart round pixel `(cx, cy)` of a
