@@ -313,7 +313,6 @@ pub fn denoise_samples(
         .map_init(Vec::new, |found, t| filter_with_noise(t, found))
         .collect();
     // Then the wider passes over the groups' filtered illumination.
-    let tn = std::time::Instant::now();
     let mut target_starts = Vec::with_capacity(w * h + 1);
     target_starts.push(0usize);
     for row in &rows {
@@ -366,7 +365,6 @@ pub fn denoise_samples(
         std::mem::swap(&mut nodes, &mut widened);
     }
     drop(widened);
-    eprintln!("nprobe {:?}", tn.elapsed());
     let excess_weight = excess_weight(frames.spp);
     let illumination: Vec<Option<[f32; 3]>> = nodes
         .iter()
