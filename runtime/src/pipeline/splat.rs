@@ -409,6 +409,23 @@ pub(super) struct Band {
 }
 
 impl Band {
+    /// The band's rows that an image `height` rows tall with its top row at band row `top`
+    /// covers, each with the image's row index; none where they do not meet.
+    fn image_rows(
+        &mut self,
+        top: i32,
+        height: usize,
+    ) -> impl Iterator<Item = (usize, &mut [[f32; 4]])> {
+        let (first, end) = (top.max(self.y0), (top + height as i32).min(self.y1));
+        let width = self.width as usize;
+        let (first_row, count, start) = if first < end {
+            ((first - top) as usize, (end - first) as usize, (first - self.y0) as usize * width)
+        } else {
+            (0, 0, self.data.len())
+        };
+        (first_row..first_row + count).zip(self.data[start..].chunks_exact_mut(width.max(1)))
+    }
+
     #[inline]
     fn add(&mut self, x: i32, y: i32, v: [f32; 4]) {
         if y < self.y0 || y >= self.y1 || x < 0 || x >= self.width {
@@ -811,14 +828,7 @@ fn splat_upright_spans<'v>(
     row: impl Fn(usize) -> ([u16; 2], &'v [f32]),
 ) {
     let (x0, y0) = top_left;
-    let (top, bottom) = (y0.max(band.y0), (y0 + height as i32).min(band.y1));
-    if top >= bottom {
-        return;
-    }
-    let width = band.width as usize;
-    let first_row = (top - y0) as usize;
-    let count = (bottom - top) as usize;
-    let band_rows = band.data[(top - band.y0) as usize * width..].chunks_exact_mut(width);
+    let band_width = band.width;
     let colour4 = glam::Vec4::from_array(colour);
     // Red, green and blue by the colour, alpha by the mean of the three weights, as `weighted`
     // does.
@@ -831,10 +841,10 @@ fn splat_upright_spans<'v>(
         let value = rgb_weights * glam::Vec4::new(r, g, b, r + g + b);
         *px = (glam::Vec4::from_array(*px) + value).to_array();
     };
-    for (v, band_row) in (first_row..first_row + count).zip(band_rows) {
+    for (v, band_row) in band.image_rows(y0, height) {
         let (span, values) = row(v);
         let start = x0 + i32::from(span[0]);
-        let (lo, hi) = (start.max(0), (x0 + i32::from(span[1])).min(band.width));
+        let (lo, hi) = (start.max(0), (x0 + i32::from(span[1])).min(band_width));
         if lo >= hi {
             continue;
         }
@@ -865,19 +875,12 @@ fn splat_upright_spans<'v>(
 /// database's three channels.
 fn splat_wide(band: &mut Band, colour: [f32; 4], centre: (i32, i32), image: &WideImage) {
     let (x0, y0) = (centre.0 + image.origin[0], centre.1 + image.origin[1]);
-    let (top, bottom) = (y0.max(band.y0), (y0 + image.height() as i32).min(band.y1));
-    if top >= bottom {
-        return;
-    }
-    let width = band.width as usize;
-    let first_row = (top - y0) as usize;
-    let count = (bottom - top) as usize;
-    let band_rows = band.data[(top - band.y0) as usize * width..].chunks_exact_mut(width);
+    let band_width = band.width;
     let weights = glam::Vec4::new(colour[0], colour[1], colour[2], colour[3] / 3.0);
-    for (v, band_row) in (first_row..first_row + count).zip(band_rows) {
+    for (v, band_row) in band.image_rows(y0, image.height()) {
         let (span, values) = image.row(v);
         let start = x0 + i32::from(span[0]);
-        let (lo, hi) = (start.max(0), (x0 + i32::from(span[1])).min(band.width));
+        let (lo, hi) = (start.max(0), (x0 + i32::from(span[1])).min(band_width));
         if lo >= hi {
             continue;
         }

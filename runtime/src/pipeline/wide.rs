@@ -97,6 +97,9 @@ impl WideImages {
         db: &PsfDatabase,
         packed: Option<&PackedImages>,
     ) -> Self {
+        if db.channels() != 3 {
+            return Self::default();
+        }
         let count = db.psf_count();
         let mut uses = vec![0u32; count];
         for r in records {
