@@ -169,7 +169,7 @@ pub fn denoise_samples(
             entry_starts.push(entry_starts[entry_starts.len() - 1] + n as usize);
         }
     }
-    let entries: Vec<Entry> = rows.iter().flat_map(|r| r.entries.iter().copied()).collect();
+    let entries: Vec<Entry> = concat_rows(&rows, |r| &r.entries);
     let inv_two_var = 1.0 / (2.0 * sigma * sigma);
     let max_d2 = (CUTOFF_SIGMAS * sigma).powi(2);
     // The cross-bilateral weights round `target`: every neighbour's (weight, luminance,
@@ -307,7 +307,7 @@ pub fn denoise_samples(
     };
     // The members of one pixel that lie on one surface share one filtered illumination, that
     // of their mean position: the filter runs once per pixel and surface, not once per sample.
-    let targets: Vec<Member> = rows.iter().flat_map(|r| r.targets.iter().copied()).collect();
+    let targets: Vec<Member> = concat_rows(&rows, |r| &r.targets);
     let filtered: Vec<Option<FilteredGroup>> = targets
         .par_iter()
         .map_init(Vec::new, |found, t| filter_with_noise(t, found))
@@ -367,19 +367,30 @@ pub fn denoise_samples(
     drop(widened);
     let excess_weight = excess_weight(frames.spp);
     let illumination: Vec<Option<[f32; 3]>> = nodes
-        .iter()
+        .par_iter()
         .zip(&excess)
         .map(|(n, e)| {
             n.lit
                 .then(|| std::array::from_fn(|c| n.at.illumination[c] + excess_weight * e[c]))
         })
         .collect();
+    // Each member's group among all the frame's, its row's groups numbered from the row's
+    // first: written on every thread into memory zeroed lazily.
+    let mut group_of_member: Vec<u32> = bytemuck::zeroed_vec(order.len());
+    let mut rest = group_of_member.as_mut_slice();
+    let mut pieces = Vec::with_capacity(rows.len());
     let mut first_target = 0;
-    let mut per_member = Vec::with_capacity(order.len());
     for row in &rows {
-        per_member.extend(row.group_of.iter().map(|&g| illumination[first_target + g as usize]));
+        let (piece, tail) = rest.split_at_mut(row.group_of.len());
+        pieces.push((piece, row, first_target as u32));
+        rest = tail;
         first_target += row.targets.len();
     }
+    pieces.into_par_iter().for_each(|(piece, row, first)| {
+        for (dst, &g) in piece.iter_mut().zip(&row.group_of) {
+            *dst = first + g;
+        }
+    });
     (0..frames.samples.len())
         .into_par_iter()
         .map_init(Vec::new, |found, k| {
@@ -398,7 +409,7 @@ pub fn denoise_samples(
                     filter(&target, found)
                 }
                 (NOT_A_MEMBER, _) => None,
-                (j, _) => per_member[j as usize],
+                (j, _) => illumination[group_of_member[j as usize] as usize],
             };
             let Some(mean) = illumination else {
                 return original;
@@ -657,6 +668,26 @@ fn guide_exponent(a: &Member, b: &Member, inv_depth: f32) -> Option<(f32, f32)> 
     Some((dz * dz + da2 / (scale * scale) * inv_albedo_var, cosine))
 }
 
+/// The rows' `part`s one after another, each row's copied on a thread of its own into memory
+/// that is zeroed lazily: one thread joining them (and faulting their fresh pages in) was a
+/// serial stretch of the denoiser.
+fn concat_rows<T: bytemuck::Zeroable + Copy + Send + Sync>(
+    rows: &[RowGroups],
+    part: impl Fn(&RowGroups) -> &[T] + Sync,
+) -> Vec<T> {
+    let total = rows.iter().map(|r| part(r).len()).sum();
+    let mut out: Vec<T> = bytemuck::zeroed_vec(total);
+    let mut rest = out.as_mut_slice();
+    let mut pieces = Vec::with_capacity(rows.len());
+    for row in rows {
+        let (piece, tail) = rest.split_at_mut(part(row).len());
+        pieces.push((piece, row));
+        rest = tail;
+    }
+    pieces.into_par_iter().for_each(|(piece, row)| piece.copy_from_slice(part(row)));
+    out
+}
+
 /// [`denoise_samples`]' mark for a sample that is not among the frame's members.
 const NOT_A_MEMBER: u32 = u32::MAX;
 
@@ -676,7 +707,7 @@ fn luminance(c: [f32; 3]) -> f32 {
 
 /// One sample as the filter reads it, stored in the order of the pixels its moved position
 /// falls in.
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Copy, Debug, Default, bytemuck::Zeroable)]
 struct Member {
     q: [f32; 2],
     depth: f32,
@@ -689,7 +720,7 @@ struct Member {
 /// with the first member's guides, `count` members of the given mean illumination. A group
 /// whose brightest member stands out ([`OUTLIER_FACTOR`]) makes two entries, that member alone
 /// and the rest, so that the filter can still set a firefly aside and cap its luminance.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, bytemuck::Zeroable)]
 struct Entry {
     at: Member,
     count: f32,
