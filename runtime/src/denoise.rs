@@ -169,7 +169,8 @@ pub fn denoise_samples(
             entry_starts.push(entry_starts[entry_starts.len() - 1] + n as usize);
         }
     }
-    let entries: Vec<Entry> = concat_rows(&rows, |r| &r.entries);
+    let entries: Vec<Entry> =
+        join_rows(&rows, |r| r.entries.len(), |y, part| part.copy_from_slice(&rows[y].entries));
     let inv_two_var = 1.0 / (2.0 * sigma * sigma);
     let max_d2 = (CUTOFF_SIGMAS * sigma).powi(2);
     // The cross-bilateral weights round `target`: every neighbour's (weight, luminance,
@@ -307,7 +308,8 @@ pub fn denoise_samples(
     };
     // The members of one pixel that lie on one surface share one filtered illumination, that
     // of their mean position: the filter runs once per pixel and surface, not once per sample.
-    let targets: Vec<Member> = concat_rows(&rows, |r| &r.targets);
+    let targets: Vec<Member> =
+        join_rows(&rows, |r| r.targets.len(), |y, part| part.copy_from_slice(&rows[y].targets));
     let filtered: Vec<Option<FilteredGroup>> = targets
         .par_iter()
         .map_init(Vec::new, |found, t| filter_with_noise(t, found))
@@ -374,20 +376,11 @@ pub fn denoise_samples(
                 .then(|| std::array::from_fn(|c| n.at.illumination[c] + excess_weight * e[c]))
         })
         .collect();
-    // Each member's group among all the frame's, its row's groups numbered from the row's
-    // first: written on every thread into memory zeroed lazily.
-    let mut group_of_member: Vec<u32> = bytemuck::zeroed_vec(order.len());
-    let mut rest = group_of_member.as_mut_slice();
-    let mut pieces = Vec::with_capacity(rows.len());
-    let mut first_target = 0;
-    for row in &rows {
-        let (piece, tail) = rest.split_at_mut(row.group_of.len());
-        pieces.push((piece, row, first_target as u32));
-        rest = tail;
-        first_target += row.targets.len();
-    }
-    pieces.into_par_iter().for_each(|(piece, row, first)| {
-        for (dst, &g) in piece.iter_mut().zip(&row.group_of) {
+    // Each member's group among all the frame's (its row's groups are numbered from the row's
+    // first, `target_starts` at the row's first pixel).
+    let group_of_member: Vec<u32> = join_rows(&rows, |r| r.group_of.len(), |y, part| {
+        let first = target_starts[y * w] as u32;
+        for (dst, &g) in part.iter_mut().zip(&rows[y].group_of) {
             *dst = first + g;
         }
     });
@@ -668,23 +661,23 @@ fn guide_exponent(a: &Member, b: &Member, inv_depth: f32) -> Option<(f32, f32)> 
     Some((dz * dz + da2 / (scale * scale) * inv_albedo_var, cosine))
 }
 
-/// The rows' `part`s one after another, each row's copied on a thread of its own into memory
-/// that is zeroed lazily: one thread joining them (and faulting their fresh pages in) was a
-/// serial stretch of the denoiser.
-fn concat_rows<T: bytemuck::Zeroable + Copy + Send + Sync>(
+/// One list of every row's part, each row's part (`len` items) written by `write(row index,
+/// part)` on a thread of its own into memory that is zeroed lazily: one thread joining the
+/// rows (and faulting their fresh pages in) was a serial stretch of the denoiser.
+fn join_rows<T: bytemuck::Zeroable + Send>(
     rows: &[RowGroups],
-    part: impl Fn(&RowGroups) -> &[T] + Sync,
+    len: impl Fn(&RowGroups) -> usize,
+    write: impl Fn(usize, &mut [T]) + Sync,
 ) -> Vec<T> {
-    let total = rows.iter().map(|r| part(r).len()).sum();
-    let mut out: Vec<T> = bytemuck::zeroed_vec(total);
+    let mut out: Vec<T> = bytemuck::zeroed_vec(rows.iter().map(&len).sum());
     let mut rest = out.as_mut_slice();
-    let mut pieces = Vec::with_capacity(rows.len());
+    let mut parts = Vec::with_capacity(rows.len());
     for row in rows {
-        let (piece, tail) = rest.split_at_mut(part(row).len());
-        pieces.push((piece, row));
+        let (part, tail) = std::mem::take(&mut rest).split_at_mut(len(row));
+        parts.push(part);
         rest = tail;
     }
-    pieces.into_par_iter().for_each(|(piece, row)| piece.copy_from_slice(part(row)));
+    parts.into_par_iter().enumerate().for_each(|(y, part)| write(y, part));
     out
 }
 

@@ -239,7 +239,8 @@ pub struct PsfImage {
 
 impl PsfImage {
     /// A single lit pixel of value 1, grey: the PSF of an in-focus point.
-    pub fn point() -> Self {
+    #[cfg(test)]
+    pub(crate) fn point() -> Self {
         Self {
             origin: [0, 0],
             width: 1,
