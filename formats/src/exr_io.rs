@@ -209,7 +209,11 @@ pub fn read_channels(path: &Path) -> Result<Channels> {
         }
     }
     for channel in layer.channel_data.list {
-        let samples: Vec<f32> = channel.sample_data.values_as_f32().collect();
+        let samples: Vec<f32> = match channel.sample_data {
+            // Already f32: moved, not copied (a stochastic frame's channels are hundreds of MB).
+            FlatSamples::F32(values) => values,
+            other => other.values_as_f32().collect(),
+        };
         out.data.insert(channel.name.to_string(), samples);
     }
     Ok(out)
