@@ -322,7 +322,9 @@ pub fn denoise_samples(
             target_starts.push(target_starts[target_starts.len() - 1] + n as usize);
         }
     }
-    let counts: Vec<f32> = rows.iter().flat_map(|r| r.target_counts.iter().copied()).collect();
+    let counts: Vec<f32> = join_rows(&rows, |r| r.target_counts.len(), |y, part| {
+        part.copy_from_slice(&rows[y].target_counts)
+    });
     // Built on every thread: one cache line a group, and its fresh pages faulted in by both.
     let mut nodes: Vec<WideningNode> = targets
         .par_iter()
