@@ -117,4 +117,29 @@ def pan(scn):
             turn_about(o, cam.location, -math.radians(6.0))
     return cam, dict(dof=True, motion=True)
 
-EXTRA_SCENES = dict(street=street, lights=lights, disc=disc, pan=pan)
+def approach(scn):
+    # A car driving towards the camera at night, its lamps growing from small disks into large
+    # bokeh as it leaves the focus plane, along a textured road, a near post out of focus
+    # across it and a lit facade far behind: motion in depth (the car's distance falls by a
+    # fifth within the frame) with defocus changing over the shutter.
+    sun(0.15)
+    area((-3, -5, 6), 3.0, 2.5, rot=(math.radians(30), math.radians(-20), 0))
+    bpy.ops.mesh.primitive_plane_add(size=80, location=(0, 10, 0))
+    add(bpy.context.object, mat("road", (0.35, 0.33, 0.3), checker=70))
+    bpy.ops.mesh.primitive_plane_add(size=80, location=(0, 18, 0), rotation=(math.radians(90), 0, 0))
+    add(bpy.context.object, mat("facade", (0.65, 0.5, 0.35), checker=50))
+    bpy.ops.mesh.primitive_cube_add(size=1.0, location=(-0.35, -7.0, 1.0))
+    o = bpy.context.object; o.scale = (0.08, 0.08, 2.0); add(o, mat("post", (0.8, 0.8, 0.75), checker=4))
+    d = (0.3, -2.5, 0)
+    bpy.ops.mesh.primitive_cube_add(size=1.0, location=(0.4, 1.5, 0.55))
+    car = bpy.context.object; car.scale = (1.0, 2.0, 0.55); add(car, mat("car", (0.15, 0.35, 0.6), checker=6))
+    animate(car, delta=d)
+    for sx in (-0.35, 0.35):
+        bpy.ops.mesh.primitive_uv_sphere_add(radius=0.07, location=(0.4 + sx, 1.5 - 1.02, 0.6))
+        o = bpy.context.object; add(o, mat(f"lamp{sx}", (1, .93, .8), emit=150)); animate(o, delta=d)
+    for i in range(5):
+        bpy.ops.mesh.primitive_uv_sphere_add(radius=0.06, location=(-3.0 + 1.5 * i, 17.5, 2.2 + 0.3 * (i % 2)))
+        add(bpy.context.object, mat(f"window{i}", (1, .7, .4), emit=120))
+    return camera(scn, fstop=2.0, focus=9.0), dict(dof=True, motion=True)
+
+EXTRA_SCENES = dict(street=street, lights=lights, disc=disc, pan=pan, approach=approach)

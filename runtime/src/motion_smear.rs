@@ -56,8 +56,9 @@ pub const MAX_SMEAR_PX: f32 = 512.0;
 /// what costs, not the memory; a frame that needs more is an error rather than a slow crawl.
 const MAX_SMEARED_PIXELS: usize = 4 << 20;
 /// Most values (pixels times channels) of smeared PSF images one frame builds, summed (1 GiB
-/// of f32: 64 Mi pixels of RGBA, four times as many of grey): a frame beyond it is an error,
-/// not an unbounded allocation. A camera pan through the double Gauss at 512 px runs in 0.24
+/// of f32: 64 Mi pixels of RGBA, four times as many of grey), by default
+/// (`ClassifyOptions::smeared_values_budget`): a frame beyond it draws its longest streaks at a
+/// reduced resolution, or is an error, never an unbounded allocation. A camera pan through the double Gauss at 512 px runs in 0.24
 /// GB in all; a Cycles disc spinning 30 degrees a frame, reconstructed from 16 spp along its
 /// arcs, builds 202 M values (0.81 GB).
 pub const MAX_FRAME_SMEARED_VALUES: usize = 4 * (64 << 20);
@@ -270,8 +271,8 @@ pub enum SmearError {
     /// The frame's smeared PSFs together would be larger than the renderer builds per frame.
     #[error(
         "the frame's moving pixels call for {keys} smeared PSFs of about {pixels} pixels of \
-         {channels} channel(s) in all, more than the {MAX_FRAME_SMEARED_VALUES} values built \
-         per frame: shorten the shutter or render the frame in tiles"
+         {channels} channel(s) in all, more than the {budget_values} values built per frame: \
+         shorten the shutter or render the frame in tiles"
     )]
     FrameTooLarge {
         /// Distinct smeared PSFs.
@@ -280,6 +281,8 @@ pub enum SmearError {
         pixels: usize,
         /// Values per pixel (1 grey, 3 RGB).
         channels: usize,
+        /// The frame's budget of values (`ClassifyOptions::smeared_values_budget`).
+        budget_values: usize,
     },
 }
 

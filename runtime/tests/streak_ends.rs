@@ -166,3 +166,95 @@ fn sharp_pixels_of_several_cells_share_their_streaks() {
     );
     assert_eq!(several, one_cell, "{} cells", cells.len());
 }
+
+/// A frame whose streaks would need more smeared PSF images than its budget draws its longest
+/// streaks at a reduced resolution instead of failing (a car driving at the camera, whose every
+/// pixel streaks outwards at its own angle and length), keeps its light, and stays close to
+/// the frame drawn without a budget; a budget too small even for the coarsest level is a clear
+/// error.
+#[test]
+fn streaks_beyond_the_frames_budget_are_drawn_at_a_reduced_resolution() {
+    let (w, h) = (96usize, 96usize);
+    let camera = camera(w as u32, h as u32, true, 1.0);
+    let dbs = DbSet::new(Some(quick_db(PsfModel::ThinLens)), None).expect("db set");
+    // A textured plane slightly out of focus, every pixel moving away from the centre by up to
+    // 30 px: a distinct angle and length nearly everywhere.
+    let mut color = Vec::new();
+    let mut motion = Vec::new();
+    for y in 0..h {
+        for x in 0..w {
+            let checker = ((x / 6 + y / 6) % 2) as f32;
+            color.push([0.2 + 0.6 * checker, 0.3, 0.5 - 0.3 * checker, 1.0]);
+            let (dx, dy) = (
+                x as f32 + 0.5 - w as f32 / 2.0,
+                y as f32 + 0.5 - h as f32 / 2.0,
+            );
+            motion.push([dx * 0.6, dy * 0.6]);
+        }
+    }
+    let depth = vec![support::depth_for_coc(&camera, 1.5) as f32; w * h];
+    let g = GBuffer::from_planes(w, h, color, Some(depth), Some(motion)).expect("g-buffer");
+    let with_budget = |values: usize| {
+        let mut options = SynthOptions::default();
+        options.classify.smeared_values_budget = values;
+        options
+    };
+    // The values the frame's smeared images hold when nothing limits them.
+    let unlimited = with_budget(usize::MAX);
+    let classified =
+        spreadlet::pipeline::classify(&g, &camera, &dbs, &unlimited.classify).expect("classify");
+    let database = classified.database.as_ref().expect("the frame's database");
+    let first = dbs.combined.as_ref().expect("combined").psf_count();
+    let values: usize = (first..database.psf_count())
+        .filter_map(|i| database.dense(i))
+        .map(|d| d.data.len())
+        .sum();
+    assert!(values > 0, "nothing smeared");
+    let (full, full_stats) = synthesize(&g, &camera, &dbs, &unlimited).expect("synth");
+    assert_eq!(full_stats.counts.reduced, 0, "{:?}", full_stats.counts);
+
+    let (reduced, stats) = synthesize(&g, &camera, &dbs, &with_budget(values * 3 / 4))
+        .expect("a frame over its budget is drawn, not refused");
+    assert!(
+        stats.counts.reduced > 0,
+        "nothing reduced: {:?}",
+        stats.counts
+    );
+    let light = |image: &spreadlet::RgbaImage| -> f64 {
+        image
+            .pixels
+            .iter()
+            .map(|p| f64::from(p[0] + p[1] + p[2]))
+            .sum()
+    };
+    let (full_light, reduced_light) = (light(&full), light(&reduced));
+    let mean_difference = full
+        .pixels
+        .iter()
+        .zip(&reduced.pixels)
+        .map(|(a, b)| (0..3).map(|c| f64::from((a[c] - b[c]).abs())).sum::<f64>())
+        .sum::<f64>()
+        / full_light;
+    eprintln!(
+        "budget {} of {values} values: {} of {} fragments reduced; light {:.4} of the \
+         unlimited frame's, mean difference {:.4} of its mean",
+        values * 3 / 4,
+        stats.counts.reduced,
+        w * h,
+        reduced_light / full_light,
+        mean_difference
+    );
+    assert!(
+        (reduced_light / full_light - 1.0).abs() < 0.01,
+        "light {reduced_light} against {full_light}"
+    );
+    assert!(mean_difference < 0.05, "mean difference {mean_difference}");
+
+    let refused = synthesize(&g, &camera, &dbs, &with_budget(1000))
+        .expect_err("a budget too small for the coarsest level is an error");
+    let text = refused.to_string();
+    assert!(
+        text.contains("smeared PSFs") && text.contains("1000 values"),
+        "{text}"
+    );
+}

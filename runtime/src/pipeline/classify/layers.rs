@@ -6,7 +6,7 @@ use super::lookup::{front_turns_the_aperture, lookup_psf, Lookup};
 use super::*;
 use crate::camera::Camera;
 use crate::dbset::{DbSet, NO_TWIN};
-use crate::motion_smear::{PsfImage, SmearExtent, SmearKey};
+use crate::motion_smear::{PsfImage, SmearError, SmearExtent, SmearKey};
 use crate::smear_symmetry::{
     canonical_key, is_grid_symmetric, transform_image, BoxImage, GridSymmetry,
 };
@@ -186,11 +186,14 @@ pub fn classify_fragments(
         .reduced_resolution
         .then(|| blur_range(dbs, model, thin_smear.is_some()))
         .flatten();
-    let scale_of = |frag: &Fragment| -> u32 {
+    // `motion_cap`: the longest motion (px) drawn at the frame's resolution, besides the
+    // database's own range; lowered only when the frame's streaks would not fit their budget.
+    let scale_of = |frag: &Fragment, motion_cap: f32| -> u32 {
         let Some([coc_max, len_max]) = range else {
             return 1;
         };
         let coc_max = coc_max.min(options.coarse_above_px);
+        let len_max = len_max.min(motion_cap);
         let coc = signed_coc(frag.depth).abs();
         let m = frag.motion;
         let len = (m[0] * m[0] + m[1] * m[1]).sqrt();
@@ -201,14 +204,18 @@ pub fn classify_fragments(
         }
         scale
     };
-    let scales: Vec<u8> = if range.is_some() {
-        fragments.par_iter().map(|f| scale_of(f).trailing_zeros() as u8).collect()
-    } else {
-        Vec::new()
+    let scales_under = |motion_cap: f32| -> Vec<u8> {
+        if range.is_some() {
+            fragments
+                .par_iter()
+                .map(|f| scale_of(f, motion_cap).trailing_zeros() as u8)
+                .collect()
+        } else {
+            Vec::new()
+        }
     };
     // A fragment as its level draws it: centred on its coarse pixel, CoC and motion in coarse
     // pixels, colour spread over the coarse pixel's frame pixels.
-    let level_of = |index: usize| scales.get(index).copied().unwrap_or(0) as usize;
     let at_level = |frag: &Fragment, level: usize| -> (Fragment, f32) {
         if level == 0 {
             return (*frag, signed_coc(frag.depth));
@@ -228,58 +235,88 @@ pub fn classify_fragments(
         Some(all) if moving_lens || thin_smear.is_some() => psf_reach(all),
         _ => Vec::new(),
     };
-    let smear_keys: Vec<Option<(SmearKey, bool)>> = match combined {
-        Some(_) if moving_lens || thin_smear.is_some() => {
-            fragments
-                .par_iter()
-                .enumerate()
-                .map(|(index, frag)| {
-                    let (frag, signed) = at_level(frag, level_of(index));
-                    let frag = &frag;
-                    let m = frag.motion;
-                    let motion_len = (m[0] * m[0] + m[1] * m[1]).sqrt();
-                    if frag.weight <= 0.0 || motion_len < options.copy_threshold_px {
-                        return None;
-                    }
-                    if let Some(thin) = thin_smear {
-                        // The thin-lens database comes first in the combined one. In front
-                        // of the focus plane the aperture's image is turned half a turn.
-                        let (i, clamped) = thin.lookup([signed.abs(), 0.0]);
-                        let turned = flip_front && signed < 0.0;
-                        let radial = if turned { [-1.0, 0.0] } else { [1.0, 0.0] };
+    // The longest motion in the frame, px: where the frame's streaks do not fit their budget,
+    // the cap on full-resolution motion starts at half of it.
+    let longest_motion = fragments
+        .par_iter()
+        .map(|f| (f.motion[0] * f.motion[0] + f.motion[1] * f.motion[1]).sqrt())
+        .reduce(|| 0.0, f32::max);
+    let mut motion_cap = f32::INFINITY;
+    let (scales, smear_keys, smeared) = loop {
+        let scales = scales_under(motion_cap);
+        let level_of = |index: usize| scales.get(index).copied().unwrap_or(0) as usize;
+        let smear_keys: Vec<Option<(SmearKey, bool)>> = match combined {
+            Some(_) if moving_lens || thin_smear.is_some() => {
+                fragments
+                    .par_iter()
+                    .enumerate()
+                    .map(|(index, frag)| {
+                        let (frag, signed) = at_level(frag, level_of(index));
+                        let frag = &frag;
+                        let m = frag.motion;
+                        let motion_len = (m[0] * m[0] + m[1] * m[1]).sqrt();
+                        if frag.weight <= 0.0 || motion_len < options.copy_threshold_px {
+                            return None;
+                        }
+                        if let Some(thin) = thin_smear {
+                            // The thin-lens database comes first in the combined one. In front
+                            // of the focus plane the aperture's image is turned half a turn.
+                            let (i, clamped) = thin.lookup([signed.abs(), 0.0]);
+                            let turned = flip_front && signed < 0.0;
+                            let radial = if turned { [-1.0, 0.0] } else { [1.0, 0.0] };
+                            let reach = reach.get(i as usize).copied().unwrap_or(0) as f32;
+                            let threshold = ordered_dither(frag.x, frag.y);
+                            let (key, too_long) = SmearKey::dithered(i, m, frag.bend, radial, reach, threshold);
+                            return Some((key, clamped || too_long));
+                        }
+                        let found = lookup_psf(
+                            frag,
+                            0.0,
+                            motion_len,
+                            centre,
+                            pixels_per_mm,
+                            dbs,
+                            model,
+                            options,
+                            false,
+                            &mut psf_db::CellMemo::default(),
+                        );
+                        if found.path == SplatPath::Copy {
+                            return None;
+                        }
+                        let i = found.psf_index;
                         let reach = reach.get(i as usize).copied().unwrap_or(0) as f32;
-                        let threshold = ordered_dither(frag.x, frag.y);
-                        let (key, too_long) = SmearKey::dithered(i, m, frag.bend, radial, reach, threshold);
-                        return Some((key, clamped || too_long));
-                    }
-                    let found = lookup_psf(
-                        frag,
-                        0.0,
-                        motion_len,
-                        centre,
-                        pixels_per_mm,
-                        dbs,
-                        model,
-                        options,
-                        false,
-                        &mut psf_db::CellMemo::default(),
-                    );
-                    if found.path == SplatPath::Copy {
-                        return None;
-                    }
-                    let i = found.psf_index;
-                    let reach = reach.get(i as usize).copied().unwrap_or(0) as f32;
-                    let radial = [found.rot_cos, found.rot_sin];
-                    Some(SmearKey::new(i, m, frag.bend, radial, reach))
-                })
-                .collect()
+                        let radial = [found.rot_cos, found.rot_sin];
+                        Some(SmearKey::new(i, m, frag.bend, radial, reach))
+                    })
+                    .collect()
+            }
+            _ => Vec::new(),
+        };
+        let built = match combined {
+            Some(all) if !smear_keys.is_empty() => {
+                SmearedPsfs::build(
+                        &smear_keys,
+                        all,
+                        options.pack_images,
+                        options.smeared_values_budget,
+                    )
+            }
+            _ => Ok(SmearedPsfs::default()),
+        };
+        match built {
+            // Too many streaks, or too long, for the frame's budget: the longest are drawn at
+            // half the resolution (a quarter of the pixels, half the angle steps), then a
+            // quarter, until they fit or reach the coarsest level.
+            Err(ClassifyError::MotionSmear(SmearError::FrameTooLarge { .. }))
+                if range.is_some() && motion_cap > longest_motion / MAX_SCALE as f32 =>
+            {
+                motion_cap = motion_cap.min(longest_motion) / 2.0;
+            }
+            built => break (scales, smear_keys, built?),
         }
-        _ => Vec::new(),
     };
-    let smeared = match combined {
-        Some(all) if !smear_keys.is_empty() => SmearedPsfs::build(&smear_keys, all, &reach, options.pack_images)?,
-        _ => SmearedPsfs::default(),
-    };
+    let level_of = |index: usize| scales.get(index).copied().unwrap_or(0) as usize;
     let combined = smeared.database.as_deref().or(combined);
     // A still pixel's blend of two turned dense PSFs is one record until the shared turns
     // premix it.
@@ -815,14 +852,15 @@ struct SmearedPsfs {
 
 impl SmearedPsfs {
     /// The smeared PSFs of the fragments' keys (`None`: not smeared), from the lens PSFs of
-    /// `all` (whose PSFs reach `reach` px); the frame's smeared images are bounded by
-    /// [`crate::motion_smear::MAX_FRAME_SMEARED_VALUES`]. With `pack`, grey and RGB images are
-    /// kept packed.
+    /// `all`; the frame's smeared images hold at most
+    /// `budget_values` values (pixels times channels), or this fails with
+    /// [`SmearError::FrameTooLarge`] before building any. With `pack`, grey and RGB images
+    /// are kept packed.
     fn build(
         fragment_keys: &[Option<(SmearKey, bool)>],
         all: &PsfDatabase,
-        reach: &[i32],
         pack: bool,
+        budget_values: usize,
     ) -> Result<Self, ClassifyError> {
         let mut keys: Vec<SmearKey> = fragment_keys.iter().flatten().map(|&(k, _)| k).collect();
         if keys.is_empty() {
@@ -895,24 +933,6 @@ impl SmearedPsfs {
             unique_of_key[i as usize] = unique.len() as u32 - 1;
         }
         drop(mapped);
-        let pixels: usize = unique
-            .iter()
-            .map(|k| {
-                let r = reach.get(k.cell as usize).copied().unwrap_or(0) as f32;
-                k.estimated_pixels(r)
-            })
-            .sum();
-        // The bound is on memory: a grey lens PSF's smeared images hold one value per pixel
-        // where an RGB one holds three.
-        let channels = all.channels().max(1);
-        if pixels.saturating_mul(channels) > crate::motion_smear::MAX_FRAME_SMEARED_VALUES {
-            return Err(crate::motion_smear::SmearError::FrameTooLarge {
-                keys: unique.len(),
-                pixels,
-                channels,
-            }
-            .into());
-        }
         // A lens PSF the pixel grid's symmetries keep (a sharp point's) smears along a key
         // into a symmetry's image of its smear along the least key of the key's orbit: that
         // one is smeared, the others moved from it.
@@ -941,6 +961,24 @@ impl SmearedPsfs {
                     .transpose()
             })
             .collect::<Result<Vec<_>, _>>()?;
+        // The bound is on memory, the boxes the images are built in (known before any is
+        // built): a grey lens PSF's smeared images hold one value per pixel where an RGB one
+        // holds three.
+        let pixels: usize = extents
+            .iter()
+            .flatten()
+            .map(|(_, e, _)| e.width.saturating_mul(e.height))
+            .fold(0, usize::saturating_add);
+        let channels = all.channels().max(1);
+        if pixels.saturating_mul(channels) > budget_values {
+            return Err(SmearError::FrameTooLarge {
+                keys: unique.len(),
+                pixels,
+                channels,
+                budget_values,
+            }
+            .into());
+        }
         let first = all.psf_count() as u32;
         let mut drawn = Vec::new();
         let mut unique_index = Vec::with_capacity(unique.len());

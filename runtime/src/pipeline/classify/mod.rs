@@ -206,6 +206,14 @@ pub struct ClassifyOptions {
     /// (`turned`): the bokeh keeps one rim. Off: the two are mixed as they are, and their rims
     /// lie a cell's blur apart.
     pub scaled_blends: bool,
+    /// Most values (pixels times channels) of the smeared PSF images one frame builds, summed
+    /// ([`crate::motion_smear::MAX_FRAME_SMEARED_VALUES`] by default, 1 GiB of f32). A frame
+    /// whose streaks need more (many distinct long motions: a car driving at the camera,
+    /// reconstructed from stochastic samples) draws its longest streaks at half the
+    /// resolution, then a quarter, an eighth, where [`Self::reduced_resolution`] allows it
+    /// (counted in `reduced`); where it still needs more, or cannot be reduced (a real lens),
+    /// classification fails with a clear error instead of allocating without bound.
+    pub smeared_values_budget: usize,
 }
 
 impl Default for ClassifyOptions {
@@ -228,6 +236,7 @@ impl Default for ClassifyOptions {
             shared_turns: true,
             pack_images: false,
             scaled_blends: true,
+            smeared_values_budget: crate::motion_smear::MAX_FRAME_SMEARED_VALUES,
         }
     }
 }
@@ -515,6 +524,7 @@ mod tests {
             keys: 3,
             pixels: 1 << 30,
             channels: 1,
+            budget_values: 1 << 28,
         });
         assert!(std::error::Error::source(&e).is_none());
         let text = e.to_string();
