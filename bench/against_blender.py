@@ -40,7 +40,7 @@ HARD = os.path.join(ROOT, "scene", "scenes", "hard")
 SCENES = ["bokeh", "crossing", "occluder", "rotating", "physical", "studio", "rain"] + [
     os.path.join(HARD, f"{name}.json")
     for name in ("car-on-road", "spinning-disc", "fast-box", "slanted-floor", "camera-pan",
-                 "rolling-wheel")]
+                 "rolling-wheel", "approaching-car")]
 STAGES = ["read_input", "database", "classify", "splat", "integrate", "composite",
           "write_output"]
 
