@@ -266,7 +266,8 @@ pub fn classify_fragments(
                             let radial = if turned { [-1.0, 0.0] } else { [1.0, 0.0] };
                             let reach = reach.get(i as usize).copied().unwrap_or(0) as f32;
                             let threshold = ordered_dither(frag.x, frag.y);
-                            let (key, too_long) = SmearKey::dithered(i, m, frag.bend, radial, reach, threshold);
+                            let (key, too_long) =
+                                SmearKey::dithered(i, m, frag.bend, radial, reach, threshold);
                             return Some((key, clamped || too_long));
                         }
                         let found = lookup_psf(
@@ -296,11 +297,11 @@ pub fn classify_fragments(
         let built = match combined {
             Some(all) if !smear_keys.is_empty() => {
                 SmearedPsfs::build(
-                        &smear_keys,
-                        all,
-                        options.pack_images,
-                        options.smeared_values_budget,
-                    )
+                    &smear_keys,
+                    all,
+                    options.pack_images,
+                    options.smeared_values_budget,
+                )
             }
             _ => Ok(SmearedPsfs::default()),
         };
