@@ -87,11 +87,13 @@ fn hidden_behind_deep(deep: &DeepImage, camera: &Camera, fragments: &[Fragment])
     let signed_coc = |d: f32| -> f32 { lens.map_or(0.0, |l| l.signed_coc_px(f64::from(d)) as f32) };
     let flat = deep.flatten();
     let mut depth = vec![f32::INFINITY; n];
+    let mut motion = vec![[0.0f32; 2]; n];
     let mut several = vec![false; n];
+    let shutter = camera.shutter_frames as f32;
     for i in 0..n {
         let samples = &deep.samples[deep.offsets[i]..deep.offsets[i + 1]];
         let mut through = 1.0f32;
-        let mut best = (0.0f32, f32::INFINITY);
+        let mut best = (0.0f32, f32::INFINITY, [0.0f32; 2]);
         let mut visible = 0;
         for s in samples {
             let share = through * s.color[3];
@@ -99,11 +101,12 @@ fn hidden_behind_deep(deep: &DeepImage, camera: &Camera, fragments: &[Fragment])
                 visible += 1;
             }
             if share > best.0 {
-                best = (share, s.depth);
+                best = (share, s.depth, s.motion);
             }
             through *= 1.0 - s.color[3];
         }
         depth[i] = best.1;
+        motion[i] = best.2.map(|m| m * shutter);
         several[i] = visible > 1;
     }
     let proxy = crate::gbuffer::GBuffer {
@@ -139,19 +142,32 @@ fn hidden_behind_deep(deep: &DeepImage, camera: &Camera, fragments: &[Fragment])
             ..fragments[0]
         },
     };
-    // Behind sharper occluders only: a deep image's own samples hold what a blurrier
-    // occluder's smear reveals wherever the renderer saw it.
-    let no_blur = |_: usize, _: (i32, i32)| 0.0;
+    // Behind sharper occluders, and behind opaque ones that move more along the walk than the
+    // background, as for a flat G-buffer: a deep image seen through a pinhole at the frame time
+    // holds what shows through a silhouette's own pixels, not the background that a moving
+    // occluder's smear uncovers beyond them. (Blurrier by defocus alone is left to the deep
+    // samples, as before.)
+    let moves = effects_move(fragments);
+    let blur_along = |i: usize, d: (i32, i32)| -> f32 {
+        let m = if moves { motion[i] } else { [0.0; 2] };
+        0.5 * (m[0] * d.0 as f32 + m[1] * d.1 as f32).abs()
+    };
     super::hidden::hidden_background(
         &proxy,
         &several,
         &[],
         &coc_at,
         &depth_at,
-        &no_blur,
+        &blur_along,
         f32::INFINITY,
         &own,
     )
+}
+
+/// Whether any of the deep image's fragments moves over the shutter (their motion is zero when
+/// the effects leave motion blur out).
+fn effects_move(fragments: &[Fragment]) -> bool {
+    fragments.iter().any(|f| f.motion != [0.0; 2])
 }
 
 /// Classifies a deep image: its samples as fragments ([`deep_fragments`]), layered and
