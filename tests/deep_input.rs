@@ -163,6 +163,27 @@ fn synth(input: &Path, camera: &Path, out: &Path, backend: &str) -> std::process
     )
 }
 
+/// `synth` on the CPU from `dir`'s flat G-buffer (`g.exr`) and deep image (`deep.exr`) with
+/// its camera, each scored against its reference (`ref.exr`): `[flat, deep]`, each (SSIM,
+/// FLIP mean), printed under `what`.
+fn flat_and_deep_scores(dir: &Path, what: &str) -> [(f64, f64); 2] {
+    let camera = dir.join("cam.json");
+    let reference = dir.join("ref.exr");
+    let scores = ["g", "deep"].map(|input| {
+        let out = dir.join(format!("{input}_out.exr"));
+        assert_success(&synth(
+            &dir.join(format!("{input}.exr")),
+            &camera,
+            &out,
+            "cpu",
+        ));
+        compare_scores(&out, &reference)
+    });
+    let [(s1, f1), (s2, f2)] = scores;
+    eprintln!("{what} 128 px: flat SSIM {s1:.4} FLIP {f1:.4}; deep SSIM {s2:.4} FLIP {f2:.4}");
+    scores
+}
+
 #[test]
 fn a_deep_render_flattens_to_its_gbuffer_and_blurs_better_than_it() {
     let dir = tempfile::tempdir().expect("temp dir");
@@ -187,31 +208,12 @@ fn a_deep_render_flattens_to_its_gbuffer_and_blurs_better_than_it() {
         "the deep image flattens {worst} away from the G-buffer"
     );
 
-    let camera = dir.path().join("cam.json");
-    let (from_flat, from_deep) = (
-        dir.path().join("flat_out.exr"),
-        dir.path().join("deep_out.exr"),
-    );
-    assert_success(&synth(
-        &dir.path().join("g.exr"),
-        &camera,
-        &from_flat,
-        "cpu",
-    ));
-    assert_success(&synth(
-        &dir.path().join("deep.exr"),
-        &camera,
-        &from_deep,
-        "cpu",
-    ));
-    let reference = dir.path().join("ref.exr");
-    let (s1, f1) = compare_scores(&from_flat, &reference);
-    let (s2, f2) = compare_scores(&from_deep, &reference);
-    eprintln!("bokeh 128 px: flat SSIM {s1:.4} FLIP {f1:.4}; deep SSIM {s2:.4} FLIP {f2:.4}");
+    let [(s1, f1), (s2, f2)] = flat_and_deep_scores(dir.path(), "bokeh");
     assert!(s2 > s1 && f2 < f1, "flat {s1}/{f1}, deep {s2}/{f2}");
 
     // The GPU runs the same records through its stages (lavapipe in CI).
     let gpu = dir.path().join("gpu.exr");
+    let (camera, from_deep) = (dir.path().join("cam.json"), dir.path().join("deep_out.exr"));
     let ran = synth(&dir.path().join("deep.exr"), &camera, &gpu, "gpu");
     assert_gpu_run_matches(&ran, &gpu, &from_deep, "the deep input");
 }
@@ -227,27 +229,7 @@ fn a_moving_occluder_in_a_deep_image_streaks_past_its_outline() {
     let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("scene/scenes/hard/car-on-road.json");
     let deep_path = p(&dir.path().join("deep.exr"));
     render_scene_128(dir.path(), &p(&scene), &["--deep", &deep_path]);
-    let camera = dir.path().join("cam.json");
-    let (from_flat, from_deep) = (
-        dir.path().join("flat_out.exr"),
-        dir.path().join("deep_out.exr"),
-    );
-    assert_success(&synth(
-        &dir.path().join("g.exr"),
-        &camera,
-        &from_flat,
-        "cpu",
-    ));
-    assert_success(&synth(
-        &dir.path().join("deep.exr"),
-        &camera,
-        &from_deep,
-        "cpu",
-    ));
-    let reference = dir.path().join("ref.exr");
-    let (s1, f1) = compare_scores(&from_flat, &reference);
-    let (s2, f2) = compare_scores(&from_deep, &reference);
-    eprintln!("car-on-road 128 px: flat SSIM {s1:.4} FLIP {f1:.4}; deep SSIM {s2:.4} FLIP {f2:.4}");
+    let [(s1, f1), (s2, f2)] = flat_and_deep_scores(dir.path(), "car-on-road");
     assert!(s2 >= s1 && f2 <= f1, "flat {s1}/{f1}, deep {s2}/{f2}");
 }
 
