@@ -41,6 +41,16 @@ pub(crate) fn keep_freed_memory_below(width: u32, height: u32) {
     }
 }
 
+/// For a frame's summary line: how many fragments were drawn at a reduced resolution (their
+/// blur beyond the database's range, or their streaks beyond the frame's budget), or nothing.
+pub(crate) fn reduced_note(reduced: usize) -> String {
+    if reduced > 0 {
+        format!(", {reduced} at a reduced resolution")
+    } else {
+        String::new()
+    }
+}
+
 /// Milliseconds since `t`.
 pub(crate) fn ms_since(t: std::time::Instant) -> f64 {
     t.elapsed().as_secs_f64() * 1e3

@@ -129,7 +129,7 @@ pub(crate) fn run(args: ReconstructArgs) -> Result<()> {
         }
         if !args.quiet {
             eprintln!(
-                "{}: {}x{} from {} spp: {} sparse, {} dense, {} copied, {} dropped; {:.0} ms on the {}",
+                "{}: {}x{} from {} spp: {} sparse, {} dense, {} copied, {} dropped{}; {:.0} ms on the {}",
                 job.out.display(),
                 stats.width,
                 stats.height,
@@ -138,6 +138,7 @@ pub(crate) fn run(args: ReconstructArgs) -> Result<()> {
                 stats.counts.dense,
                 stats.counts.copied,
                 stats.counts.dropped,
+                super::reduced_note(stats.counts.reduced),
                 stats.times.total_ms,
                 frame.device,
             );

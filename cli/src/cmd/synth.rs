@@ -535,7 +535,7 @@ fn synth_frame(args: &SynthArgs, job: &FrameJob, renderer: &mut Renderer) -> Res
     write_frame_outputs(job, image, |write_ms| {
         if !args.quiet {
             eprintln!(
-                "{}x{} ({}{}): {} sparse, {} dense{}, {} copied, {} dropped; {} of {} layers; \
+                "{}x{} ({}{}): {} sparse, {} dense{}, {} copied, {} dropped{}; {} of {} layers; \
              synthesis {:.0} ms (classify {:.0}, splat {:.0}, integrate {:.0}, composite {:.0}) \
              on the {}",
                 stats.width,
@@ -558,6 +558,7 @@ fn synth_frame(args: &SynthArgs, job: &FrameJob, renderer: &mut Renderer) -> Res
                 },
                 stats.counts.copied,
                 stats.counts.dropped,
+                super::reduced_note(stats.counts.reduced),
                 stats.layers_used,
                 stats.layers,
                 stats.times.total_ms,
