@@ -71,14 +71,20 @@ pub fn deep_fragments(deep: &DeepImage, camera: &Camera, effects: Effects) -> Ve
     fragments
 }
 
-/// The background hidden behind sharper occluders, continued from the visible background
-/// beside them, as for a flat G-buffer ([`super::hidden::hidden_background`]): deep data holds
+/// The background hidden behind sharper occluders and moving ones, continued from the visible
+/// background beside them (but for a background brighter than `hdr_threshold` behind a moving
+/// one), as for a flat G-buffer ([`super::hidden::hidden_background`]): deep data holds
 /// what shows through an edge or a transparent surface, not what an opaque one hides. Each
 /// pixel stands for its dominant sample (the one contributing most after "over") when deciding
 /// what is nearer and sharper; a pixel with several visible samples (an edge) is treated as
 /// a split edge pixel; the copies are of a background pixel's farthest sample, behind every
 /// sample of the pixels they fill (their source is past any sample index).
-fn hidden_behind_deep(deep: &DeepImage, camera: &Camera, fragments: &[Fragment]) -> Vec<Fragment> {
+fn hidden_behind_deep(
+    deep: &DeepImage,
+    camera: &Camera,
+    fragments: &[Fragment],
+    hdr_threshold: f32,
+) -> Vec<Fragment> {
     if fragments.is_empty() {
         return Vec::new();
     }
@@ -146,7 +152,9 @@ fn hidden_behind_deep(deep: &DeepImage, camera: &Camera, fragments: &[Fragment])
     // background, as for a flat G-buffer: a deep image seen through a pinhole at the frame time
     // holds what shows through a silhouette's own pixels, not the background that a moving
     // occluder's smear uncovers beyond them. (Blurrier by defocus alone is left to the deep
-    // samples, as before.)
+    // samples, as before.) A background brighter than `hdr_threshold` is not continued behind
+    // a moving occluder, as on a flat G-buffer: a small emitter does not go on behind what
+    // passes in front of it.
     let moves = effects_move(fragments);
     let blur_along = |i: usize, d: (i32, i32)| -> f32 {
         let m = if moves { motion[i] } else { [0.0; 2] };
@@ -159,7 +167,7 @@ fn hidden_behind_deep(deep: &DeepImage, camera: &Camera, fragments: &[Fragment])
         &coc_at,
         &depth_at,
         &blur_along,
-        f32::INFINITY,
+        hdr_threshold,
         &own,
     )
 }
@@ -197,7 +205,7 @@ pub(crate) fn classify_deep_with(
         ..PathCounts::default()
     };
     if options.fill_hidden && model.is_some() {
-        let filled = hidden_behind_deep(deep, camera, &fragments);
+        let filled = hidden_behind_deep(deep, camera, &fragments, options.hdr_dense_threshold);
         counts.hidden_filled += filled.len();
         fragments.extend(filled);
     }
