@@ -83,6 +83,7 @@ fn hidden_behind_deep(
     deep: &DeepImage,
     camera: &Camera,
     fragments: &[Fragment],
+    motion_blur: bool,
     hdr_threshold: f32,
 ) -> Vec<Fragment> {
     if fragments.is_empty() {
@@ -155,9 +156,8 @@ fn hidden_behind_deep(
     // samples, as before.) A background brighter than `hdr_threshold` is not continued behind
     // a moving occluder, as on a flat G-buffer: a small emitter does not go on behind what
     // passes in front of it.
-    let moves = effects_move(fragments);
     let blur_along = |i: usize, d: (i32, i32)| -> f32 {
-        let m = if moves { motion[i] } else { [0.0; 2] };
+        let m = if motion_blur { motion[i] } else { [0.0; 2] };
         0.5 * (m[0] * d.0 as f32 + m[1] * d.1 as f32).abs()
     };
     super::hidden::hidden_background(
@@ -170,12 +170,6 @@ fn hidden_behind_deep(
         hdr_threshold,
         &own,
     )
-}
-
-/// Whether any of the deep image's fragments moves over the shutter (their motion is zero when
-/// the effects leave motion blur out).
-fn effects_move(fragments: &[Fragment]) -> bool {
-    fragments.iter().any(|f| f.motion != [0.0; 2])
 }
 
 /// Classifies a deep image: its samples as fragments ([`deep_fragments`]), layered and
@@ -205,7 +199,13 @@ pub(crate) fn classify_deep_with(
         ..PathCounts::default()
     };
     if options.fill_hidden && model.is_some() {
-        let filled = hidden_behind_deep(deep, camera, &fragments, options.hdr_dense_threshold);
+        let filled = hidden_behind_deep(
+            deep,
+            camera,
+            &fragments,
+            effects.motion,
+            options.hdr_dense_threshold,
+        );
         counts.hidden_filled += filled.len();
         fragments.extend(filled);
     }

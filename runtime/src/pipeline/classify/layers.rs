@@ -235,12 +235,9 @@ pub fn classify_fragments(
         Some(all) if moving_lens || thin_smear.is_some() => psf_reach(all),
         _ => Vec::new(),
     };
-    // The longest motion in the frame, px: where the frame's streaks do not fit their budget,
-    // the cap on full-resolution motion starts at half of it.
-    let longest_motion = fragments
-        .par_iter()
-        .map(|f| (f.motion[0] * f.motion[0] + f.motion[1] * f.motion[1]).sqrt())
-        .reduce(|| 0.0, f32::max);
+    // Where the frame's streaks do not fit their budget, the cap on full-resolution motion
+    // starts at half the frame's longest motion (px), found then.
+    let mut longest_motion: Option<f32> = None;
     let mut motion_cap = f32::INFINITY;
     let (scales, smear_keys, smeared) = loop {
         let scales = scales_under(motion_cap);
@@ -309,10 +306,19 @@ pub fn classify_fragments(
             // Too many streaks, or too long, for the frame's budget: the longest are drawn at
             // half the resolution (a quarter of the pixels, half the angle steps), then a
             // quarter, until they fit or reach the coarsest level.
-            Err(ClassifyError::MotionSmear(SmearError::FrameTooLarge { .. }))
-                if range.is_some() && motion_cap > longest_motion / MAX_SCALE as f32 =>
+            Err(e @ ClassifyError::MotionSmear(SmearError::FrameTooLarge { .. }))
+                if range.is_some() =>
             {
-                motion_cap = motion_cap.min(longest_motion) / 2.0;
+                let longest = *longest_motion.get_or_insert_with(|| {
+                    fragments
+                        .par_iter()
+                        .map(|f| (f.motion[0] * f.motion[0] + f.motion[1] * f.motion[1]).sqrt())
+                        .reduce(|| 0.0, f32::max)
+                });
+                if motion_cap <= longest / MAX_SCALE as f32 {
+                    return Err(e);
+                }
+                motion_cap = motion_cap.min(longest) / 2.0;
             }
             built => break (scales, smear_keys, built?),
         }
