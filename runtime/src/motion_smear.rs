@@ -58,9 +58,9 @@ const MAX_SMEARED_PIXELS: usize = 4 << 20;
 /// Most values (pixels times channels) of smeared PSF images one frame builds, summed (1 GiB
 /// of f32: 64 Mi pixels of RGBA, four times as many of grey), by default
 /// (`ClassifyOptions::smeared_values_budget`): a frame beyond it draws its longest streaks at a
-/// reduced resolution, or is an error, never an unbounded allocation. A camera pan through the double Gauss at 512 px runs in 0.24
-/// GB in all; a Cycles disc spinning 30 degrees a frame, reconstructed from 16 spp along its
-/// arcs, builds 202 M values (0.81 GB).
+/// reduced resolution, or is an error, never an unbounded allocation. A camera pan through the
+/// double Gauss at 512 px runs in 0.24 GB in all; a Cycles disc spinning 30 degrees a frame,
+/// reconstructed from 16 spp along its arcs, builds 202 M values (0.81 GB).
 pub const MAX_FRAME_SMEARED_VALUES: usize = 4 * (64 << 20);
 
 /// Which smeared PSF a moving fragment uses: its physical-lens cell (index in the set's
