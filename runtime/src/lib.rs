@@ -62,6 +62,7 @@ macro_rules! internal_modules {
 
 internal_modules!(
     baseline,
+    behind_blur,
     condition,
     databases,
     dbcache,

@@ -494,6 +494,37 @@ impl<'a> PlacedSamples<'a> {
         }
     }
 
+    /// What each pixel's samples that are drawn blurred (their CoC radius or half their motion
+    /// over the shutter at least [`crate::sample_density::MIN_BLUR_PX`]) took from it, in pixel
+    /// order ([`crate::behind_blur`]): they are moved away and drawn spread, and the pixel's
+    /// other samples are all that stays on it.
+    pub fn blurred_samples(&self) -> Vec<crate::behind_blur::BlurredSamples> {
+        let spp = self.frames.spp.max(1);
+        (0..self.frames.width * self.frames.height)
+            .into_par_iter()
+            .map(|p| {
+                let mut out = crate::behind_blur::BlurredSamples::default();
+                for k in p * spp..(p + 1) * spp {
+                    let (Some(s), Some(m)) =
+                        (self.frames.samples.get(k), self.moved.get(k).copied().flatten())
+                    else {
+                        continue;
+                    };
+                    let motion = m.motion.map(|v| v * self.shutter);
+                    let blur = m.coc.abs().max(0.5 * motion[0].hypot(motion[1]));
+                    if s.color[3] > 0.0 && blur >= crate::sample_density::MIN_BLUR_PX {
+                        out.share += self.weight;
+                        out.farthest_depth = out.farthest_depth.max(s.depth);
+                        out.motion_sum = [out.motion_sum[0] + motion[0], out.motion_sum[1] + motion[1]];
+                        out.blur_sum += blur;
+                        out.count += 1;
+                    }
+                }
+                out
+            })
+            .collect()
+    }
+
     /// Whether sample `k`'s bilinear split is sharpened ([`sharpened_share`]) with the
     /// bilinear placement (3 spp and more): for a light's sample, and for every sample from
     /// [`SHARPEN_EVERY_SAMPLE_SPP`]. (At 1 and 2 spp a light's sample that would get a
@@ -761,6 +792,14 @@ pub(crate) fn classify_samples(
         frames.width,
         frames.height,
         reach,
+        crate::sample_merge::signed_coc_of(camera),
+    );
+    crate::behind_blur::fill_behind_blur(
+        &mut fragments,
+        frames.width,
+        frames.height,
+        reach,
+        &placed.blurred_samples(),
         crate::sample_merge::signed_coc_of(camera),
     );
     let counts = PathCounts {
