@@ -95,8 +95,7 @@ pub fn fill_behind_blur(
             && f.color[..3].iter().all(|&v| v <= BRIGHT)
             && coc_px(f).abs().max(0.5 * f.motion[0].hypot(f.motion[1])) < MIN_BLUR_PX
     };
-    // Each pixel's sharp fragments (indices into `fragments`), and whether it holds any
-    // fragment that is not sharp but also not blurred (a light's): such a pixel is no hole.
+    // Each pixel's sharp fragments (indices into `fragments`).
     let mut starts = vec![0usize; w * h + 1];
     for f in fragments.iter() {
         if let Some(p) = pixel_of(f).filter(|_| sharp(f)) {
@@ -115,21 +114,31 @@ pub fn fill_behind_blur(
         }
     }
     drop(fill);
+    if starts[w * h] == 0 {
+        return;
+    }
     let same = |a: f32, b: f32| (a - b).abs() <= SAME_SURFACE_PARALLAX * b.abs();
     let sharp_at = |p: usize| by_pixel[starts[p]..starts[p + 1]].iter().map(|&i| &fragments[i as usize]);
-    // Pixels within the tent of a pixel that lost samples to blur: only there do weights move.
-    let near_blur: Vec<bool> = (0..w * h)
+    let has_sharp: Vec<bool> = (0..w * h).map(|p| starts[p] < starts[p + 1]).collect();
+    let has_blur: Vec<bool> = blurred.iter().map(|b| b.share > 0.0).collect();
+    // Pixels within the tent of a pixel that lost samples to blur (only there do weights
+    // move), and within it of a sharp fragment (only there can a hole be filled).
+    let near_blur = dilate(&has_blur, w, h, radius);
+    let near_sharp = dilate(&has_sharp, w, h, radius);
+    // Each pixel's sharp fragments summed: the least and largest parallax, and the weight.
+    let surface_at: Vec<Option<PixelSurface>> = (0..w * h)
         .into_par_iter()
         .map(|p| {
-            let (x, y) = ((p % w) as i64, (p / w) as i64);
-            (-radius..=radius).any(|dy| {
-                (-radius..=radius).any(|dx| {
-                    let (qx, qy) = (x + dx, y + dy);
-                    qx >= 0
-                        && qy >= 0
-                        && qx < w as i64
-                        && qy < h as i64
-                        && blurred[qy as usize * w + qx as usize].share > 0.0
+            sharp_at(p).fold(None, |found: Option<PixelSurface>, f| {
+                Some(match found {
+                    None => PixelSurface {
+                        parallax: [f.parallax; 2],
+                        weight: f.weight,
+                    },
+                    Some(s) => PixelSurface {
+                        parallax: [s.parallax[0].min(f.parallax), s.parallax[1].max(f.parallax)],
+                        weight: s.weight + f.weight,
+                    },
                 })
             })
         })
@@ -138,19 +147,20 @@ pub fn fill_behind_blur(
     // region: it holds no other sharp surface, its blurred samples are all nearer, and the
     // surface and those samples fill it.
     let region_weight = |q: usize, parallax: f32, depth: f32| -> Option<f32> {
-        let mut own = 0.0f32;
-        for f in sharp_at(q) {
-            if !same(f.parallax, parallax) {
-                return None;
-            }
-            own += f.weight;
-        }
+        let own = match surface_at[q] {
+            None => 0.0,
+            Some(s) if same(s.parallax[0], parallax) && same(s.parallax[1], parallax) => s.weight,
+            Some(_) => return None,
+        };
         let b = blurred[q];
         if b.share > 0.0 && b.farthest_depth >= depth * (1.0 - SAME_SURFACE_PARALLAX) {
             return None;
         }
         (own + b.share >= 1.0 - WHOLE_PIXEL_TOLERANCE).then_some(own)
     };
+    // Where weights move: sharp pixels near blur, and the holes near sharp pixels.
+    let hole_candidate = |p: usize| has_blur[p] && !has_sharp[p] && near_sharp[p];
+    let moves = |p: usize| near_blur[p] && (has_sharp[p] || hole_candidate(p));
     // How the weights round each pixel are averaged, from the blurred samples round it (over
     // the square tent): along their motion where they move one way (the veil they lay is
     // smooth along it and may change abruptly across it, at a car's roof and sill), over a
@@ -160,7 +170,7 @@ pub fn fill_behind_blur(
     let smoothing: Vec<Smoothing> = (0..w * h)
         .into_par_iter()
         .map(|p| {
-            if !near_blur[p] {
+            if !moves(p) {
                 return Smoothing::Square(0);
             }
             let (x, y) = ((p % w) as i64, (p / w) as i64);
@@ -241,7 +251,7 @@ pub fn fill_behind_blur(
     // surface round it that weighs most there.
     let holes: Vec<Fragment> = (0..w * h)
         .into_par_iter()
-        .filter(|&p| blurred[p].share > 0.0 && starts[p] == starts[p + 1])
+        .filter(|&p| hole_candidate(p))
         .map_init(Vec::new, |scratch, p| {
             let (x, y) = ((p % w) as i64, (p / w) as i64);
             // The surfaces in the nearest square round the hole that holds any (up to the
@@ -295,6 +305,33 @@ pub fn fill_behind_blur(
         }
     }
     fragments.extend(holes);
+}
+
+/// A pixel's sharp fragments: the least and the largest of their parallaxes, and their summed
+/// weight (in fragment order).
+#[derive(Clone, Copy)]
+struct PixelSurface {
+    parallax: [f32; 2],
+    weight: f32,
+}
+
+/// `mask` grown by `radius` pixels on every side (a square), over a `w` x `h` frame.
+fn dilate(mask: &[bool], w: usize, h: usize, radius: i64) -> Vec<bool> {
+    let r = radius.max(0) as usize;
+    let mut rows = vec![false; w * h];
+    for y in 0..h {
+        let row = &mask[y * w..(y + 1) * w];
+        for x in 0..w {
+            rows[y * w + x] = row[x.saturating_sub(r)..(x + r + 1).min(w)].iter().any(|&m| m);
+        }
+    }
+    let mut out = vec![false; w * h];
+    for y in 0..h {
+        for x in 0..w {
+            out[y * w + x] = (y.saturating_sub(r)..(y + r + 1).min(h)).any(|yy| rows[yy * w + x]);
+        }
+    }
+    out
 }
 
 /// A surface's sharp fragments round a hole: their summed weight, weighted sums of colour,
