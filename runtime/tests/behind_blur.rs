@@ -19,21 +19,7 @@ const HEIGHT: usize = 128;
 /// A plain wall in focus at 4 m and a light box at 2 m crossing it at about 27 px per frame
 /// (f/16: the box's CoC is a tenth of a pixel, so only its motion blurs it), its soft ends
 /// about 20 px wide and 100 rows tall.
-const SCENE: &str = r#"{
-  "name": "box crossing a wall in focus",
-  "camera": {"width": 128, "height": 128, "focal_length_mm": 50, "sensor_width_mm": 36,
-             "f_stop": 16, "focus_distance": 4.0, "aperture_blades": 0, "shutter_frames": 1.0},
-  "camera_pose": {"position": [0, 0, 0], "look_at": [0, 0, -1]},
-  "background": [0.0, 0.0, 0.0],
-  "ambient": [0.3, 0.3, 0.3],
-  "lights": [],
-  "objects": [
-    {"name": "wall", "shape": {"type": "plane", "point": [0, 0, -4], "normal": [0, 0, 1]},
-     "material": {"albedo": [0.3, 0.3, 0.3]}},
-    {"name": "box", "shape": {"type": "box", "center": [0.0, 0.0, -2.0], "half_size": [0.12, 0.3, 0.05]},
-     "material": {"albedo": [2.5, 2.5, 2.5]}, "velocity": [0.3, 0.0, 0.0]}
-  ]
-}"#;
+const SCENE: &str = include_str!("../../scene/scenes/hard/box-over-sharp-wall.json");
 
 /// Luminance (mean of R, G, B) of every pixel.
 fn luminance(image: &spreadlet::RgbaImage) -> Vec<f64> {
