@@ -20,12 +20,16 @@
 //! W'(p) = sum over q in R near p of k(p - q) W(q)  /  sum over q in R near p of k(p - q)
 //! ```
 //!
-//! with `k` the tent of [`crate::sample_density`] and `R` those pixels. A hole gets a fragment
-//! of the surface of that weight, coloured with its neighbours' weighted mean colour. A pixel
-//! that also holds another sharp surface, a miss, or blurred samples farther than the sharp
-//! surface is not in `R`: there the weights say how much of the pixel each surface covers
-//! (an edge in focus; a sharp object over a blurred background), and they are kept. Far from
-//! any blurred sample nothing changes, so frames without blur keep their bytes.
+//! with `R` those pixels and `k` a tent along the blurred samples' motion where they move one
+//! way (the veil is smooth along it and may change abruptly across it, at a car's roof and
+//! sill), reaching a quarter of their motion, else a square tent reaching half their mean blur
+//! radius, both at most a few times [`crate::sample_density::reach_px`]. A hole gets a fragment
+//! of the surface of that weight, coloured with its nearest neighbours' mean colour. A pixel
+//! that also holds another sharp surface, holds blurred samples farther than the sharp surface,
+//! or that the two leave more than a quarter empty (misses) is not in `R`: there the weights
+//! say how much of the pixel each surface covers (an edge in focus; a sharp object over a
+//! blurred background), and they are kept. Far from any blurred sample nothing changes, so
+//! frames without blur keep their bytes.
 
 use crate::pipeline::classify::Fragment;
 use crate::sample_density::{MIN_BLUR_PX, SAME_SURFACE_PARALLAX};
