@@ -162,49 +162,42 @@ pub fn fill_behind_blur(
         }
         (own + b.share >= 1.0 - WHOLE_PIXEL_TOLERANCE).then_some(own)
     };
-    // Where weights move: sharp pixels near blur, and the holes near sharp pixels.
+    // The holes that may be filled: pixels that lost samples to blur near sharp ones.
     let hole_candidate = |p: usize| has_blur[p] && !has_sharp[p] && near_sharp[p];
-    let moves = |p: usize| near_blur[p] && (has_sharp[p] || hole_candidate(p));
     // How the weights round each pixel are averaged, from the blurred samples round it (over
     // the square tent): along their motion where they move one way (the veil they lay is
     // smooth along it and may change abruptly across it, at a car's roof and sill), over a
     // square elsewhere (defocus, a spin); and no farther than a quarter of their motion or
     // half their mean blur radius, over which the veil itself changes (a slowly turning
-    // object's outline stays sharp).
-    let smoothing: Vec<Smoothing> = (0..w * h)
-        .into_par_iter()
-        .map(|p| {
-            if !moves(p) {
-                return Smoothing::Square(0);
+    // object's outline stays sharp). Worked out where it is asked for (once or twice per pixel
+    // whose weights move), not kept for the whole frame.
+    let smoothing = |x: i64, y: i64| -> Smoothing {
+        let (mut motion, mut blur, mut count) = ([0.0f32; 2], 0.0f32, 0u32);
+        for qy in (y - radius).max(0)..=(y + radius).min(h as i64 - 1) {
+            for qx in (x - radius).max(0)..=(x + radius).min(w as i64 - 1) {
+                let b = &blurred[qy as usize * w + qx as usize];
+                motion = [motion[0] + b.motion_sum[0], motion[1] + b.motion_sum[1]];
+                blur += b.blur_sum;
+                count += b.count;
             }
-            let (x, y) = ((p % w) as i64, (p / w) as i64);
-            let (mut motion, mut blur, mut count) = ([0.0f32; 2], 0.0f32, 0u32);
-            for qy in (y - radius).max(0)..=(y + radius).min(h as i64 - 1) {
-                for qx in (x - radius).max(0)..=(x + radius).min(w as i64 - 1) {
-                    let b = &blurred[qy as usize * w + qx as usize];
-                    motion = [motion[0] + b.motion_sum[0], motion[1] + b.motion_sum[1]];
-                    blur += b.blur_sum;
-                    count += b.count;
-                }
-            }
-            if count == 0 {
-                return Smoothing::Square(0);
-            }
-            let length = motion[0].hypot(motion[1]);
-            let mean_motion = length / count as f32;
-            if mean_motion >= 2.0 * MIN_BLUR_PX {
-                let reach = ((0.25 * mean_motion) as i64).min(ALONG_MOTION_REACH_PER_TENT_PX * radius);
-                Smoothing::Along([motion[0] / length, motion[1] / length], reach)
-            } else {
-                Smoothing::Square(((0.5 * blur / count as f32) as i64).min(radius))
-            }
-        })
-        .collect();
+        }
+        if count == 0 {
+            return Smoothing::Square(0);
+        }
+        let length = motion[0].hypot(motion[1]);
+        let mean_motion = length / count as f32;
+        if mean_motion >= 2.0 * MIN_BLUR_PX {
+            let reach = ((0.25 * mean_motion) as i64).min(ALONG_MOTION_REACH_PER_TENT_PX * radius);
+            Smoothing::Along([motion[0] / length, motion[1] / length], reach)
+        } else {
+            Smoothing::Square(((0.5 * blur / count as f32) as i64).min(radius))
+        }
+    };
     // The pixels round (x, y) the weights are averaged over, with their tent weights.
     let taps = |x: i64, y: i64, out: &mut Vec<(usize, f32)>| {
         out.clear();
         let inside = |qx: i64, qy: i64| qx >= 0 && qy >= 0 && qx < w as i64 && qy < h as i64;
-        match smoothing[y as usize * w + x as usize] {
+        match smoothing(x, y) {
             Smoothing::Along([dx, dy], reach) => {
                 for k in -reach..=reach {
                     let qx = (x as f32 + 0.5 + k as f32 * dx).floor() as i64;
