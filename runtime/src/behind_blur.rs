@@ -375,21 +375,8 @@ impl<'a> NearbySurface<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// A sharp fragment (CoC 0, still) of grey `color` on pixel (x, y) at `depth`.
-    fn sharp(x: i32, y: i32, depth: f32, color: f32, weight: f32) -> Fragment {
-        Fragment {
-            x,
-            y,
-            color: [color, color, color, 1.0],
-            weight,
-            parallax: 1.0 / depth,
-            depth,
-            motion: [0.0; 2],
-            bend: 0.0,
-            source: 0,
-        }
-    }
+    // Still and given CoC 0 below: sharp.
+    use crate::sample_density::tests::fragment as sharp;
 
     /// Every pixel of a `w` x `h` frame lost `share` of its samples to blurred ones at
     /// `depth` moving `motion` px over the shutter.

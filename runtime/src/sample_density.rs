@@ -183,10 +183,11 @@ pub fn even_out(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
-    fn fragment(x: i32, y: i32, depth: f32, color: f32, weight: f32) -> Fragment {
+    /// A still fragment of grey `color` on pixel (x, y) at `depth`, CoC left to the caller.
+    pub(crate) fn fragment(x: i32, y: i32, depth: f32, color: f32, weight: f32) -> Fragment {
         Fragment {
             x,
             y,

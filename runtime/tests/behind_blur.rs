@@ -6,12 +6,7 @@
 
 mod support;
 
-use psf_db::PsfModel;
-use spreadlet::camera::Camera;
-use spreadlet::dbset::DbSet;
-use spreadlet::reconstruct::reconstruct;
-use spreadlet::synth::SynthOptions;
-use support::quick_db;
+use support::{luminance, reconstruct_scene};
 
 /// A plain wall in focus at 4 m and a light box at 2 m crossing it at about 27 px per frame
 /// (f/16: the box's CoC is a tenth of a pixel, so only its motion blurs it), its soft ends
@@ -21,15 +16,6 @@ const MOVING_BOX: &str = include_str!("../../scene/scenes/hard/box-over-sharp-wa
 /// The same wall behind a still light bar at 0.5 m, f/1.2: a CoC radius of about 6.5 px, so
 /// that the bar's edges are soft for about 13 px.
 const DEFOCUSED_BAR: &str = include_str!("../../scene/scenes/hard/bar-before-sharp-wall.json");
-
-/// Luminance (mean of R, G, B) of every pixel.
-fn luminance(image: &spreadlet::RgbaImage) -> Vec<f64> {
-    image
-        .pixels
-        .iter()
-        .map(|p| (f64::from(p[0]) + f64::from(p[1]) + f64::from(p[2])) / 3.0)
-        .collect()
-}
 
 /// How reconstruction from 4 spp of `scene` (a bright blurred surface over a dark sharp one)
 /// errs against its reference where the blurred surface covers 15-97 % of a pixel (the sharp
@@ -44,20 +30,7 @@ struct SoftEdgeErrors {
 }
 
 fn soft_edge_errors(scene: &str) -> SoftEdgeErrors {
-    let scene = scene::Scene::from_json(scene, "test scene").expect("scene");
-    let camera = Camera::from_json_str(&scene.camera_json()).expect("camera");
-    let render = scene::RenderOptions {
-        seed: 5,
-        ..Default::default()
-    };
-    let frames = scene::render_stochastic(&scene, 4, &render).expect("frames");
-    let reference = scene::render_reference(&scene, 256, &render).expect("reference");
-    let dbs = DbSet::new(
-        Some(quick_db(PsfModel::ThinLens)),
-        Some(quick_db(PsfModel::LensMotion)),
-    )
-    .expect("db set");
-    let (image, _) = reconstruct(&frames, &camera, &dbs, &SynthOptions::default()).expect("recon");
+    let (_, _, reference, image) = reconstruct_scene(scene, 4, 5);
     let (got, want) = (luminance(&image), luminance(&reference));
 
     // The wall alone and the blurred surface alone: the reference's darkest and brightest.

@@ -10,12 +10,8 @@
 
 mod support;
 
-use psf_db::PsfModel;
 use spreadlet::camera::Camera;
-use spreadlet::dbset::DbSet;
-use spreadlet::reconstruct::reconstruct;
-use spreadlet::synth::SynthOptions;
-use support::quick_db;
+use support::{luminance, reconstruct_quick, reconstruct_scene};
 
 /// Frame edge, pixels.
 const SIZE: usize = 128;
@@ -40,15 +36,6 @@ const SCENE: &str = r#"{
   ]
 }"#;
 
-/// Luminance (mean of R, G, B) of every pixel.
-fn luminance(image: &spreadlet::RgbaImage) -> Vec<f64> {
-    image
-        .pixels
-        .iter()
-        .map(|p| (f64::from(p[0]) + f64::from(p[1]) + f64::from(p[2])) / 3.0)
-        .collect()
-}
-
 /// Sum of `values` over the pixels where `mask` holds.
 fn masked_sum(values: &[f64], mask: &[bool]) -> f64 {
     values
@@ -61,25 +48,12 @@ fn masked_sum(values: &[f64], mask: &[bool]) -> f64 {
 
 #[test]
 fn a_bright_emitter_keeps_its_energy_and_its_surroundings_stay_dark() {
-    let scene = scene::Scene::from_json(SCENE, "test scene").expect("scene");
-    let camera = Camera::from_json_str(&scene.camera_json()).expect("camera");
+    let (camera, frames, reference, image) = reconstruct_scene(SCENE, 1, 11);
     let lens = camera.thin_lens().expect("lens");
     assert!(
         lens.signed_coc_px(0.4).abs() > 5.0,
         "precondition: the emitter is well out of focus"
     );
-    let render = scene::RenderOptions {
-        seed: 11,
-        ..Default::default()
-    };
-    let frames = scene::render_stochastic(&scene, 1, &render).expect("frames");
-    let reference = scene::render_reference(&scene, 256, &render).expect("reference");
-    let dbs = DbSet::new(
-        Some(quick_db(PsfModel::ThinLens)),
-        Some(quick_db(PsfModel::LensMotion)),
-    )
-    .expect("db set");
-    let (image, _) = reconstruct(&frames, &camera, &dbs, &SynthOptions::default()).expect("recon");
 
     let (got, want) = (luminance(&image), luminance(&reference));
     let plain = frames.average();
@@ -166,14 +140,7 @@ fn an_emitter_over_a_moving_wall_keeps_its_energy_in_the_middle_and_by_the_edge(
         let camera = Camera::from_json_str(&scene.camera_json()).expect("camera");
         let frames =
             scene::render_stochastic(&scene, 4, &scene::RenderOptions::default()).expect("frames");
-        let dbs = DbSet::new(
-            Some(quick_db(PsfModel::ThinLens)),
-            Some(quick_db(PsfModel::LensMotion)),
-        )
-        .expect("db set");
-        let (image, _) =
-            reconstruct(&frames, &camera, &dbs, &SynthOptions::default()).expect("recon");
-        let got = luminance(&image);
+        let got = luminance(&reconstruct_quick(&frames, &camera));
         let plain = luminance(&frames.average());
         // The emitter's samples: the plain average's pixels above 1, and 10 px round them.
         let mut window = vec![false; SIZE * SIZE];

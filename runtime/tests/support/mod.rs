@@ -162,3 +162,58 @@ pub fn physical_camera(db: &PsfDatabase, h: usize) -> Camera {
         scene_unit_mm: lens.scene_unit_mm,
     }
 }
+
+/// A scene renderer scene (JSON) rendered at `spp` samples per pixel with `seed`, its
+/// 256-spp reference, and the frames reconstructed on the CPU with the Quick-profile
+/// thin-lens and lens-motion databases: (camera, frames, reference, reconstruction).
+pub fn reconstruct_scene(
+    json: &str,
+    spp: usize,
+    seed: u64,
+) -> (
+    Camera,
+    spreadlet::StochasticFrames,
+    spreadlet::RgbaImage,
+    spreadlet::RgbaImage,
+) {
+    let scene = scene::Scene::from_json(json, "test scene").expect("scene");
+    let camera = Camera::from_json_str(&scene.camera_json()).expect("camera");
+    let render = scene::RenderOptions {
+        seed,
+        ..Default::default()
+    };
+    let frames = scene::render_stochastic(&scene, spp, &render).expect("frames");
+    let reference = scene::render_reference(&scene, 256, &render).expect("reference");
+    let image = reconstruct_quick(&frames, &camera);
+    (camera, frames, reference, image)
+}
+
+/// `frames` reconstructed on the CPU with the Quick-profile thin-lens and lens-motion
+/// databases and the default options.
+pub fn reconstruct_quick(
+    frames: &spreadlet::StochasticFrames,
+    camera: &Camera,
+) -> spreadlet::RgbaImage {
+    let dbs = spreadlet::dbset::DbSet::new(
+        Some(quick_db(PsfModel::ThinLens)),
+        Some(quick_db(PsfModel::LensMotion)),
+    )
+    .expect("db set");
+    spreadlet::reconstruct::reconstruct(
+        frames,
+        camera,
+        &dbs,
+        &spreadlet::synth::SynthOptions::default(),
+    )
+    .expect("reconstruction")
+    .0
+}
+
+/// Luminance (mean of R, G, B) of every pixel of `image`.
+pub fn luminance(image: &spreadlet::RgbaImage) -> Vec<f64> {
+    image
+        .pixels
+        .iter()
+        .map(|p| (f64::from(p[0]) + f64::from(p[1]) + f64::from(p[2])) / 3.0)
+        .collect()
+}
