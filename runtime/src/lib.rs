@@ -68,6 +68,7 @@ internal_modules!(
     dbcache,
     dbset,
     denoise,
+    depth_motion,
     edge_field,
     error,
     #[cfg(feature = "gpu")]

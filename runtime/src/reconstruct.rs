@@ -171,6 +171,12 @@ fn moved_samples_of(
     let field = effects.motion.then(|| PixelMotionField::of(frames));
     let bends = field.as_ref().map(PixelMotionField::bends);
     let central_differences = field.is_some() && pinhole_sub_renders;
+    let depth_motion = effects.motion.then(|| {
+        crate::depth_motion::DepthMotion::of(frames, |z| {
+            lens.map_or(0.0, |l| l.signed_coc_px(f64::from(z)) as f32)
+        })
+    });
+    let shutter = camera.shutter_frames as f32;
     frames
         .samples
         .par_iter()
@@ -195,6 +201,10 @@ fn moved_samples_of(
             }
             let coc = lens.map_or(0.0, |l| l.signed_coc_px(f64::from(s.depth)) as f32);
             let mut motion = if effects.motion { s.motion } else { [0.0; 2] };
+            // A surface nearing or leaving the camera speeds up or slows down on screen.
+            let along = depth_motion
+                .as_ref()
+                .and_then(|d| d.acceleration(pixel, s.depth, motion));
             // The pixel's bend is its nearest surface's: a sample of a farther one (the wall
             // seen past a spinning disc's rim) keeps its straight path.
             let mut bend = match (&field, &bends) {
@@ -214,6 +224,15 @@ fn moved_samples_of(
                 px + 0.5 + s.jitter[0] - coc * s.lens[0] - motion[0] * s.time,
                 py + 0.5 + s.jitter[1] - coc * s.lens[1] - motion[1] * s.time,
             ];
+            // Along a path that speeds up, `p(t) = p0 + t m0 + t^2 a / 2`, as for a bend
+            // below; then on to the middle of its stretch over the shutter, `p0 + a S^2 / 8`,
+            // where the straight and even streak it is drawn with is centred.
+            if let Some(a) = along {
+                let t = s.time;
+                let shift = 0.5 * t * t + 0.125 * shutter * shutter;
+                q = [q[0] + shift * a[0], q[1] + shift * a[1]];
+                motion = [motion[0] - t * a[0], motion[1] - t * a[1]];
+            }
             // Along a bent path `p(t) = p0 + t m0 + t^2 a / 2` the label holds the motion at
             // the sample's own time, `m(t) = m0 + t a`: so `p0 = p(t) - t m(t) + t^2 a / 2`,
             // and the motion at the shutter centre is `m(t) - t a`.

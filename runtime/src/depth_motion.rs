@@ -1,0 +1,365 @@
+//! Motion in depth: how fast each pixel's surface nears the camera, read from the stochastic
+//! samples' labels, and how its image's path speeds up because of it.
+//!
+//! A point at camera-space position `(X, Y, Z)` moving with velocity `V` (scene units per
+//! frame) projects to `p = f (X, Y) / Z + c`, `f` the focal length in pixels and `c` the
+//! principal point, and its image moves at
+//!
+//! ```text
+//! m = dp/dt = (f V_xy - (p - c) V_z) / Z .
+//! ```
+//!
+//! So `m Z`, the motion label times the depth label, is a linear function of the image
+//! position with slope `-V_z` on its diagonal, for every point of a surface that translates,
+//! at every time within the shutter and whatever the surface's slant: a least-squares fit of
+//! `m Z` against the samples' positions round a pixel gives `V_z` from the fit's divergence,
+//! `V_z = -div(m Z) / 2`, without reading time at all. A surface sliding across the view has
+//! `V_z = 0`; a car driving at the camera a negative one.
+//!
+//! Differentiating `m` once more along the point's path, with `dZ/dt = V_z`:
+//!
+//! ```text
+//! dm/dt = -2 m V_z / Z ,
+//! ```
+//!
+//! an acceleration along the motion: the image of a nearing surface speeds up over the
+//! shutter (its points move outwards ever faster), a receding one slows down. A sample's
+//! motion label is the velocity at its own time, so moved back with it as if the path were
+//! straight and even, a sample from late in the shutter of a nearing lamp lands too far back
+//! and draws a streak too long, overshooting where the lamp was when the shutter opened.
+//! [`path_acceleration`] gives the acceleration for [`crate::reconstruct`] to move samples
+//! back along the parabola it makes, as it does for a spinning surface's arcs.
+
+use formats::StochasticFrames;
+use rayon::prelude::*;
+
+/// Samples of a pixel within this relative depth of its nearest are of its nearest surface,
+/// the one whose motion in depth the pixel's fit reads.
+const SAME_SURFACE_DEPTH: f32 = 0.03;
+
+/// The fit for a pixel reads the pixels this many pixels round it (every other one along
+/// each axis: 7 x 7 pixels).
+pub const FIT_RADIUS_PX: i64 = 6;
+
+/// Pixels within the fit's window whose surface's depth differs from the centre's by more
+/// than this fraction are left out: a car's image nears the camera by a quarter of its depth
+/// within one frame, and its samples carry the depth at their own time.
+const WINDOW_DEPTH_TOLERANCE: f32 = 0.25;
+
+/// Pixels within the fit's window whose surface's motion differs from the centre's by more
+/// than this fraction of the centre's speed (plus [`WINDOW_MOTION_SLACK_PX`]) are left out:
+/// the road under a car, still while the car moves.
+const WINDOW_MOTION_TOLERANCE: f32 = 0.5;
+
+/// Motion difference always allowed within the window, pixels per frame.
+const WINDOW_MOTION_SLACK_PX: f32 = 1.0;
+
+/// Pixels whose surface moves less than this, pixels per frame, get no fit: their path's
+/// acceleration (proportional to the motion) would move nothing.
+pub const MIN_SPEED_PX: f32 = 0.5;
+
+/// The fewest samples a fit reads.
+const MIN_FIT_SAMPLES: f32 = 12.0;
+
+/// The relative nearing speed `|V_z| / Z` beyond which a fit is not believed, per frame: a
+/// surface twice as near within one frame is beyond what a straight-and-even path or its
+/// parabola describes.
+pub const MAX_RELATIVE_NEARING: f32 = 0.5;
+
+/// Each pixel's nearest surface as the fit reads it: the sums over its samples of their
+/// positions (relative to the pixel's centre, pixels), of `m Z` and of their products, and
+/// the surface's mean motion and depth for the window's tests.
+#[derive(Clone, Copy, Debug, Default)]
+struct PixelMoments {
+    n: f32,
+    x: f32,
+    y: f32,
+    xx: f32,
+    xy: f32,
+    yy: f32,
+    /// Sums of `m Z`, x and y components.
+    wx: f32,
+    wy: f32,
+    /// Sums of position times `m Z`: `x w_x`, `y w_x`, `x w_y`, `y w_y`.
+    x_wx: f32,
+    y_wx: f32,
+    x_wy: f32,
+    y_wy: f32,
+    /// Mean motion label, pixels per frame.
+    motion: [f32; 2],
+    /// Mean depth, scene units.
+    depth: f32,
+}
+
+impl PixelMoments {
+    /// The moments of a pixel's samples at positions `(x, y)` relative to its centre with
+    /// motion labels `m` and depths `z`.
+    fn of(samples: impl Iterator<Item = ([f32; 2], [f32; 2], f32)>) -> Self {
+        let mut s = PixelMoments::default();
+        for ([x, y], m, z) in samples {
+            let w = [m[0] * z, m[1] * z];
+            s.n += 1.0;
+            s.x += x;
+            s.y += y;
+            s.xx += x * x;
+            s.xy += x * y;
+            s.yy += y * y;
+            s.wx += w[0];
+            s.wy += w[1];
+            s.x_wx += x * w[0];
+            s.y_wx += y * w[0];
+            s.x_wy += x * w[1];
+            s.y_wy += y * w[1];
+            s.motion[0] += m[0];
+            s.motion[1] += m[1];
+            s.depth += z;
+        }
+        if s.n > 0.0 {
+            s.motion = s.motion.map(|v| v / s.n);
+            s.depth /= s.n;
+        }
+        s
+    }
+
+    /// Adds `o`, whose positions are relative to a pixel `(dx, dy)` from this one's.
+    fn add_shifted(&mut self, o: &PixelMoments, dx: f32, dy: f32) {
+        self.n += o.n;
+        self.x += o.x + o.n * dx;
+        self.y += o.y + o.n * dy;
+        self.xx += o.xx + 2.0 * dx * o.x + o.n * dx * dx;
+        self.xy += o.xy + dx * o.y + dy * o.x + o.n * dx * dy;
+        self.yy += o.yy + 2.0 * dy * o.y + o.n * dy * dy;
+        self.wx += o.wx;
+        self.wy += o.wy;
+        self.x_wx += o.x_wx + dx * o.wx;
+        self.y_wx += o.y_wx + dy * o.wx;
+        self.x_wy += o.x_wy + dx * o.wy;
+        self.y_wy += o.y_wy + dy * o.wy;
+    }
+
+    /// `V_z` from the least-squares plane of `m Z` over these sums: minus half the
+    /// divergence of the fitted gradient. `None` where the samples are too few or lie too
+    /// near a line to fix a gradient.
+    fn nearing_speed(&self) -> Option<f32> {
+        if self.n < MIN_FIT_SAMPLES {
+            return None;
+        }
+        let n = self.n;
+        let (mx, my) = (self.x / n, self.y / n);
+        let cxx = self.xx / n - mx * mx;
+        let cxy = self.xy / n - mx * my;
+        let cyy = self.yy / n - my * my;
+        let det = cxx * cyy - cxy * cxy;
+        // At least a pixel's spread along each axis, and not along one line.
+        if !(cxx >= 1.0 && cyy >= 1.0 && det >= 0.25 * cxx * cyy) {
+            return None;
+        }
+        let (mwx, mwy) = (self.wx / n, self.wy / n);
+        let c_x_wx = self.x_wx / n - mx * mwx;
+        let c_y_wx = self.y_wx / n - my * mwx;
+        let c_x_wy = self.x_wy / n - mx * mwy;
+        let c_y_wy = self.y_wy / n - my * mwy;
+        // d(w_x)/dx and d(w_y)/dy of the two planes' normal equations.
+        let dwx_dx = (cyy * c_x_wx - cxy * c_y_wx) / det;
+        let dwy_dy = (cxx * c_y_wy - cxy * c_x_wy) / det;
+        let v = -0.5 * (dwx_dx + dwy_dy);
+        v.is_finite().then_some(v)
+    }
+}
+
+/// Each pixel's nearest surface's speed towards the camera, as a field over the frame.
+pub(crate) struct DepthMotion {
+    /// `V_z` of each pixel's nearest surface, scene units per frame (negative: nearing); 0
+    /// where it is not known.
+    nearing: Vec<f32>,
+    /// Each pixel's nearest surface's mean motion (pixels per frame) and depth.
+    surface: Vec<([f32; 2], f32)>,
+}
+
+impl DepthMotion {
+    /// The field of `frames`, whose samples' CoC radius at a depth (pixels, signed) is
+    /// `signed_coc`: a sample is read where its ray's pinhole image lies, its pixel's centre
+    /// plus its jitter less its CoC times its lens position.
+    pub fn of(frames: &StochasticFrames, signed_coc: impl Fn(f32) -> f32 + Sync) -> Self {
+        let (w, h, spp) = (frames.width, frames.height, frames.spp.max(1));
+        let usable = |s: &&formats::Sample| {
+            s.color[3] > 0.0
+                && s.depth.is_finite()
+                && s.depth > 0.0
+                && s.motion
+                    .iter()
+                    .chain(&s.lens)
+                    .chain(&s.jitter)
+                    .all(|v| v.is_finite())
+        };
+        let moments: Vec<PixelMoments> = frames
+            .samples
+            .par_chunks(spp)
+            .map(|pixel| {
+                let nearest = pixel
+                    .iter()
+                    .filter(usable)
+                    .map(|s| s.depth)
+                    .fold(f32::INFINITY, f32::min);
+                let limit = nearest * (1.0 + SAME_SURFACE_DEPTH);
+                PixelMoments::of(
+                    pixel
+                        .iter()
+                        .filter(usable)
+                        .filter(|s| s.depth <= limit)
+                        .map(|s| {
+                            let coc = signed_coc(s.depth);
+                            let at = [
+                                s.jitter[0] - coc * s.lens[0],
+                                s.jitter[1] - coc * s.lens[1],
+                            ];
+                            (at, s.motion, s.depth)
+                        }),
+                )
+            })
+            .collect();
+        let nearing: Vec<f32> = (0..w * h)
+            .into_par_iter()
+            .map(|i| {
+                let me = &moments[i];
+                let speed = me.motion[0].hypot(me.motion[1]);
+                if me.n == 0.0 || speed.is_nan() || speed < MIN_SPEED_PX {
+                    return 0.0;
+                }
+                let (cx, cy) = ((i % w) as i64, (i / w) as i64);
+                let motion_limit = WINDOW_MOTION_TOLERANCE * speed + WINDOW_MOTION_SLACK_PX;
+                let mut sum = PixelMoments::default();
+                for dy in (-FIT_RADIUS_PX..=FIT_RADIUS_PX).step_by(2) {
+                    let y = cy + dy;
+                    if y < 0 || y >= h as i64 {
+                        continue;
+                    }
+                    for dx in (-FIT_RADIUS_PX..=FIT_RADIUS_PX).step_by(2) {
+                        let x = cx + dx;
+                        if x < 0 || x >= w as i64 {
+                            continue;
+                        }
+                        let o = &moments[y as usize * w + x as usize];
+                        let same = o.n > 0.0
+                            && (o.depth - me.depth).abs() <= WINDOW_DEPTH_TOLERANCE * me.depth
+                            && (o.motion[0] - me.motion[0]).hypot(o.motion[1] - me.motion[1])
+                                <= motion_limit;
+                        if same {
+                            sum.add_shifted(o, dx as f32, dy as f32);
+                        }
+                    }
+                }
+                match sum.nearing_speed() {
+                    Some(v) if v.abs() <= MAX_RELATIVE_NEARING * me.depth => v,
+                    _ => 0.0,
+                }
+            })
+            .collect();
+        let surface = moments.iter().map(|m| (m.motion, m.depth)).collect();
+        DepthMotion {
+            nearing,
+            surface,
+        }
+    }
+
+    /// The acceleration of the path of a sample in `pixel` at `depth` with motion label
+    /// `motion` (pixels per frame squared), when it is of the pixel's nearest surface (its
+    /// depth within [`WINDOW_DEPTH_TOLERANCE`] and its motion as the fit's window allows);
+    /// `None` otherwise, or where the pixel's nearing speed is not known.
+    pub fn acceleration(&self, pixel: usize, depth: f32, motion: [f32; 2]) -> Option<[f32; 2]> {
+        let v = *self.nearing.get(pixel)?;
+        if v == 0.0 {
+            return None;
+        }
+        let (m, d) = self.surface[pixel];
+        let limit = WINDOW_MOTION_TOLERANCE * m[0].hypot(m[1]) + WINDOW_MOTION_SLACK_PX;
+        let same = (depth - d).abs() <= WINDOW_DEPTH_TOLERANCE * d
+            && (motion[0] - m[0]).hypot(motion[1] - m[1]) <= limit;
+        same.then(|| path_acceleration(motion, depth, v))
+    }
+
+    /// The nearing speed of `pixel`'s nearest surface, scene units per frame (0 where not
+    /// known).
+    #[cfg(test)]
+    fn nearing_speed(&self, pixel: usize) -> f32 {
+        self.nearing.get(pixel).copied().unwrap_or(0.0)
+    }
+}
+
+/// The acceleration along its path of the image of a point at `depth` (scene units) moving
+/// at `motion` (pixels per frame) while nearing the camera at `nearing` scene units per frame
+/// (negative when nearing): `-2 motion nearing / depth`, pixels per frame squared, with the
+/// relative nearing speed bounded by [`MAX_RELATIVE_NEARING`].
+pub fn path_acceleration(motion: [f32; 2], depth: f32, nearing: f32) -> [f32; 2] {
+    let rate = (nearing / depth).clamp(-MAX_RELATIVE_NEARING, MAX_RELATIVE_NEARING);
+    [-2.0 * motion[0] * rate, -2.0 * motion[1] * rate]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use formats::Sample;
+
+    /// Frames of a plane `Z = z0 + gz x_cam` translating at `v` (scene units per frame),
+    /// seen by a pinhole of focal length `f` pixels, one sample per pixel at the pixel's
+    /// centre at time `t(x, y)`: depth and motion labels as the projection gives them.
+    fn translating_plane(z0: f32, slope: f32, v: [f32; 3], f: f32) -> StochasticFrames {
+        let (w, h) = (48, 48);
+        let c = [24.0f32, 24.0];
+        let mut samples = Vec::new();
+        for y in 0..h {
+            for x in 0..w {
+                let p = [x as f32 + 0.5, y as f32 + 0.5];
+                // The ray through p meets the plane Z = z0 + slope X, X = (p - c) Z / f.
+                let u = (p[0] - c[0]) / f;
+                let z = z0 / (1.0 - slope * u);
+                let motion = [
+                    (f * v[0] - (p[0] - c[0]) * v[2]) / z,
+                    (f * v[1] - (p[1] - c[1]) * v[2]) / z,
+                ];
+                samples.push(Sample {
+                    color: [0.5, 0.5, 0.5, 1.0],
+                    depth: z,
+                    lens: [0.0; 2],
+                    time: ((x * 7 + y * 3) % 11) as f32 / 11.0 - 0.5,
+                    motion,
+                    jitter: [0.0; 2],
+                });
+            }
+        }
+        StochasticFrames::new(w, h, 1, samples)
+    }
+
+    #[test]
+    fn a_surface_driving_at_the_camera_reads_its_speed() {
+        let frames = translating_plane(4.0, 0.0, [0.05, 0.0, -0.3], 300.0);
+        let field = DepthMotion::of(&frames, |_| 0.0);
+        for (x, y) in [(24, 24), (10, 30), (40, 8)] {
+            let v = field.nearing_speed(y * 48 + x);
+            assert!((v + 0.3).abs() < 0.003, "V_z at ({x}, {y}): {v}, not -0.3");
+        }
+    }
+
+    #[test]
+    fn a_slanted_surface_sliding_across_does_not_near() {
+        // Its motion varies with its depth across the image, but no point nears the camera.
+        let frames = translating_plane(4.0, 0.4, [0.2, 0.05, 0.0], 300.0);
+        let field = DepthMotion::of(&frames, |_| 0.0);
+        for (x, y) in [(24, 24), (10, 30), (40, 8)] {
+            let v = field.nearing_speed(y * 48 + x);
+            assert!(v.abs() < 1e-3, "V_z at ({x}, {y}): {v}, not 0");
+        }
+    }
+
+    #[test]
+    fn a_nearing_point_speeds_up_as_its_projection_does() {
+        // p(t) = f X / (Z0 + V t), differentiated twice numerically at t = 0.
+        let (f, x, z0, v) = (300.0f64, 0.4f64, 4.0f64, -0.3f64);
+        let p = |t: f64| f * x / (z0 + v * t);
+        let dt = 1e-3;
+        let numeric = (p(dt) - 2.0 * p(0.0) + p(-dt)) / (dt * dt);
+        let motion = (p(dt) - p(-dt)) / (2.0 * dt);
+        let a = f64::from(path_acceleration([motion as f32, 0.0], z0 as f32, v as f32)[0]);
+        assert!((a - numeric).abs() < 1e-3 * numeric.abs(), "{a} against {numeric}");
+    }
+}
