@@ -167,21 +167,74 @@ impl PixelMoments {
     }
 }
 
-/// Each pixel's nearest surface's speed towards the camera, as a field over the frame.
+/// Each pixel's nearest surface's speed towards the camera, where it is known: the fits of
+/// the moving pixels, indexed by pixel.
 pub(crate) struct DepthMotion {
-    /// `V_z` of each pixel's nearest surface, scene units per frame (negative: nearing); 0
-    /// where it is not known.
-    nearing: Vec<f32>,
-    /// Each pixel's nearest surface's mean motion (pixels per frame) and depth.
-    surface: Vec<([f32; 2], f32)>,
+    /// Each pixel's index into `fits`, [`NO_FIT`] where its surface's nearing speed is not
+    /// known; empty when no pixel's is.
+    fit_of: Vec<u32>,
+    fits: Vec<SurfaceFit>,
 }
+
+/// A pixel's nearest surface: its speed in depth `V_z` (scene units per frame, negative when
+/// nearing), its mean motion (pixels per frame) and its mean depth.
+#[derive(Clone, Copy, Debug)]
+struct SurfaceFit {
+    nearing: f32,
+    motion: [f32; 2],
+    depth: f32,
+}
+
+/// [`DepthMotion::fit_of`]'s mark for a pixel without a fit.
+const NO_FIT: u32 = u32::MAX;
 
 impl DepthMotion {
     /// The field of `frames`, whose samples' CoC radius at a depth (pixels, signed) is
     /// `signed_coc`: a sample is read where its ray's pinhole image lies, its pixel's centre
-    /// plus its jitter less its CoC times its lens position.
-    pub fn of(frames: &StochasticFrames, signed_coc: impl Fn(f32) -> f32 + Sync) -> Self {
+    /// plus its jitter less its CoC times its lens position. `speed(pixel)` is how fast the
+    /// pixel's nearest surface moves (pixels per frame): only pixels within
+    /// [`FIT_RADIUS_PX`] of one moving at [`MIN_SPEED_PX`] or more are read, and only those
+    /// moving get a fit.
+    pub fn of(
+        frames: &StochasticFrames,
+        signed_coc: impl Fn(f32) -> f32 + Sync,
+        speed: impl Fn(usize) -> f32 + Sync,
+    ) -> Self {
         let (w, h, spp) = (frames.width, frames.height, frames.spp.max(1));
+        let none = DepthMotion {
+            fit_of: Vec::new(),
+            fits: Vec::new(),
+        };
+        // Pixels are numbered in 32 bits; no frame that fits in memory has 4 G of them.
+        if frames.samples.len() != w * h * spp || w * h >= NO_FIT as usize {
+            return none;
+        }
+        let moving: Vec<u32> = (0..w * h)
+            .into_par_iter()
+            .filter(|&i| speed(i) >= MIN_SPEED_PX)
+            .map(|i| i as u32)
+            .collect();
+        if moving.is_empty() {
+            return none;
+        }
+        // The pixels the fits read, each given a slot: the moving ones' windows. Most frames
+        // move in a small part of the frame; where their windows could cover it, every
+        // pixel is read.
+        let window_pixels = (FIT_RADIUS_PX as usize + 1).pow(2);
+        let (slot, read): (Vec<u32>, Vec<usize>) = if moving.len() * window_pixels >= w * h {
+            ((0..(w * h) as u32).collect(), (0..w * h).collect())
+        } else {
+            let (mut slot, mut read) = (vec![NO_FIT; w * h], Vec::new());
+            for &i in &moving {
+                for j in window(i as usize, w, h) {
+                    if slot[j] == NO_FIT {
+                        slot[j] = read.len() as u32;
+                        read.push(j);
+                    }
+                }
+            }
+            (slot, read)
+        };
         let usable = |s: &&formats::Sample| {
             s.color[3] > 0.0
                 && s.depth.is_finite()
@@ -192,10 +245,10 @@ impl DepthMotion {
                     .chain(&s.jitter)
                     .all(|v| v.is_finite())
         };
-        let moments: Vec<PixelMoments> = frames
-            .samples
-            .par_chunks(spp)
-            .map(|pixel| {
+        let moments: Vec<PixelMoments> = read
+            .par_iter()
+            .map(|&j| {
+                let pixel = &frames.samples[j * spp..(j + 1) * spp];
                 let nearest = pixel
                     .iter()
                     .filter(usable)
@@ -218,48 +271,57 @@ impl DepthMotion {
                 )
             })
             .collect();
-        let nearing: Vec<f32> = (0..w * h)
-            .into_par_iter()
-            .map(|i| {
-                let me = &moments[i];
+        let fitted: Vec<(u32, SurfaceFit)> = moving
+            .par_iter()
+            .filter_map(|&i| {
+                let i = i as usize;
+                let me = &moments[slot[i] as usize];
                 let speed = me.motion[0].hypot(me.motion[1]);
                 if me.n == 0.0 || speed.is_nan() || speed < MIN_SPEED_PX {
-                    return 0.0;
+                    return None;
                 }
-                let (cx, cy) = ((i % w) as i64, (i / w) as i64);
                 let motion_limit = WINDOW_MOTION_TOLERANCE * speed + WINDOW_MOTION_SLACK_PX;
                 let mut sum = PixelMoments::default();
-                for dy in (-FIT_RADIUS_PX..=FIT_RADIUS_PX).step_by(2) {
-                    let y = cy + dy;
-                    if y < 0 || y >= h as i64 {
-                        continue;
-                    }
-                    for dx in (-FIT_RADIUS_PX..=FIT_RADIUS_PX).step_by(2) {
-                        let x = cx + dx;
-                        if x < 0 || x >= w as i64 {
-                            continue;
-                        }
-                        let o = &moments[y as usize * w + x as usize];
-                        let same = o.n > 0.0
-                            && (o.depth - me.depth).abs() <= WINDOW_DEPTH_TOLERANCE * me.depth
-                            && (o.motion[0] - me.motion[0]).hypot(o.motion[1] - me.motion[1])
-                                <= motion_limit;
-                        if same {
-                            sum.add_shifted(o, dx as f32, dy as f32);
-                        }
+                for j in window(i, w, h) {
+                    let o = &moments[slot[j] as usize];
+                    let same = o.n > 0.0
+                        && (o.depth - me.depth).abs() <= WINDOW_DEPTH_TOLERANCE * me.depth
+                        && (o.motion[0] - me.motion[0]).hypot(o.motion[1] - me.motion[1])
+                            <= motion_limit;
+                    if same {
+                        let (dx, dy) = ((j % w) as f32 - (i % w) as f32, (j / w) as f32 - (i / w) as f32);
+                        sum.add_shifted(o, dx, dy);
                     }
                 }
-                match sum.nearing_speed() {
-                    Some(v) if v.abs() <= MAX_RELATIVE_NEARING * me.depth => v,
-                    _ => 0.0,
-                }
+                let nearing = sum
+                    .nearing_speed()
+                    .filter(|v| *v != 0.0 && v.abs() <= MAX_RELATIVE_NEARING * me.depth)?;
+                Some((
+                    i as u32,
+                    SurfaceFit {
+                        nearing,
+                        motion: me.motion,
+                        depth: me.depth,
+                    },
+                ))
             })
             .collect();
-        let surface = moments.iter().map(|m| (m.motion, m.depth)).collect();
-        DepthMotion {
-            nearing,
-            surface,
+        drop(moments);
+        let mut fit_of = slot;
+        fit_of.fill(NO_FIT);
+        for (k, &(i, _)) in fitted.iter().enumerate() {
+            fit_of[i as usize] = k as u32;
         }
+        DepthMotion {
+            fit_of,
+            fits: fitted.into_iter().map(|(_, f)| f).collect(),
+        }
+    }
+
+    /// The fit of `pixel`'s nearest surface, where there is one.
+    fn fit(&self, pixel: usize) -> Option<&SurfaceFit> {
+        let k = *self.fit_of.get(pixel)?;
+        self.fits.get(k as usize)
     }
 
     /// The acceleration of the path of a sample in `pixel` at `depth` with motion label
@@ -267,23 +329,36 @@ impl DepthMotion {
     /// depth within [`WINDOW_DEPTH_TOLERANCE`] and its motion as the fit's window allows);
     /// `None` otherwise, or where the pixel's nearing speed is not known.
     pub fn acceleration(&self, pixel: usize, depth: f32, motion: [f32; 2]) -> Option<[f32; 2]> {
-        let v = *self.nearing.get(pixel)?;
-        if v == 0.0 {
-            return None;
-        }
-        let (m, d) = self.surface[pixel];
+        let fit = self.fit(pixel)?;
+        let (m, d) = (fit.motion, fit.depth);
         let limit = WINDOW_MOTION_TOLERANCE * m[0].hypot(m[1]) + WINDOW_MOTION_SLACK_PX;
         let same = (depth - d).abs() <= WINDOW_DEPTH_TOLERANCE * d
             && (motion[0] - m[0]).hypot(motion[1] - m[1]) <= limit;
-        same.then(|| path_acceleration(motion, depth, v))
+        same.then(|| path_acceleration(motion, depth, fit.nearing))
     }
 
     /// The nearing speed of `pixel`'s nearest surface, scene units per frame (0 where not
     /// known).
     #[cfg(test)]
     fn nearing_speed(&self, pixel: usize) -> f32 {
-        self.nearing.get(pixel).copied().unwrap_or(0.0)
+        self.fit(pixel).map_or(0.0, |f| f.nearing)
     }
+}
+
+/// The pixels a fit for pixel `i` of a `w x h` frame reads: every other pixel along each axis
+/// within [`FIT_RADIUS_PX`] of it, inside the frame.
+fn window(i: usize, w: usize, h: usize) -> impl Iterator<Item = usize> {
+    let (cx, cy) = ((i % w) as i64, (i / w) as i64);
+    let offsets = || (-FIT_RADIUS_PX..=FIT_RADIUS_PX).step_by(2);
+    offsets()
+        .map(move |dy| cy + dy)
+        .filter(move |&y| y >= 0 && y < h as i64)
+        .flat_map(move |y| {
+            offsets()
+                .map(move |dx| cx + dx)
+                .filter(move |&x| x >= 0 && x < w as i64)
+                .map(move |x| y as usize * w + x as usize)
+        })
 }
 
 /// The acceleration along its path of the image of a point at `depth` (scene units) moving
@@ -333,7 +408,7 @@ mod tests {
     #[test]
     fn a_surface_driving_at_the_camera_reads_its_speed() {
         let frames = translating_plane(4.0, 0.0, [0.05, 0.0, -0.3], 300.0);
-        let field = DepthMotion::of(&frames, |_| 0.0);
+        let field = DepthMotion::of(&frames, |_| 0.0, |_| 1.0);
         for (x, y) in [(24, 24), (10, 30), (40, 8)] {
             let v = field.nearing_speed(y * 48 + x);
             assert!((v + 0.3).abs() < 0.003, "V_z at ({x}, {y}): {v}, not -0.3");
@@ -344,7 +419,7 @@ mod tests {
     fn a_slanted_surface_sliding_across_does_not_near() {
         // Its motion varies with its depth across the image, but no point nears the camera.
         let frames = translating_plane(4.0, 0.4, [0.2, 0.05, 0.0], 300.0);
-        let field = DepthMotion::of(&frames, |_| 0.0);
+        let field = DepthMotion::of(&frames, |_| 0.0, |_| 1.0);
         for (x, y) in [(24, 24), (10, 30), (40, 8)] {
             let v = field.nearing_speed(y * 48 + x);
             assert!(v.abs() < 1e-3, "V_z at ({x}, {y}): {v}, not 0");

@@ -171,10 +171,12 @@ fn moved_samples_of(
     let field = effects.motion.then(|| PixelMotionField::of(frames));
     let bends = field.as_ref().map(PixelMotionField::bends);
     let central_differences = field.is_some() && pinhole_sub_renders;
-    let depth_motion = effects.motion.then(|| {
-        crate::depth_motion::DepthMotion::of(frames, |z| {
-            lens.map_or(0.0, |l| l.signed_coc_px(f64::from(z)) as f32)
-        })
+    let depth_motion = field.as_ref().map(|field| {
+        crate::depth_motion::DepthMotion::of(
+            frames,
+            |z| lens.map_or(0.0, |l| l.signed_coc_px(f64::from(z)) as f32),
+            |pixel| field.speed(pixel),
+        )
     });
     let shutter = camera.shutter_frames as f32;
     frames
