@@ -324,17 +324,17 @@ impl DepthMotion {
         self.fits.get(k as usize)
     }
 
-    /// The acceleration of the path of a sample in `pixel` at `depth` with motion label
-    /// `motion` (pixels per frame squared), when it is of the pixel's nearest surface (its
-    /// depth within [`WINDOW_DEPTH_TOLERANCE`] and its motion as the fit's window allows);
-    /// `None` otherwise, or where the pixel's nearing speed is not known.
-    pub fn acceleration(&self, pixel: usize, depth: f32, motion: [f32; 2]) -> Option<[f32; 2]> {
+    /// The speed in depth (scene units per frame, negative when nearing) of the surface a
+    /// sample in `pixel` at `depth` with motion label `motion` (pixels per frame) lies on,
+    /// when it is the pixel's nearest (its depth within [`WINDOW_DEPTH_TOLERANCE`] and its
+    /// motion as the fit's window allows) and its speed is known; `None` otherwise.
+    pub fn nearing(&self, pixel: usize, depth: f32, motion: [f32; 2]) -> Option<f32> {
         let fit = self.fit(pixel)?;
         let (m, d) = (fit.motion, fit.depth);
         let limit = WINDOW_MOTION_TOLERANCE * m[0].hypot(m[1]) + WINDOW_MOTION_SLACK_PX;
         let same = (depth - d).abs() <= WINDOW_DEPTH_TOLERANCE * d
             && (motion[0] - m[0]).hypot(motion[1] - m[1]) <= limit;
-        same.then(|| path_acceleration(motion, depth, fit.nearing))
+        same.then_some(fit.nearing)
     }
 
     /// The nearing speed of `pixel`'s nearest surface, scene units per frame (0 where not
@@ -359,6 +359,17 @@ fn window(i: usize, w: usize, h: usize) -> impl Iterator<Item = usize> {
                 .filter(move |&x| x >= 0 && x < w as i64)
                 .map(move |x| y as usize * w + x as usize)
         })
+}
+
+/// The derivative of the image motion of a point at `depth` (scene units) nearing the camera
+/// at `nearing` (scene units per frame) from its central difference over a frame on each side,
+/// `(p(t + 1) - p(t - 1)) / 2` (pixels per frame), as Blender's pinhole sub-renders label
+/// their samples: along `p(t) = c + P / (Z + V t)` the difference is the derivative divided
+/// by `1 - (V / Z)^2`, with `V / Z` bounded by [`MAX_RELATIVE_NEARING`].
+pub fn derivative_of_central_difference(difference: [f32; 2], depth: f32, nearing: f32) -> [f32; 2] {
+    let rate = (nearing / depth).clamp(-MAX_RELATIVE_NEARING, MAX_RELATIVE_NEARING);
+    let f = 1.0 - rate * rate;
+    [difference[0] * f, difference[1] * f]
 }
 
 /// The acceleration along its path of the image of a point at `depth` (scene units) moving
@@ -424,6 +435,19 @@ mod tests {
             let v = field.nearing_speed(y * 48 + x);
             assert!(v.abs() < 1e-3, "V_z at ({x}, {y}): {v}, not 0");
         }
+    }
+
+    #[test]
+    fn a_central_difference_of_a_nearing_point_becomes_its_derivative() {
+        // p(t) = f X / (Z0 + V t): Blender's label (p(1) - p(-1)) / 2 against dp/dt at 0.
+        let (f, x, z0, v) = (300.0f64, 0.4f64, 4.0f64, -1.2f64);
+        let p = |t: f64| f * x / (z0 + v * t);
+        let difference = (p(1.0) - p(-1.0)) / 2.0;
+        let derivative = -f * x * v / (z0 * z0);
+        assert!((difference / derivative - 1.0).abs() > 0.05, "precondition: they differ");
+        let got = derivative_of_central_difference([difference as f32, 0.0], z0 as f32, v as f32);
+        let got = f64::from(got[0]);
+        assert!((got - derivative).abs() < 1e-4 * derivative.abs(), "{got} against {derivative}");
     }
 
     #[test]

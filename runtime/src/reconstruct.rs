@@ -204,9 +204,16 @@ fn moved_samples_of(
             let coc = lens.map_or(0.0, |l| l.signed_coc_px(f64::from(s.depth)) as f32);
             let mut motion = if effects.motion { s.motion } else { [0.0; 2] };
             // A surface nearing or leaving the camera speeds up or slows down on screen.
-            let along = depth_motion
+            let nearing = depth_motion
                 .as_ref()
-                .and_then(|d| d.acceleration(pixel, s.depth, motion));
+                .and_then(|d| d.nearing(pixel, s.depth, motion));
+            // Blender's labels are central differences over a frame each side: along a
+            // nearing path, longer than the derivative.
+            if let (Some(v), true) = (nearing, central_differences) {
+                motion = crate::depth_motion::derivative_of_central_difference(motion, s.depth, v);
+            }
+            let along =
+                nearing.map(|v| crate::depth_motion::path_acceleration(motion, s.depth, v));
             // The pixel's bend is its nearest surface's: a sample of a farther one (the wall
             // seen past a spinning disc's rim) keeps its straight path.
             let mut bend = match (&field, &bends) {
