@@ -901,6 +901,7 @@ mod tests {
                     coc: 0.0,
                     motion: [0.0; 2],
                     bend: 0.0,
+                    ..MovedSample::default()
                 }));
             }
         }
@@ -1071,6 +1072,7 @@ mod tests {
                         coc: 0.0,
                         motion: [0.0; 2],
                         bend: 0.0,
+                        ..MovedSample::default()
                     }));
                 }
             }
@@ -1161,6 +1163,7 @@ mod tests {
                         coc: 0.0,
                         motion: [0.0; 2],
                         bend: 0.0,
+                        ..MovedSample::default()
                     }));
                 }
             }
@@ -1234,6 +1237,7 @@ mod tests {
                 coc: 0.0,
                 motion: [0.0; 2],
                 bend: 0.0,
+                ..MovedSample::default()
             });
         }
         let guides = frames.guides.clone().expect("guides");

@@ -134,7 +134,7 @@ impl SamplePlacement {
 }
 
 /// A sample moved back to the lens centre and the shutter centre.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct MovedSample {
     /// Continuous sensor position there, pixels (pixel centres at +0.5).
     pub q: [f32; 2],
@@ -146,6 +146,9 @@ pub struct MovedSample {
     /// How far its path bends across the motion, px per frame squared ([`Fragment::bend`] in
     /// frame units): a spinning surface's points travel arcs.
     pub bend: f32,
+    /// Planar depth at the shutter centre, scene units: the sample's own, less its surface's
+    /// speed in depth times its time where that speed is known ([`crate::depth_motion`]).
+    pub depth: f32,
 }
 
 /// Every sample moved back to the lens and shutter centre (`docs/STOCHASTIC.md`), in the order
@@ -214,6 +217,16 @@ fn moved_samples_of(
             }
             let along =
                 nearing.map(|v| crate::depth_motion::path_acceleration(motion, s.depth, v));
+            // The depth at the shutter centre: a nearing surface's samples then lie at one
+            // depth whatever their time, so that one PSF draws them and they merge as one
+            // surface (a car's samples at a quarter's difference in depth did not). A light's
+            // samples keep their own, each the streak's width at its time: at the centre's,
+            // a lamp's light drew faint scratches across the body beside it.
+            let light = s.color[..3].iter().any(|&c| c > BRIGHT_SAMPLE);
+            let depth = match nearing {
+                Some(v) if !light => (s.depth - v * s.time).max(0.5 * s.depth),
+                _ => s.depth,
+            };
             // The pixel's bend is its nearest surface's: a sample of a farther one (the wall
             // seen past a spinning disc's rim) keeps its straight path.
             let mut bend = match (&field, &bends) {
@@ -259,6 +272,7 @@ fn moved_samples_of(
                 coc,
                 motion,
                 bend,
+                depth,
             })
         })
         .collect()
@@ -542,7 +556,7 @@ impl<'a> PlacedSamples<'a> {
                     let blur = m.coc.abs().max(0.5 * motion[0].hypot(motion[1]));
                     if s.color[3] > 0.0 && blur >= crate::sample_density::MIN_BLUR_PX {
                         out.share += self.weight;
-                        out.farthest_depth = out.farthest_depth.max(s.depth);
+                        out.farthest_depth = out.farthest_depth.max(m.depth);
                         out.motion_sum = [out.motion_sum[0] + motion[0], out.motion_sum[1] + motion[1]];
                         out.blur_sum += blur;
                         out.count += 1;
@@ -582,11 +596,12 @@ impl<'a> PlacedSamples<'a> {
     fn fragment_seed(&self, k: usize) -> FragmentSeed {
         let s = &self.frames.samples[k];
         let motion = self.moved[k].map_or([0.0; 2], |m| m.motion);
+        let depth = self.moved[k].map_or(s.depth, |m| m.depth);
         FragmentSeed {
             color: self.denoised.as_ref().map_or(s.color, |d| d[k]),
             weight: self.weight,
-            parallax: 1.0 / s.depth,
-            depth: s.depth,
+            parallax: 1.0 / depth,
+            depth,
             motion: [motion[0] * self.shutter, motion[1] * self.shutter],
             // Over the shutter a path's bend scales with the shutter's square.
             bend: self.moved[k].map_or(0.0, |m| m.bend) * self.shutter * self.shutter,

@@ -176,6 +176,23 @@ pub fn reconstruct_scene(
     spreadlet::RgbaImage,
     spreadlet::RgbaImage,
 ) {
+    let (scene, camera, frames) = scene_frames(json, spp, seed);
+    let render = scene::RenderOptions {
+        seed,
+        ..Default::default()
+    };
+    let reference = scene::render_reference(&scene, 256, &render).expect("reference");
+    let image = reconstruct_quick(&frames, &camera);
+    (camera, frames, reference, image)
+}
+
+/// A scene renderer scene (JSON), its camera, and its stochastic frames at `spp` samples per
+/// pixel with `seed`.
+pub fn scene_frames(
+    json: &str,
+    spp: usize,
+    seed: u64,
+) -> (scene::Scene, Camera, spreadlet::StochasticFrames) {
     let scene = scene::Scene::from_json(json, "test scene").expect("scene");
     let camera = Camera::from_json_str(&scene.camera_json()).expect("camera");
     let render = scene::RenderOptions {
@@ -183,9 +200,7 @@ pub fn reconstruct_scene(
         ..Default::default()
     };
     let frames = scene::render_stochastic(&scene, spp, &render).expect("frames");
-    let reference = scene::render_reference(&scene, 256, &render).expect("reference");
-    let image = reconstruct_quick(&frames, &camera);
-    (camera, frames, reference, image)
+    (scene, camera, frames)
 }
 
 /// `frames` reconstructed on the CPU with the Quick-profile thin-lens and lens-motion
@@ -194,6 +209,14 @@ pub fn reconstruct_quick(
     frames: &spreadlet::StochasticFrames,
     camera: &Camera,
 ) -> spreadlet::RgbaImage {
+    reconstruct_quick_with_stats(frames, camera).0
+}
+
+/// [`reconstruct_quick`], with the call's statistics.
+pub fn reconstruct_quick_with_stats(
+    frames: &spreadlet::StochasticFrames,
+    camera: &Camera,
+) -> (spreadlet::RgbaImage, spreadlet::SynthStats) {
     let dbs = spreadlet::dbset::DbSet::new(
         Some(quick_db(PsfModel::ThinLens)),
         Some(quick_db(PsfModel::LensMotion)),
@@ -206,7 +229,6 @@ pub fn reconstruct_quick(
         &spreadlet::synth::SynthOptions::default(),
     )
     .expect("reconstruction")
-    .0
 }
 
 /// Luminance (mean of R, G, B) of every pixel of `image`.
