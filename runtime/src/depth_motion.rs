@@ -438,6 +438,26 @@ mod tests {
     }
 
     #[test]
+    fn labels_beyond_reason_give_a_bounded_speed_and_no_panic() {
+        // Motion labels near f32's limit (their products with depth overflow), a depth near
+        // zero, and a plane's labels with one pixel's made infinite.
+        for (motion, depth) in [(1e30f32, 4.0f32), (3.0e38, 1e30), (5.0, 1e-30)] {
+            let mut frames = translating_plane(4.0, 0.0, [0.05, 0.0, -0.3], 300.0);
+            for s in frames.samples.iter_mut() {
+                s.motion = [motion, -motion];
+                s.depth = depth;
+            }
+            frames.samples[100].motion = [f32::INFINITY, 0.0];
+            let field = DepthMotion::of(&frames, |_| 0.0, |_| 1.0);
+            for pixel in 0..48 * 48 {
+                let v = field.nearing_speed(pixel);
+                assert!(v.is_finite(), "pixel {pixel}: {v}");
+                assert!(v.abs() <= MAX_RELATIVE_NEARING * depth, "pixel {pixel}: {v}");
+            }
+        }
+    }
+
+    #[test]
     fn a_central_difference_of_a_nearing_point_becomes_its_derivative() {
         // p(t) = f X / (Z0 + V t): Blender's label (p(1) - p(-1)) / 2 against dp/dt at 0.
         let (f, x, z0, v) = (300.0f64, 0.4f64, 4.0f64, -1.2f64);
