@@ -33,10 +33,6 @@
 use formats::StochasticFrames;
 use rayon::prelude::*;
 
-/// Samples of a pixel within this relative depth of its nearest are of its nearest surface,
-/// the one whose motion in depth the pixel's fit reads.
-const SAME_SURFACE_DEPTH: f32 = 0.03;
-
 /// The fit for a pixel reads the pixels this many pixels round it (every other one along
 /// each axis: 7 x 7 pixels).
 pub const FIT_RADIUS_PX: i64 = 6;
@@ -254,7 +250,8 @@ impl DepthMotion {
                     .filter(usable)
                     .map(|s| s.depth)
                     .fold(f32::INFINITY, f32::min);
-                let limit = nearest * (1.0 + SAME_SURFACE_DEPTH);
+                // The pixel's nearest surface, as its motion field reads it.
+                let limit = nearest * (1.0 + crate::reconstruct::FIELD_SAME_SURFACE_DEPTH);
                 PixelMoments::of(
                     pixel
                         .iter()

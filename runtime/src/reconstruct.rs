@@ -221,7 +221,8 @@ fn moved_samples_of(
             // depth whatever their time, so that one PSF draws them and they merge as one
             // surface (a car's samples at a quarter's difference in depth did not). A light's
             // samples keep their own, each the streak's width at its time: at the centre's,
-            // a lamp's light drew faint scratches across the body beside it.
+            // a lamp's light drew faint scratches across the body beside it (why is not
+            // understood; docs/BENCHMARKS.md, "A surface nearing the camera").
             let light = s.color[..3].iter().any(|&c| c > BRIGHT_SAMPLE);
             let depth = match nearing {
                 Some(v) if !light => (s.depth - v * s.time).max(0.5 * s.depth),
@@ -320,7 +321,7 @@ struct PixelMotionField {
 }
 
 /// Samples of a pixel within this relative depth of its nearest are of its nearest surface.
-const FIELD_SAME_SURFACE_DEPTH: f32 = 0.03;
+pub(crate) const FIELD_SAME_SURFACE_DEPTH: f32 = 0.03;
 
 impl PixelMotionField {
     fn of(frames: &StochasticFrames) -> Self {
@@ -595,8 +596,9 @@ impl<'a> PlacedSamples<'a> {
     /// What every fragment of sample `k` shares.
     fn fragment_seed(&self, k: usize) -> FragmentSeed {
         let s = &self.frames.samples[k];
-        let motion = self.moved[k].map_or([0.0; 2], |m| m.motion);
-        let depth = self.moved[k].map_or(s.depth, |m| m.depth);
+        let (motion, depth, bend) = self.moved[k].map_or(([0.0; 2], s.depth, 0.0), |m| {
+            (m.motion, m.depth, m.bend)
+        });
         FragmentSeed {
             color: self.denoised.as_ref().map_or(s.color, |d| d[k]),
             weight: self.weight,
@@ -604,7 +606,7 @@ impl<'a> PlacedSamples<'a> {
             depth,
             motion: [motion[0] * self.shutter, motion[1] * self.shutter],
             // Over the shutter a path's bend scales with the shutter's square.
-            bend: self.moved[k].map_or(0.0, |m| m.bend) * self.shutter * self.shutter,
+            bend: bend * self.shutter * self.shutter,
         }
     }
 
