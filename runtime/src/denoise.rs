@@ -187,26 +187,31 @@ pub fn denoise_samples(
             }
             let row = y as usize * w;
             let (first, last) = (row + x0 as usize, row + x1 as usize);
-            for entry in &entries[entry_starts[first]..entry_starts[last + 1]] {
+            let row_entries = &entries[entry_starts[first]..entry_starts[last + 1]];
+            // Every entry within reach written, and the next one written over it where it
+            // weighs nothing: which entries do is data (noise, edges), and a branch for each
+            // test mispredicted more than the arithmetic it skipped.
+            let mut kept = out.len();
+            out.resize(kept + row_entries.len(), (0.0, 0.0, [0.0; 3]));
+            for entry in row_entries {
                 let mj = &entry.at;
                 let (dx, dy) = (mj.q[0] - mi.q[0], mj.q[1] - mi.q[1]);
                 let d2 = dx * dx + dy * dy;
+                // Beyond the cut-off: which entries are is geometry, predictable.
                 if d2 > max_d2 {
                     continue;
                 }
-                let Some((guides, cosine)) = guide_exponent(mi, mj, inv_depth) else {
-                    continue;
-                };
+                let (guides, cosine) = guide_terms(mi, mj, inv_depth);
                 let exponent = d2 * inv_two_var + guides;
-                if exponent > 12.0 {
-                    continue;
-                }
                 let weight = (-exponent).exp() * cosine.powi(NORMAL_POWER) * entry.count;
-                if !(weight > 0.0 && weight.is_finite()) {
-                    continue;
-                }
-                out.push((weight, entry.luminance, mj.illumination));
+                let keep = (cosine > 0.0)
+                    & (exponent <= 12.0)
+                    & (weight > 0.0)
+                    & weight.is_finite();
+                out[kept] = (weight, entry.luminance, mj.illumination);
+                kept += usize::from(keep);
             }
+            out.truncate(kept);
         }
     };
     // The weighted mean illumination of `neighbours`, each neighbour's luminance capped at
@@ -478,34 +483,28 @@ fn widen(
             let mut total = 0.0f32;
             for (cell, tent) in tent_taps(cx, cy, step, (w, h)) {
                 for other in &nodes[target_starts[cell]..target_starts[cell + 1]] {
-                    if !other.lit {
-                        continue;
-                    }
                     let d = other.luminance - me.luminance;
                     // The smaller of the two: a group whose first filter straddled a
                     // shadow's edge reads the edge as noise, its neighbour does not.
                     let sigma = me.noise.min(other.noise);
                     let shading = d * d / (2.0 * (NOISE_TOLERANCE * sigma).powi(2) + 1e-12);
-                    if shading > 12.0 {
-                        continue;
-                    }
-                    let Some((guides, cosine)) = guide_exponent(&me.at, &other.at, inv_depth)
-                    else {
-                        continue;
-                    };
+                    let (guides, cosine) = guide_terms(&me.at, &other.at, inv_depth);
                     let exponent = shading + guides;
-                    if exponent > 12.0 {
-                        continue;
-                    }
                     let weight =
                         tent * other.count * (-exponent).exp() * cosine.powi(NORMAL_POWER);
-                    if !(weight > 0.0 && weight.is_finite()) {
-                        continue;
-                    }
+                    // One test of every condition, without a branch for each: which of them
+                    // fails is data (noise), and its mispredictions cost more than the
+                    // arithmetic they skipped.
+                    let keep = other.lit
+                        & (cosine > 0.0)
+                        & (shading <= 12.0)
+                        & (exponent <= 12.0)
+                        & (weight > 0.0)
+                        & weight.is_finite();
                     for (acc, e) in sum.iter_mut().zip(other.at.illumination) {
-                        *acc += weight * e;
+                        *acc += if keep { weight * e } else { 0.0 };
                     }
-                    total += weight;
+                    total += if keep { weight } else { 0.0 };
                 }
             }
             if !(total > 0.0 && total.is_finite()) {
@@ -614,24 +613,18 @@ fn spread_excess(
             for (cell, tent) in cells() {
                 let first = target_starts[cell];
                 for (o, other) in nodes[first..target_starts[cell + 1]].iter().enumerate() {
-                    if !other.lit {
-                        continue;
-                    }
-                    let Some((guides, cosine)) = guide_exponent(&me.at, &other.at, inv_depth)
-                    else {
-                        continue;
-                    };
-                    if guides > 12.0 {
-                        continue;
-                    }
+                    let (guides, cosine) = guide_terms(&me.at, &other.at, inv_depth);
                     let weight = tent * other.count * (-guides).exp() * cosine.powi(NORMAL_POWER);
-                    if !(weight > 0.0 && weight.is_finite()) {
-                        continue;
-                    }
+                    // One test of every condition, as in the widening passes.
+                    let keep = other.lit
+                        & (cosine > 0.0)
+                        & (guides <= 12.0)
+                        & (weight > 0.0)
+                        & weight.is_finite();
                     for (acc, e) in sum.iter_mut().zip(excess[first + o]) {
-                        *acc += weight * e;
+                        *acc += if keep { weight * e } else { 0.0 };
                     }
-                    total += weight;
+                    total += if keep { weight } else { 0.0 };
                 }
             }
             if total > 0.0 && total.is_finite() {
@@ -645,13 +638,12 @@ fn spread_excess(
 
 /// The filter's weight of `b` for `a` without the distance (both passes weigh the guides
 /// alike): the exponent of the depth and albedo terms and the normals' cosine (raised to
-/// [`NORMAL_POWER`] by the caller); `None` for normals a right angle or more apart.
+/// [`NORMAL_POWER`] by the caller; a neighbour whose cosine is not positive weighs nothing, which
+/// the caller tests with its other conditions).
 /// `inv_depth` is `1 / (DEPTH_TOLERANCE a.depth)`, computed once per `a`.
-fn guide_exponent(a: &Member, b: &Member, inv_depth: f32) -> Option<(f32, f32)> {
+#[inline(always)]
+fn guide_terms(a: &Member, b: &Member, inv_depth: f32) -> (f32, f32) {
     let cosine = a.normal[0] * b.normal[0] + a.normal[1] * b.normal[1] + a.normal[2] * b.normal[2];
-    if cosine <= 0.0 {
-        return None;
-    }
     let dz = (b.depth - a.depth) * inv_depth;
     let mut scale = ALBEDO_EPSILON;
     let mut da2 = 0.0;
@@ -660,7 +652,7 @@ fn guide_exponent(a: &Member, b: &Member, inv_depth: f32) -> Option<(f32, f32)> 
         da2 += (a.albedo[c] - b.albedo[c]).powi(2);
     }
     let inv_albedo_var = 1.0 / (ALBEDO_SIGMA * ALBEDO_SIGMA);
-    Some((dz * dz + da2 / (scale * scale) * inv_albedo_var, cosine))
+    (dz * dz + da2 / (scale * scale) * inv_albedo_var, cosine)
 }
 
 /// One list of every row's part, each row's part (`len` items) written by `write(row index,
