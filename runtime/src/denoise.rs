@@ -26,7 +26,8 @@
 //!
 //! The first filter reaches 2.5 sigma (4 px at 1 spp, 3 px at 4 spp), too little to take the
 //! noise of one or four samples per pixel down to a clean frame. Its result is widened by
-//! three passes over the groups ("a trous": a 3 x 3 tent with its taps 2, 4 and 8 px apart),
+//! three passes over the groups ("a trous": a 3 x 3 tent with its taps 2, 4 and 8 px apart;
+//! two, 2 and 4 px apart, from [`NARROW_WIDENING_SPP`], where less noise is left to widen),
 //! each weighing a neighbouring group by the same guides and by how far their illumination
 //! differs in units of the noise the first filter left (the standard deviation of its
 //! weighted mean, the smaller of the two groups'): differences within the noise are averaged,
@@ -369,7 +370,7 @@ pub fn denoise_samples(
         }
     }
     let mut widened = Vec::new();
-    for &step in &WIDENING_STEPS_PX {
+    for &step in widening_steps_px(frames.spp) {
         widen(&nodes, &target_starts, (w, h), step, &mut widened);
         std::mem::swap(&mut nodes, &mut widened);
     }
@@ -433,6 +434,21 @@ pub fn denoise_samples(
 /// tent kernel with its taps `step` pixels apart ("a trous"), so the filter's reach grows to
 /// about 14 px at the cost of 9 pixels a pass.
 pub const WIDENING_STEPS_PX: [i64; 3] = [2, 4, 8];
+
+/// From this many samples per pixel the widening passes stop at 4 px ([`widening_steps_px`]):
+/// the 8-px pass flattened the soft light round emitters (a Cycles street at 16 spp of 4 paths:
+/// FLIP p99 0.218 with it, 0.190 without) and took nothing visible from the noise, while at 8
+/// spp and fewer it still did (`studio` at 8 spp: FLIP 0.0493 with it, 0.0503 without).
+pub const NARROW_WIDENING_SPP: usize = 16;
+
+/// The dilations of the widening passes for `spp` samples per pixel, pixels.
+pub fn widening_steps_px(spp: usize) -> &'static [i64] {
+    if spp >= NARROW_WIDENING_SPP {
+        &WIDENING_STEPS_PX[..2]
+    } else {
+        &WIDENING_STEPS_PX
+    }
+}
 
 /// Illumination difference, in units of the noise the first filter leaves on the two groups
 /// (combined), at which a widening pass's weight falls to `1/e`: differences within the noise
