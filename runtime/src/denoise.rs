@@ -27,7 +27,8 @@
 //! The first filter reaches 2.5 sigma (4 px at 1 spp, 3 px at 4 spp), too little to take the
 //! noise of one or four samples per pixel down to a clean frame. Its result is widened by
 //! three passes over the groups ("a trous": a 3 x 3 tent with its taps 2, 4 and 8 px apart;
-//! two, 2 and 4 px apart, from [`NARROW_WIDENING_SPP`], where less noise is left to widen),
+//! a fourth, 16 px apart, at 1 spp, and only the first two from [`NARROW_WIDENING_SPP`]: the
+//! less noise the first filter leaves, the less far it is widened),
 //! each weighing a neighbouring group by the same guides and by how far their illumination
 //! differs in units of the noise the first filter left (the standard deviation of its
 //! weighted mean, the smaller of the two groups'): differences within the noise are averaged,
@@ -432,21 +433,33 @@ pub fn denoise_samples(
 
 /// The dilations of the widening passes after the first filter, pixels: each is a 3 x 3
 /// tent kernel with its taps `step` pixels apart ("a trous"), so the filter's reach grows to
-/// about 14 px at the cost of 9 pixels a pass.
-pub const WIDENING_STEPS_PX: [i64; 3] = [2, 4, 8];
+/// about 30 px at the cost of 9 pixels a pass. How many of them run depends on the samples
+/// per pixel ([`widening_steps_px`]).
+pub const WIDENING_STEPS_PX: [i64; 4] = [2, 4, 8, 16];
+
+/// Up to this many samples per pixel all four widening passes run ([`widening_steps_px`]): at
+/// 1 spp the 16-px pass takes the blotches the first three leave on a plain wall (comets at 1
+/// spp of 1 path: FLIP 0.0324 -> 0.0269; `studio` 0.0799 -> 0.0769), at 2 spp it changed
+/// nothing visible and raised `studio`'s FLIP p99 (0.238 -> 0.242), at 4 spp it flattened
+/// soft light (the Cycles `approach` car: FLIP 0.0309 -> 0.0336).
+pub const WIDEST_WIDENING_MAX_SPP: usize = 1;
 
 /// From this many samples per pixel the widening passes stop at 4 px ([`widening_steps_px`]):
-/// the 8-px pass flattened the soft light round emitters (a Cycles street at 16 spp of 4 paths:
-/// FLIP p99 0.218 with it, 0.190 without) and took nothing visible from the noise, while at 8
-/// spp and fewer it still did (`studio` at 8 spp: FLIP 0.0493 with it, 0.0503 without).
+/// the 8-px pass flattened the soft light round emitters (the Cycles `approach` car at 16 spp
+/// of 4 paths: FLIP p99 0.218 with it, 0.190 without) and took nothing visible from the noise,
+/// while at 8 spp and fewer it still did (`studio` at 8 spp: FLIP 0.0493 with it, 0.0503
+/// without).
 pub const NARROW_WIDENING_SPP: usize = 16;
 
-/// The dilations of the widening passes for `spp` samples per pixel, pixels.
+/// The dilations of the widening passes for `spp` samples per pixel, pixels: their reach
+/// shrinks as the noise the first filter leaves does.
 pub fn widening_steps_px(spp: usize) -> &'static [i64] {
-    if spp >= NARROW_WIDENING_SPP {
-        &WIDENING_STEPS_PX[..2]
-    } else {
+    if spp <= WIDEST_WIDENING_MAX_SPP {
         &WIDENING_STEPS_PX
+    } else if spp < NARROW_WIDENING_SPP {
+        &WIDENING_STEPS_PX[..3]
+    } else {
+        &WIDENING_STEPS_PX[..2]
     }
 }
 
