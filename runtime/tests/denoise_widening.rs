@@ -7,7 +7,9 @@ mod support;
 
 use support::reconstruct_scene;
 
-/// Two lamps and a soft key light over a textured floor and a backdrop, at f/2.
+/// Textured objects under a 1 m area light with one diffuse bounce (shading noise), a
+/// defocused box, a rolling sphere and a streaking emitter over a checkered floor and wall, at
+/// f/2.
 const STUDIO: &str = include_str!("../../scene/scenes/studio.json");
 
 /// `studio` rendered and reconstructed at `spp` samples per pixel: FLIP (mean, 99th
