@@ -26,11 +26,13 @@
 //! paths").
 //!
 //! The smeared PSFs are built per frame, for the (cell, turn, length, angle, bend) keys its
-//! moving pixels use, and appended to the frame's database as dense PSFs. Keys are quantised so that
-//! a streak's ends and a PSF's rim are off by at most about a quarter pixel: the length in
-//! steps of 1/4 px up to 8 px and of 2 % beyond, the angle in steps of at most 1/length radians
-//! (the tip of a streak of length `L` moves `L/2 * dtheta/2` px at most), the turn in steps of
-//! at most 1/(2 reach) radians.
+//! moving pixels use, and appended to the frame's database as dense PSFs. Keys are quantised so
+//! that a streak's ends and a PSF's rim are off by at most about a quarter pixel, or, where a
+//! quantity is dithered between the steps either side of it over neighbouring pixels, so that
+//! the streaks average to the pixel's own: the length in steps of 1/4 px up to 8 px and of 2 %
+//! beyond, the angle in steps of at most 1/length radians rounded or 2/length dithered (the tip
+//! of a streak of length `L` moves `L/2 * dtheta` px a step; [`AngleResolution`]), the turn in
+//! steps of at most 1/(2 reach) radians.
 
 use psf_db::PsfDatabase;
 
@@ -80,13 +82,42 @@ pub struct SmearKey {
     pub turn_step: u32,
     /// Turn steps over a full turn: finer for a wider PSF (its rim moves `reach * dturn`).
     pub turn_steps: u32,
-    /// Angle steps four times finer (a lens PSF reaching under [`NARROW_PSF_PX`] / 2 px: its
-    /// streak is a thin line, whose tip a step moves visibly between neighbouring pixels).
-    pub fine_angles: bool,
+    /// How finely the angle is quantised ([`SmearKey::angle_steps`]).
+    pub angle_resolution: AngleResolution,
     /// Quantised bend of the motion path (see [`SmearKey::bend_px`]), signed, relative to the
     /// key's angle: positive bends towards the angle turned a quarter turn clockwise on screen
     /// (`(-sin, cos)`, y down).
     pub bend_step: i32,
+}
+
+/// How finely a [`SmearKey`]'s motion angle is quantised: steps at most `1 / (per_px
+/// length)` radians apart over `[0, pi)`, where the tip of a streak of length `L` moves `L/2`
+/// times the step.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum AngleResolution {
+    /// Steps `2 / length` radians apart, the motion's angle dithered between the two steps either side of it
+    /// ([`SmearKey::dithered`]): a tip is off by up to 1 px on a pixel of its own, and over
+    /// neighbouring pixels the streaks average to the motion's angle. Half the keys of
+    /// rounded steps on a frame whose every pixel moves its own way (a car driving at the
+    /// camera).
+    Dithered,
+    /// Steps `1 / length` radians apart, rounded: a tip off by at most 1/4 px.
+    Rounded,
+    /// Steps `1 / (4 length)` radians apart, rounded: for a lens PSF reaching under
+    /// [`NARROW_PSF_PX`] / 2 px, whose streak is a thin line: a tip a step moves shows between
+    /// neighbouring pixels, dithered or not (a spinning disc's flat squares came out mottled).
+    Fine,
+}
+
+impl AngleResolution {
+    /// Angle steps per pixel of motion length, per radian.
+    fn per_px(self) -> f32 {
+        match self {
+            AngleResolution::Dithered => 0.5,
+            AngleResolution::Rounded => 1.0,
+            AngleResolution::Fine => 4.0,
+        }
+    }
 }
 
 impl SmearKey {
@@ -100,7 +131,7 @@ impl SmearKey {
         radial: [f32; 2],
         reach_px: f32,
     ) -> (Self, bool) {
-        Self::dithered(cell, motion, bend, radial, reach_px, 0.5)
+        Self::quantised(cell, motion, bend, radial, reach_px, 0.5, AngleResolution::Rounded)
     }
 
     /// [`SmearKey::new`] with the length's quantisation dithered: the length step below or
@@ -109,8 +140,8 @@ impl SmearKey {
     /// are spread evenly over `[0, 1)`, the smeared PSF is then the linear interpolation
     /// between the two steps, continuous in the length, where rounding (`threshold` 1/2)
     /// steps: a surface whose motion varies smoothly shows no line where the rounding turns.
-    /// The path's `bend` (px, relative to the motion's own direction: see `Fragment::bend`)
-    /// is rounded to its step.
+    /// The angle is rounded as [`SmearKey::new`] rounds it. The path's `bend` (px, relative to
+    /// the motion's own direction: see `Fragment::bend`) is rounded to its step.
     pub fn dithered(
         cell: u32,
         motion: [f32; 2],
@@ -118,6 +149,21 @@ impl SmearKey {
         radial: [f32; 2],
         reach_px: f32,
         threshold: f32,
+    ) -> (Self, bool) {
+        Self::quantised(cell, motion, bend, radial, reach_px, threshold, AngleResolution::Rounded)
+    }
+
+    /// [`SmearKey::dithered`] with the angle quantised as `angles` says for a lens PSF reaching
+    /// at least [`NARROW_PSF_PX`] / 2 px (dithered by the same `threshold` where that is
+    /// [`AngleResolution::Dithered`]); a narrower one's in fine steps, rounded.
+    pub fn quantised(
+        cell: u32,
+        motion: [f32; 2],
+        bend: f32,
+        radial: [f32; 2],
+        reach_px: f32,
+        threshold: f32,
+        angles: AngleResolution,
     ) -> (Self, bool) {
         let len = (motion[0] * motion[0] + motion[1] * motion[1]).sqrt();
         let clamped = len > MAX_SMEAR_PX;
@@ -142,12 +188,20 @@ impl SmearKey {
             angle_step: 0,
             turn_step,
             turn_steps,
-            fine_angles: 2.0 * reach_px < NARROW_PSF_PX as f32,
+            angle_resolution: if 2.0 * reach_px < NARROW_PSF_PX as f32 {
+                AngleResolution::Fine
+            } else {
+                angles
+            },
             bend_step: 0,
         };
         let n = key.angle_steps();
         let angle = motion[1].atan2(motion[0]).rem_euclid(std::f32::consts::PI);
-        let step = ((angle / std::f32::consts::PI * n as f32).round() as u32) % n;
+        let steps = angle / std::f32::consts::PI * n as f32;
+        let step = match key.angle_resolution {
+            AngleResolution::Dithered => quantise(steps),
+            AngleResolution::Rounded | AngleResolution::Fine => steps.round() as u32,
+        } % n;
         let key = SmearKey {
             angle_step: step,
             ..key
@@ -191,13 +245,15 @@ impl SmearKey {
         }
     }
 
-    /// How many angle steps cover pi at this key's length: at least 1/length radians apart
-    /// (1/(4 length) with [`SmearKey::fine_angles`]), and even, so that a quarter turn is a
+    /// How many angle steps cover pi at this key's length: at most `1 / (per_px length)`
+    /// radians apart, `per_px` as [`SmearKey::angle_resolution`] says, and at least four, and
+    /// even, so that a quarter turn is a
     /// whole number of steps ([`crate::smear_symmetry`]).
     pub fn angle_steps(&self) -> u32 {
-        let per_px = if self.fine_angles { 4.0 } else { 1.0 };
         let len = self.length_px();
-        let steps = (std::f32::consts::PI * len * per_px).ceil().max(4.0) as u32;
+        let steps = (std::f32::consts::PI * len * self.angle_resolution.per_px())
+            .ceil()
+            .max(4.0) as u32;
         steps + steps % 2
     }
 
@@ -1424,6 +1480,57 @@ mod tests {
         }
         let (_, clamped) = SmearKey::new(0, [MAX_SMEAR_PX + 10.0, 0.0], 0.0, [1.0, 0.0], 4.0);
         assert!(clamped);
+    }
+
+    #[test]
+    fn dithered_angles_average_to_the_motion_with_tips_within_a_pixel() {
+        for len in [12.0f32, 39.0, 90.0] {
+            for angle in [0.05f32, 0.7, 1.9, 3.0] {
+                let m = [len * angle.cos(), len * angle.sin()];
+                let dithered = |t: f32| {
+                    SmearKey::quantised(3, m, 0.0, [1.0, 0.0], 10.0, t, AngleResolution::Dithered).0
+                };
+                let rounded = SmearKey::quantised(3, m, 0.0, [1.0, 0.0], 10.0, 0.5, AngleResolution::Rounded).0;
+                // Steps twice as far apart: half the keys a frame's angles can fall on.
+                let (nd, nr) = (dithered(0.0).angle_steps(), rounded.angle_steps());
+                assert!(nd <= nr / 2 + 2 && nd >= nr / 2 - 2, "{nd} steps against {nr}");
+                // Over thresholds spread evenly, the keys' mean angle is the motion's, and each
+                // key's tip is within a pixel of the motion's.
+                let n = 256;
+                let mut mean = 0.0f64;
+                for k in 0..n {
+                    let key = dithered((k as f32 + 0.5) / n as f32);
+                    let mut d = key.angle_rad() - angle.rem_euclid(std::f32::consts::PI);
+                    if d > std::f32::consts::FRAC_PI_2 {
+                        d -= std::f32::consts::PI;
+                    } else if d < -std::f32::consts::FRAC_PI_2 {
+                        d += std::f32::consts::PI;
+                    }
+                    let tip = 0.5 * key.length_px() * d.abs();
+                    assert!(tip <= 1.0 + 0.02 * len, "length {len} angle {angle}: tip {tip} px");
+                    mean += f64::from(d) / f64::from(n);
+                }
+                let mean_tip = 0.5 * f64::from(len) * mean.abs();
+                // (The length's step, dithered by the same threshold, moves the angle steps a
+                // little: the mean is off by a twentieth of a pixel at most, where a rounded
+                // angle is off by up to a quarter and flooring it by up to a half.)
+                assert!(mean_tip < 0.06, "length {len} angle {angle}: mean tip {mean_tip} px");
+                // A narrow PSF's angle stays in fine steps, rounded: within half a step.
+                for t in [0.1, 0.9] {
+                    let narrow = SmearKey::quantised(3, m, 0.0, [1.0, 0.0], 2.0, t, AngleResolution::Dithered).0;
+                    assert_eq!(narrow.angle_resolution, AngleResolution::Fine);
+                    let a = angle.rem_euclid(std::f32::consts::PI);
+                    let mut d = (narrow.angle_rad() - a).abs();
+                    d = d.min(std::f32::consts::PI - d);
+                    let half_step = 0.5 * std::f32::consts::PI / narrow.angle_steps() as f32;
+                    assert!(d <= half_step * 1.001, "length {len} angle {angle}: {d} rad off");
+                }
+            }
+        }
+        // Dithering the length alone keeps the rounded angle.
+        let (a, _) = SmearKey::dithered(1, [30.0, 11.0], 0.0, [1.0, 0.0], 10.0, 0.8);
+        let (b, _) = SmearKey::new(1, [30.0, 11.0], 0.0, [1.0, 0.0], 10.0);
+        assert_eq!((a.angle_step, a.angle_resolution), (b.angle_step, b.angle_resolution));
     }
 
     #[test]
