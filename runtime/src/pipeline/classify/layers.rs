@@ -243,56 +243,54 @@ pub fn classify_fragments(
         let scales = scales_under(motion_cap);
         let level_of = |index: usize| scales.get(index).copied().unwrap_or(0) as usize;
         let keys_with = |angles: AngleResolution| -> Vec<Option<(SmearKey, bool)>> {
-            match combined {
-            Some(_) if moving_lens || thin_smear.is_some() => {
-                fragments
-                    .par_iter()
-                    .enumerate()
-                    .map(|(index, frag)| {
-                        let (frag, signed) = at_level(frag, level_of(index));
-                        let frag = &frag;
-                        let m = frag.motion;
-                        let motion_len = (m[0] * m[0] + m[1] * m[1]).sqrt();
-                        if frag.weight <= 0.0 || motion_len < options.copy_threshold_px {
-                            return None;
-                        }
-                        if let Some(thin) = thin_smear {
-                            // The thin-lens database comes first in the combined one. In front
-                            // of the focus plane the aperture's image is turned half a turn.
-                            let (i, clamped) = thin.lookup([signed.abs(), 0.0]);
-                            let turned = flip_front && signed < 0.0;
-                            let radial = if turned { [-1.0, 0.0] } else { [1.0, 0.0] };
-                            let reach = reach.get(i as usize).copied().unwrap_or(0) as f32;
-                            let threshold = ordered_dither(frag.x, frag.y);
-                            let (key, too_long) = SmearKey::quantised(
-                                i, m, frag.bend, radial, reach, threshold, angles,
-                            );
-                            return Some((key, clamped || too_long));
-                        }
-                        let found = lookup_psf(
-                            frag,
-                            0.0,
-                            motion_len,
-                            centre,
-                            pixels_per_mm,
-                            dbs,
-                            model,
-                            options,
-                            false,
-                            &mut psf_db::CellMemo::default(),
-                        );
-                        if found.path == SplatPath::Copy {
-                            return None;
-                        }
-                        let i = found.psf_index;
+            if combined.is_none() || !(moving_lens || thin_smear.is_some()) {
+                return Vec::new();
+            }
+            fragments
+                .par_iter()
+                .enumerate()
+                .map(|(index, frag)| {
+                    let (frag, signed) = at_level(frag, level_of(index));
+                    let frag = &frag;
+                    let m = frag.motion;
+                    let motion_len = (m[0] * m[0] + m[1] * m[1]).sqrt();
+                    if frag.weight <= 0.0 || motion_len < options.copy_threshold_px {
+                        return None;
+                    }
+                    if let Some(thin) = thin_smear {
+                        // The thin-lens database comes first in the combined one. In front
+                        // of the focus plane the aperture's image is turned half a turn.
+                        let (i, clamped) = thin.lookup([signed.abs(), 0.0]);
+                        let turned = flip_front && signed < 0.0;
+                        let radial = if turned { [-1.0, 0.0] } else { [1.0, 0.0] };
                         let reach = reach.get(i as usize).copied().unwrap_or(0) as f32;
-                        let radial = [found.rot_cos, found.rot_sin];
-                        Some(SmearKey::new(i, m, frag.bend, radial, reach))
-                    })
-                    .collect()
-            }
-            _ => Vec::new(),
-            }
+                        let threshold = ordered_dither(frag.x, frag.y);
+                        let (key, too_long) = SmearKey::quantised(
+                            i, m, frag.bend, radial, reach, threshold, angles,
+                        );
+                        return Some((key, clamped || too_long));
+                    }
+                    let found = lookup_psf(
+                        frag,
+                        0.0,
+                        motion_len,
+                        centre,
+                        pixels_per_mm,
+                        dbs,
+                        model,
+                        options,
+                        false,
+                        &mut psf_db::CellMemo::default(),
+                    );
+                    if found.path == SplatPath::Copy {
+                        return None;
+                    }
+                    let i = found.psf_index;
+                    let reach = reach.get(i as usize).copied().unwrap_or(0) as f32;
+                    let radial = [found.rot_cos, found.rot_sin];
+                    Some(SmearKey::new(i, m, frag.bend, radial, reach))
+                })
+                .collect()
         };
         // Where the frame's streaks turn every which way (a car driving at the camera), its
         // rounded angles are already off a little differently at every pixel, and building a
@@ -857,8 +855,9 @@ fn ordered_dither(x: i32, y: i32) -> f32 {
     (f64::from(x) * A + f64::from(y) * B).rem_euclid(1.0) as f32
 }
 
-/// Distinct smeared PSFs (keys at rounded angles, not counting a narrow PSF's fine ones) beyond which a frame's thin-lens streaks
-/// have their angles dithered ([`AngleResolution::Dithered`]). On `approaching-car` (512 px)
+/// Distinct smeared PSFs (keys at rounded angles, not counting a narrow PSF's fine ones)
+/// beyond which a frame's thin-lens streaks have their angles dithered
+/// ([`AngleResolution::Dithered`]). On `approaching-car` (512 px)
 /// 10,707 keys became 5,522; a camera pan's 105 to 1,589 stay rounded, where all pixels' angles
 /// agree and dithering them spread the streaks' tips (FLIP p99 +0.0055 on a Cycles pan).
 const MANY_SMEAR_KEYS: usize = 4096;
