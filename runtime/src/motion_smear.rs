@@ -785,26 +785,23 @@ pub fn smear_within(
     // non-negative, so not even a zero's sign changes), and those past the row's reach are
     // never read.
     const LANES: usize = 8;
-    let lane_rows: Vec<(usize, usize, usize)> = psf_spans
+    let mut lanes: Vec<[f32; LANES]> = Vec::new();
+    // Per lit PSF row: its index, first column, number of values and first group in `lanes`.
+    let lane_rows: Vec<(usize, usize, usize, usize)> = psf_spans
         .iter()
         .enumerate()
         .filter(|(_, s)| s[0] < s[1])
-        .map(|(y, s)| (y, s[0], ((s[1] - s[0]) * ch).div_ceil(LANES)))
+        .map(|(y, s)| {
+            let start = lanes.len();
+            let src = &psf.data[(y * psf.width + s[0]) * ch..(y * psf.width + s[1]) * ch];
+            lanes.extend(src.chunks(LANES).map(|c| {
+                let mut group = [0.0; LANES];
+                group[..c.len()].copy_from_slice(c);
+                group
+            }));
+            (y, s[0], src.len(), start)
+        })
         .collect();
-    let mut lanes: Vec<[f32; LANES]> = Vec::new();
-    let mut lane_starts = Vec::with_capacity(lane_rows.len());
-    for &(y, first, groups) in &lane_rows {
-        lane_starts.push(lanes.len());
-        let s = psf_spans[y];
-        let src = &psf.data[(y * psf.width + s[0]) * ch..(y * psf.width + s[1]) * ch];
-        debug_assert_eq!(first, s[0]);
-        lanes.extend(src.chunks(LANES).map(|c| {
-            let mut group = [0.0; LANES];
-            group[..c.len()].copy_from_slice(c);
-            group
-        }));
-        debug_assert_eq!(lanes.len() - lane_starts[lane_starts.len() - 1], groups);
-    }
     for (ky, k) in kernel_columns.iter().enumerate() {
         if k[0] >= k[1] {
             continue;
@@ -814,10 +811,10 @@ pub fn smear_within(
             if w == 0.0 {
                 continue;
             }
-            for (&(y, first, groups), &start) in lane_rows.iter().zip(&lane_starts) {
+            for &(y, first, len, start) in &lane_rows {
                 let at = ((y + ky) * width + kx + first) * ch;
-                let src = &lanes[start..start + groups];
-                match out.get_mut(at..at + groups * LANES) {
+                let src = &lanes[start..start + len.div_ceil(LANES)];
+                match out.get_mut(at..at + src.len() * LANES) {
                     Some(dst) => {
                         let (dst, _) = dst.as_chunks_mut::<LANES>();
                         for (d, s) in dst.iter_mut().zip(src) {
@@ -826,9 +823,7 @@ pub fn smear_within(
                     }
                     // The box's last values: the span alone.
                     None => {
-                        let s = psf_spans[y];
-                        let n = (s[1] - s[0]) * ch;
-                        for (d, s) in out[at..at + n].iter_mut().zip(src.as_flattened()) {
+                        for (d, s) in out[at..at + len].iter_mut().zip(src.as_flattened()) {
                             *d += w * s;
                         }
                     }

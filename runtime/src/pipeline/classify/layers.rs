@@ -297,7 +297,7 @@ pub fn classify_fragments(
         // smeared PSF for every few pixels is most of classification: the angles are then
         // dithered between steps twice as far apart, for half the keys.
         let mut smear_keys = keys_with(AngleResolution::Rounded);
-        if thin_smear.is_some() && distinct_keys(&smear_keys) > MANY_SMEAR_KEYS {
+        if thin_smear.is_some() && many_keys(&smear_keys) {
             smear_keys = keys_with(AngleResolution::Dithered);
         }
         let built = match combined {
@@ -862,22 +862,23 @@ fn ordered_dither(x: i32, y: i32) -> f32 {
 /// agree and dithering them spread the streaks' tips (FLIP p99 +0.0055 on a Cycles pan).
 const MANY_SMEAR_KEYS: usize = 4096;
 
-/// How many distinct keys `keys` holds whose angles are not in fine steps (a narrow PSF's, which
-/// stay rounded), counted only where there could be more than [`MANY_SMEAR_KEYS`].
-fn distinct_keys(keys: &[Option<(SmearKey, bool)>]) -> usize {
-    let coarse = || {
-        keys.iter()
-            .flatten()
-            .filter(|(k, _)| k.angle_resolution != AngleResolution::Fine)
-    };
-    let present = coarse().count();
-    if present <= MANY_SMEAR_KEYS {
-        return present;
+/// Whether `keys` holds more than [`MANY_SMEAR_KEYS`] distinct keys whose angles are not in
+/// fine steps (a narrow PSF's, which stay rounded). Neighbouring fragments of one surface
+/// mostly share a key: the runs of equal keys are counted first, and sorted only where there
+/// are more runs than that (a camera pan's few distinct keys come in long runs).
+fn many_keys(keys: &[Option<(SmearKey, bool)>]) -> bool {
+    let mut runs: Vec<SmearKey> = Vec::new();
+    for &(key, _) in keys.iter().flatten() {
+        if key.angle_resolution != AngleResolution::Fine && runs.last() != Some(&key) {
+            runs.push(key);
+        }
     }
-    let mut sorted: Vec<SmearKey> = coarse().map(|&(k, _)| k).collect();
-    sorted.par_sort_unstable();
-    sorted.dedup();
-    sorted.len()
+    if runs.len() <= MANY_SMEAR_KEYS {
+        return false;
+    }
+    runs.par_sort_unstable();
+    runs.dedup();
+    runs.len() > MANY_SMEAR_KEYS
 }
 
 /// The smeared PSFs of one frame ([`crate::motion_smear`]): the database its records index
