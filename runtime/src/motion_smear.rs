@@ -188,44 +188,60 @@ impl SmearKey {
             angle_step: 0,
             turn_step,
             turn_steps,
+            angle_resolution: AngleResolution::Rounded,
+            bend_step: 0,
+        };
+        (key.with_angles(motion, bend, reach_px, threshold, angles), clamped)
+    }
+
+    /// This key with the angle and bend of `motion` and `bend` quantised as
+    /// [`SmearKey::quantised`] quantises them for the same lens PSF (reaching `reach_px`),
+    /// `threshold` and `angles`; its cell, length and turn kept. A frame that first keyed its
+    /// fragments at one angle resolution re-keys them at another without looking their PSFs
+    /// up again.
+    pub fn with_angles(
+        self,
+        motion: [f32; 2],
+        bend: f32,
+        reach_px: f32,
+        threshold: f32,
+        angles: AngleResolution,
+    ) -> Self {
+        let key = SmearKey {
             angle_resolution: if 2.0 * reach_px < NARROW_PSF_PX as f32 {
                 AngleResolution::Fine
             } else {
                 angles
             },
-            bend_step: 0,
+            ..self
         };
         let n = key.angle_steps();
         let angle = motion[1].atan2(motion[0]).rem_euclid(std::f32::consts::PI);
         let steps = angle / std::f32::consts::PI * n as f32;
         let step = match key.angle_resolution {
-            AngleResolution::Dithered => quantise(steps),
+            AngleResolution::Dithered => (steps + threshold).floor() as u32,
             AngleResolution::Rounded | AngleResolution::Fine => steps.round() as u32,
         } % n;
         let key = SmearKey {
             angle_step: step,
             ..key
         };
+        // At most half a turn over the shutter (beyond, the quadratic estimate means little).
+        let most = std::f32::consts::PI * key.length_px();
+        // Rounded, not dithered: a step moves a streak's ends sideways by a quarter pixel and
+        // leaves its light where it was, and dithering it too doubled a spinning disc's keys.
+        // A bend under a step's threshold either way is none: which way the key faces (a sine
+        // and cosine) matters only for one that is not.
+        if !bend.is_finite() || bend.abs().min(most) < MIN_BEND_PX {
+            return SmearKey { bend_step: 0, ..key };
+        }
         // The key's direction may be the motion's reversed (angles are taken modulo pi): the
         // same arc is then bent the other way relative to it.
         let (sin, cos) = key.angle_rad().sin_cos();
         let facing = cos * motion[0] + sin * motion[1] >= 0.0;
         let bend = if facing { bend } else { -bend };
-        // At most half a turn over the shutter (beyond, the quadratic estimate means little).
-        let most = std::f32::consts::PI * key.length_px();
-        let bend = if bend.is_finite() {
-            bend.clamp(-most, most)
-        } else {
-            0.0
-        };
-        // Rounded, not dithered: a step moves a streak's ends sideways by a quarter pixel and
-        // leaves its light where it was, and dithering it too doubled a spinning disc's keys.
-        let bend_step = if bend.abs() < MIN_BEND_PX {
-            0
-        } else {
-            (bend / BEND_STEP_PX).round() as i32
-        };
-        (SmearKey { bend_step, ..key }, clamped)
+        let bend_step = (bend.clamp(-most, most) / BEND_STEP_PX).round() as i32;
+        SmearKey { bend_step, ..key }
     }
 
     /// How far the motion path bends sideways, px: its sideways acceleration over the shutter,
@@ -1526,6 +1542,32 @@ mod tests {
         let (a, _) = SmearKey::dithered(1, [30.0, 11.0], 0.0, [1.0, 0.0], 10.0, 0.8);
         let (b, _) = SmearKey::new(1, [30.0, 11.0], 0.0, [1.0, 0.0], 10.0);
         assert_eq!((a.angle_step, a.angle_resolution), (b.angle_step, b.angle_resolution));
+    }
+
+    #[test]
+    fn re_keying_the_angles_gives_the_keys_of_keying_afresh() {
+        // Motions every way, bent either way or not at all (and beyond half a turn), on wide
+        // and narrow PSFs, at thresholds across [0, 1): a key re-quantised at another angle
+        // resolution is the key quantised at it from the start.
+        let resolutions = [AngleResolution::Rounded, AngleResolution::Dithered, AngleResolution::Fine];
+        for len in [0.3f32, 5.0, 12.0, 47.5, 90.0, 600.0] {
+            for k in 0..24 {
+                let angle = k as f32 * 0.2618 + 0.01;
+                let m = [len * angle.cos(), len * angle.sin()];
+                for bend in [0.0f32, 0.7, -1.2, 6.0, -40.0, 1e6, f32::NAN] {
+                    for reach in [2.0f32, 10.0] {
+                        for t in [0.0f32, 0.3, 0.99] {
+                            for (from, to) in resolutions.iter().flat_map(|&a| resolutions.map(|b| (a, b))) {
+                                let (first, clamped) = SmearKey::quantised(3, m, bend, [0.0, 1.0], reach, t, from);
+                                let (afresh, clamped_afresh) = SmearKey::quantised(3, m, bend, [0.0, 1.0], reach, t, to);
+                                assert_eq!(first.with_angles(m, bend, reach, t, to), afresh, "{m:?} bent {bend}");
+                                assert_eq!(clamped, clamped_afresh);
+                            }
+                        }
+                    }
+                }
+            }
+        }
     }
 
     #[test]

@@ -242,7 +242,7 @@ pub fn classify_fragments(
     let (scales, smear_keys, smeared) = loop {
         let scales = scales_under(motion_cap);
         let level_of = |index: usize| scales.get(index).copied().unwrap_or(0) as usize;
-        let keys_with = |angles: AngleResolution| -> Vec<Option<(SmearKey, bool)>> {
+        let keys_at_rounded_angles = || -> Vec<Option<(SmearKey, bool)>> {
             if combined.is_none() || !(moving_lens || thin_smear.is_some()) {
                 return Vec::new();
             }
@@ -266,7 +266,13 @@ pub fn classify_fragments(
                         let reach = reach.get(i as usize).copied().unwrap_or(0) as f32;
                         let threshold = ordered_dither(frag.x, frag.y);
                         let (key, too_long) = SmearKey::quantised(
-                            i, m, frag.bend, radial, reach, threshold, angles,
+                            i,
+                            m,
+                            frag.bend,
+                            radial,
+                            reach,
+                            threshold,
+                            AngleResolution::Rounded,
                         );
                         return Some((key, clamped || too_long));
                     }
@@ -296,9 +302,18 @@ pub fn classify_fragments(
         // rounded angles are already off a little differently at every pixel, and building a
         // smeared PSF for every few pixels is most of classification: the angles are then
         // dithered between steps twice as far apart, for half the keys.
-        let mut smear_keys = keys_with(AngleResolution::Rounded);
+        let mut smear_keys = keys_at_rounded_angles();
         if thin_smear.is_some() && many_keys(&smear_keys) {
-            smear_keys = keys_with(AngleResolution::Dithered);
+            // Only the angles change: each key's cell, length and turn are kept, in place.
+            smear_keys.par_iter_mut().enumerate().for_each(|(index, key)| {
+                if let Some((key, _)) = key {
+                    let (frag, _) = at_level(&fragments[index], level_of(index));
+                    let reach = reach.get(key.cell as usize).copied().unwrap_or(0) as f32;
+                    let threshold = ordered_dither(frag.x, frag.y);
+                    let angles = AngleResolution::Dithered;
+                    *key = key.with_angles(frag.motion, frag.bend, reach, threshold, angles);
+                }
+            });
         }
         let built = match combined {
             Some(all) if !smear_keys.is_empty() => {
