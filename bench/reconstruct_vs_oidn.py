@@ -1,9 +1,13 @@
 """Reconstruction's time against Intel Open Image Denoise (OIDN) on the same machine, interleaved.
 
-    python3 bench/reconstruct_vs_oidn.py FRAMES.exr CAMERA.json [--rounds N] [--spreadlet BIN]
+    python3 bench/reconstruct_vs_oidn.py FRAMES.exr CAMERA.json [--rounds N] [--spreadlet BIN] \
+        [--backend cpu|auto]
 
 For each round, in turn:
-- spreadlet: `spreadlet reconstruct --input FRAMES --camera CAMERA --stats` as a process; its
+- spreadlet: `spreadlet reconstruct --input FRAMES --camera CAMERA --backend cpu --stats` as a
+  process (on the CPU, as OIDN runs here, and as `against_blender.py` times synthesis: `auto`
+  first looks for a GPU, and on a machine with only Mesa's software Vulkan adapter that look
+  alone costs about 60 ms a process before it settles on the CPU); its
   wall time (the whole process: reading, databases from the cache, writing) and the `--stats`
   total (what a library caller waits for per call, the databases already loaded);
 - OIDN: one `pyoidn.denoise` call (filter RT, hdr, albedo and normal guides, quality high, as
@@ -37,11 +41,12 @@ def oidn_seconds(rgb, albedo, normal):
     return time.time() - start
 
 
-def spreadlet_seconds(binary, frames, camera, workdir):
+def spreadlet_seconds(binary, frames, camera, workdir, backend):
     out, stats = os.path.join(workdir, "out.exr"), os.path.join(workdir, "stats.json")
     start = time.time()
     subprocess.run(
-        [binary, "reconstruct", "--input", frames, "--camera", camera, "--out", out, "--stats", stats],
+        [binary, "reconstruct", "--input", frames, "--camera", camera, "--out", out, "--stats", stats,
+         "--backend", backend],
         check=True,
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
@@ -62,6 +67,8 @@ def main():
     ap.add_argument("camera")
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--spreadlet", default="target/release/spreadlet")
+    ap.add_argument("--backend", default="cpu", choices=["cpu", "auto"],
+                    help="spreadlet's backend (default cpu: both tools on the CPU)")
     args = ap.parse_args()
     rgba, albedo, normal, _ = read_frames(args.frames)
     rgb = rgba[..., :3]
@@ -69,7 +76,8 @@ def main():
     process, call, oidn = [], [], []
     with tempfile.TemporaryDirectory() as workdir:
         for r in range(args.rounds):
-            wall, per_call = spreadlet_seconds(args.spreadlet, args.frames, args.camera, workdir)
+            wall, per_call = spreadlet_seconds(args.spreadlet, args.frames, args.camera, workdir,
+                                               args.backend)
             process.append(wall)
             call.append(per_call)
             oidn.append(oidn_seconds(rgb, albedo, normal))
