@@ -519,24 +519,25 @@ impl Renderer {
         if backend == Backend::Cpu {
             return Ok(Device::Cpu);
         }
-        match crate::gpu::GpuContext::with_requirement(backend == Backend::Gpu)? {
-            // A software adapter (lavapipe) is slower than the CPU path: `auto` skips it.
-            Some(ctx)
-                if backend == Backend::Gpu
-                    || ctx.adapter_info().device_type != wgpu::DeviceType::Cpu =>
-            {
-                Ok(Device::Gpu(Box::new(GpuState {
-                    ctx,
-                    synthesizer: None,
-                })))
-            }
-            Some(ctx) => {
+        // A software adapter (lavapipe) is slower than the CPU path: `auto` sets it aside
+        // without opening a device on it.
+        use crate::gpu::{GpuContext, Opened, SoftwareAdapter};
+        let software = match backend {
+            Backend::Gpu => SoftwareAdapter::Open,
+            Backend::Auto | Backend::Cpu => SoftwareAdapter::SetAside,
+        };
+        match GpuContext::open(backend == Backend::Gpu, software)? {
+            Opened::Context(ctx) => Ok(Device::Gpu(Box::new(GpuState {
+                ctx: *ctx,
+                synthesizer: None,
+            }))),
+            Opened::Software(info) => {
                 self.emit(Event::CpuFallback {
-                    reason: format!("{} is a software adapter", ctx.adapter_name()),
+                    reason: format!("{} ({:?}) is a software adapter", info.name, info.backend),
                 });
                 Ok(Device::Cpu)
             }
-            None => {
+            Opened::NoAdapter => {
                 self.emit(Event::CpuFallback {
                     reason: "no GPU adapter".into(),
                 });

@@ -41,6 +41,27 @@ pub fn gpu_required() -> bool {
     std::env::var(REQUIRE_GPU_ENV).is_ok_and(|v| v.trim() == "1")
 }
 
+/// What [`GpuContext::open`] does with a software adapter (lavapipe, llvmpipe), which draws
+/// slower than the CPU path.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SoftwareAdapter {
+    /// Opens a device on it as on any other (the GPU tests run on lavapipe).
+    Open,
+    /// Reports it without opening a device: `auto` sets it aside, and opening one cost
+    /// lavapipe's 5 ms, and more to tear down, per process.
+    SetAside,
+}
+
+/// What [`GpuContext::open`] found.
+pub enum Opened {
+    /// A device on the best adapter.
+    Context(Box<GpuContext>),
+    /// The best adapter is a software one, and no device was opened on it.
+    Software(Box<wgpu::AdapterInfo>),
+    /// No adapter (and none was required).
+    NoAdapter,
+}
+
 impl GpuContext {
     /// The first adapter wgpu offers (any backend, high-performance preferred), with
     /// `SHADER_FLOAT32_ATOMIC` and `TIMESTAMP_QUERY` enabled where the adapter has them.
@@ -54,6 +75,16 @@ impl GpuContext {
     /// As [`GpuContext::new`], with the requirement given explicitly instead of read from the
     /// environment.
     pub fn with_requirement(require: bool) -> Result<Option<Self>, GpuError> {
+        match Self::open(require, SoftwareAdapter::Open)? {
+            Opened::Context(ctx) => Ok(Some(*ctx)),
+            Opened::Software(_) | Opened::NoAdapter => Ok(None),
+        }
+    }
+
+    /// The best adapter's context, as [`GpuContext::with_requirement`] opens it; where that
+    /// adapter is a software one and `software` says [`SoftwareAdapter::SetAside`], its
+    /// information alone.
+    pub fn open(require: bool, software: SoftwareAdapter) -> Result<Opened, GpuError> {
         let instance = wgpu::Instance::new(wgpu::InstanceDescriptor {
             backends: wgpu::Backends::from_env().unwrap_or(wgpu::Backends::PRIMARY),
             ..wgpu::InstanceDescriptor::new_without_display_handle_from_env()
@@ -65,9 +96,12 @@ impl GpuContext {
             })) {
                 Ok(a) => a,
                 Err(e) if require => return Err(GpuError::NoAdapter(e.to_string())),
-                Err(_) => return Ok(None),
+                Err(_) => return Ok(Opened::NoAdapter),
             };
         let info = adapter.get_info();
+        if software == SoftwareAdapter::SetAside && info.device_type == wgpu::DeviceType::Cpu {
+            return Ok(Opened::Software(Box::new(info)));
+        }
         let available = adapter.features();
         let wanted = wgpu::Features::SHADER_FLOAT32_ATOMIC | wgpu::Features::TIMESTAMP_QUERY;
         let features = available & wanted;
@@ -90,7 +124,7 @@ impl GpuContext {
                 s.get_or_insert_with(|| e.to_string());
             }
         }));
-        Ok(Some(Self {
+        Ok(Opened::Context(Box::new(Self {
             device,
             queue,
             info,
@@ -98,7 +132,7 @@ impl GpuContext {
             float_atomics: features.contains(wgpu::Features::SHADER_FLOAT32_ATOMIC),
             timestamps: features.contains(wgpu::Features::TIMESTAMP_QUERY),
             uncaptured,
-        }))
+        })))
     }
 
     /// The adapter's name and backend, for reports (e.g. `llvmpipe (LLVM 15.0.7, 256 bits) (Vulkan)`).
