@@ -265,15 +265,8 @@ pub fn classify_fragments(
                         let radial = if turned { [-1.0, 0.0] } else { [1.0, 0.0] };
                         let reach = reach.get(i as usize).copied().unwrap_or(0) as f32;
                         let threshold = ordered_dither(frag.x, frag.y);
-                        let (key, too_long) = SmearKey::quantised(
-                            i,
-                            m,
-                            frag.bend,
-                            radial,
-                            reach,
-                            threshold,
-                            AngleResolution::Rounded,
-                        );
+                        let (key, too_long) =
+                            SmearKey::dithered(i, m, frag.bend, radial, reach, threshold);
                         return Some((key, clamped || too_long));
                     }
                     let found = lookup_psf(
