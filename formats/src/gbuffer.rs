@@ -441,7 +441,7 @@ impl Decoded {
             first.size,
             image.attributes.display_window,
         )?;
-        let channels = merged_channels(&name, &image.layer_data)?;
+        let channels = merged_channels(&name, image.layer_data)?;
         Ok(Decoded {
             name,
             width,
@@ -601,17 +601,17 @@ impl ViewLayer {
 /// `ViewLayer.Depth`) gets it as a prefix, so both spellings read alike.
 fn merged_channels(
     name: &str,
-    layers: &[exr::image::Layer<exr::image::AnyChannels<exr::image::FlatSamples>>],
+    layers: exr::image::Layers<exr::image::AnyChannels<exr::image::FlatSamples>>,
 ) -> Result<Vec<(String, Vec<f32>)>, GBufferError> {
     let Some(first) = layers.first() else {
         return Ok(Vec::new());
     };
+    let (first_size, first_position) = (first.size, first.attributes.layer_position);
+    let parts = layers.len();
     let mut channels: Vec<(String, Vec<f32>)> = Vec::new();
     for layer in layers {
         let part = layer.attributes.layer_name.as_ref().map(|t| t.to_string());
-        if layer.size != first.size
-            || layer.attributes.layer_position != first.attributes.layer_position
-        {
+        if layer.size != first_size || layer.attributes.layer_position != first_position {
             return Err(GBufferError::Layout {
                 path: name.to_string(),
                 message: format!(
@@ -621,16 +621,16 @@ fn merged_channels(
                     layer.size.width(),
                     layer.size.height(),
                     layer.attributes.layer_position,
-                    first.size.width(),
-                    first.size.height(),
-                    first.attributes.layer_position
+                    first_size.width(),
+                    first_size.height(),
+                    first_position
                 ),
             });
         }
-        for c in &layer.channel_data.list {
+        for c in layer.channel_data.list {
             let short = c.name.to_string();
             let full = match &part {
-                Some(p) if layers.len() > 1 && !short.starts_with(&format!("{p}.")) => {
+                Some(p) if parts > 1 && !short.starts_with(&format!("{p}.")) => {
                     format!("{p}.{short}")
                 }
                 _ => short,
@@ -641,7 +641,12 @@ fn merged_channels(
                     message: format!("channel {full} is in two parts"),
                 });
             }
-            channels.push((full, c.sample_data.values_as_f32().collect()));
+            let samples = match c.sample_data {
+                // Already f32: moved, not copied.
+                exr::image::FlatSamples::F32(values) => values,
+                other => other.values_as_f32().collect(),
+            };
+            channels.push((full, samples));
         }
     }
     Ok(channels)

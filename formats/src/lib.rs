@@ -23,6 +23,7 @@ pub mod atomic;
 pub mod camera;
 pub mod deep;
 pub mod error;
+pub mod exr_blocks;
 pub mod exr_io;
 pub mod gbuffer;
 pub mod image;

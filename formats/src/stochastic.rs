@@ -1,11 +1,13 @@
 //! Stochastic frames: N labelled samples per pixel (one ray each at a random lens position and
 //! time), their EXR layout (documented in `docs/STOCHASTIC.md`), writer and reader.
 
+use std::collections::BTreeMap;
 use std::path::Path;
 
 use rayon::prelude::*;
 
 use crate::error::{Error, Result};
+use crate::exr_blocks::ScanlineBlocks;
 use crate::exr_io;
 
 /// The text attribute that marks and sizes a stochastic-frames file.
@@ -24,7 +26,7 @@ pub const GUIDE_CHANNELS: [&str; 6] = [
 ];
 
 /// One sample: a single ray's result and the labels needed to reconstruct from it.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Zeroable)]
 pub struct Sample {
     /// Premultiplied linear RGBA: alpha 1 on a hit, 0 on a miss (RGB = background then).
     pub color: [f32; 4],
@@ -77,7 +79,7 @@ impl Sample {
 }
 
 /// A denoiser's guides for one sample: what its ray first hit, without lighting.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Zeroable)]
 pub struct SampleGuides {
     /// Linear reflectance of the first hit (emission on emitters, as Cycles writes it), RGB.
     pub albedo: [f32; 3],
@@ -299,40 +301,144 @@ impl StochasticFrames {
     }
 
     /// Reads a file written by [`StochasticFrames::write_exr`], checking its marker, version
-    /// and that the data size matches the recorded width, height and spp.
+    /// and that the data size matches the recorded width, height and spp. A scanline file
+    /// (any this crate or Blender writes) is decoded block by block on every thread, each
+    /// block's rows straight into the samples they hold.
     pub fn read_exr(path: &Path) -> Result<Self> {
+        match ScanlineBlocks::open(path)? {
+            Some(file) => Self::read_blocks(path, &file),
+            None => Self::read_channel_lists(path),
+        }
+    }
+
+    /// [`Self::read_exr`] of a scanline file: each band of pixel rows (one block's worth)
+    /// decodes the blocks that hold its rows of every sample and writes its samples whole.
+    fn read_blocks(path: &Path, file: &ScanlineBlocks) -> Result<Self> {
+        let layout = |message: String| Error::Layout {
+            path: path.to_path_buf(),
+            message,
+        };
+        let (width, height, spp) =
+            frames_layout(path, &file.text_attributes, file.width, file.height)?;
+        let channel = |name: &str| {
+            file.channel(name).ok_or_else(|| {
+                layout(format!(
+                    "missing channel {name:?} (has: {})",
+                    file.channel_names.join(", ")
+                ))
+            })
+        };
+        let mut sample_channels = [0usize; CHANNELS.len()];
+        for (slot, name) in sample_channels.iter_mut().zip(CHANNELS) {
+            *slot = channel(name)?;
+        }
+        let guide_channels = if guides_present(path, |name| file.channel(name).is_some())? {
+            let mut columns = [0usize; GUIDE_CHANNELS.len()];
+            for (slot, name) in columns.iter_mut().zip(GUIDE_CHANNELS) {
+                *slot = channel(name)?;
+            }
+            Some(columns)
+        } else {
+            None
+        };
+        let n = width * height * spp;
+        // Zeroed by the allocator: fresh pages stay unmapped until a band writes them, on its
+        // own thread.
+        let mut samples: Vec<Sample> = bytemuck::zeroed_vec(n);
+        let mut guides: Vec<SampleGuides> =
+            bytemuck::zeroed_vec(if guide_channels.is_some() { n } else { 0 });
+        let band_rows = file.rows_per_block.min(height);
+        let band = band_rows * width * spp;
+        let guide_bands: Vec<Option<&mut [SampleGuides]>> = if guide_channels.is_some() {
+            guides.chunks_mut(band).map(Some).collect()
+        } else {
+            (0..height.div_ceil(band_rows)).map(|_| None).collect()
+        };
+        samples
+            .par_chunks_mut(band)
+            .zip(guide_bands)
+            .enumerate()
+            .try_for_each(|(b, (out, mut guides_out))| -> Result<()> {
+                let (first, last) = (b * band_rows, ((b + 1) * band_rows).min(height));
+                // One row of every channel read, as f32, then the row's samples written whole.
+                let mut sample_rows = vec![[0.0f32; CHANNELS.len()]; width];
+                let mut guide_rows = vec![[0.0f32; GUIDE_CHANNELS.len()]; width];
+                let mut column = vec![0.0f32; width];
+                // Sample `k` of pixel (x, y) is data row `k * height + y`.
+                for k in 0..spp {
+                    let mut row = k * height + first;
+                    let end = k * height + last;
+                    while row < end {
+                        let block = file.decode(row / file.rows_per_block)?;
+                        let block_end = (block.first_row + block.rows).min(end);
+                        for data_row in row..block_end {
+                            let line = data_row - block.first_row;
+                            let y = data_row - k * height - first;
+                            let at = |x: usize| (y * width + x) * spp + k;
+                            for (c, &channel) in sample_channels.iter().enumerate() {
+                                block.read_row(line, channel, &mut column);
+                                for (s, &v) in sample_rows.iter_mut().zip(&column) {
+                                    s[c] = v;
+                                }
+                            }
+                            for (x, &values) in sample_rows.iter().enumerate() {
+                                out[at(x)] = Sample::from_channels(values);
+                            }
+                            if let (Some(guide_channels), Some(dst)) =
+                                (guide_channels, guides_out.as_deref_mut())
+                            {
+                                for (c, &channel) in guide_channels.iter().enumerate() {
+                                    block.read_row(line, channel, &mut column);
+                                    for (g, &v) in guide_rows.iter_mut().zip(&column) {
+                                        g[c] = v;
+                                    }
+                                }
+                                for (x, &values) in guide_rows.iter().enumerate() {
+                                    dst[at(x)] = SampleGuides::from_channels(values);
+                                }
+                            }
+                        }
+                        row = block_end;
+                    }
+                }
+                Ok(())
+            })?;
+        let frames = Self::new(width, height, spp, samples);
+        match guide_channels {
+            None => Ok(frames),
+            Some(_) => frames
+                .with_guides(guides)
+                .map_err(|e| layout(e.to_string())),
+        }
+    }
+
+    /// [`Self::read_exr`] of a tiled file or one with subsampled channels: the whole image
+    /// decoded into one list per channel first.
+    fn read_channel_lists(path: &Path) -> Result<Self> {
         let layout = |message: String| Error::Layout {
             path: path.to_path_buf(),
             message,
         };
         let mut channels = exr_io::read_channels(path)?;
-        let value = channels
-            .text_attributes
-            .get(ATTRIBUTE)
-            .cloned()
-            .ok_or_else(|| {
-                layout(format!(
-                    "no {ATTRIBUTE:?} attribute: not a stochastic-frames file"
-                ))
-            })?;
-        let (width, height, spp) = parse_attribute(&value)
-            .ok_or_else(|| layout(format!("unreadable {ATTRIBUTE:?} attribute {value:?}")))?;
-        if width == 0
-            || height == 0
-            || spp == 0
-            || channels.width != width
-            || height.checked_mul(spp) != Some(channels.height)
-        {
-            return Err(layout(format!(
-                "data of {}x{} pixels does not hold {width}x{height} pixels at {spp} spp",
-                channels.width, channels.height
-            )));
-        }
+        let (width, height, spp) = frames_layout(
+            path,
+            &channels.text_attributes,
+            channels.width,
+            channels.height,
+        )?;
         let mut columns = Vec::with_capacity(CHANNELS.len());
         for name in CHANNELS {
             columns.push(channels.take(name, path)?);
         }
-        let guide_columns = read_guides(&mut channels, path)?;
+        let guide_columns = if guides_present(path, |name| channels.data.contains_key(name))? {
+            let mut columns = Vec::with_capacity(GUIDE_CHANNELS.len());
+            for name in GUIDE_CHANNELS {
+                columns.push(channels.take(name, path)?);
+            }
+            Some(columns)
+        } else {
+            None
+        };
         let pixels = width * height;
         let n = pixels * spp;
         let row_of = |i: usize| (i % spp) * pixels + i / spp;
@@ -360,40 +466,68 @@ impl StochasticFrames {
     }
 }
 
-/// The guide channels of a stochastic-frames file, in [`GUIDE_CHANNELS`] order: `None` when it
-/// has none of them; an error when it has only some, or a value that is not finite (a
-/// denoiser's guide must be a number everywhere; a miss has albedo and normal 0; checked by
-/// [`StochasticFrames::with_guides`]).
-fn read_guides(channels: &mut exr_io::Channels, path: &Path) -> Result<Option<Vec<Vec<f32>>>> {
-    let present: Vec<&str> = GUIDE_CHANNELS
-        .iter()
-        .copied()
-        .filter(|name| channels.data.contains_key(*name))
-        .collect();
-    if present.is_empty() {
-        return Ok(None);
-    }
+/// The width, height and spp that a stochastic-frames file's marker attribute records, checked
+/// against its data window of `data_width x data_height` pixels (the `spp` frames stacked).
+fn frames_layout(
+    path: &Path,
+    text_attributes: &BTreeMap<String, String>,
+    data_width: usize,
+    data_height: usize,
+) -> Result<(usize, usize, usize)> {
     let layout = |message: String| Error::Layout {
         path: path.to_path_buf(),
         message,
     };
+    let value = text_attributes.get(ATTRIBUTE).ok_or_else(|| {
+        layout(format!(
+            "no {ATTRIBUTE:?} attribute: not a stochastic-frames file"
+        ))
+    })?;
+    let (width, height, spp) = parse_attribute(value)
+        .ok_or_else(|| layout(format!("unreadable {ATTRIBUTE:?} attribute {value:?}")))?;
+    if width == 0
+        || height == 0
+        || spp == 0
+        || data_width != width
+        || height.checked_mul(spp) != Some(data_height)
+    {
+        return Err(layout(format!(
+            "data of {data_width}x{data_height} pixels does not hold {width}x{height} pixels at \
+             {spp} spp"
+        )));
+    }
+    Ok((width, height, spp))
+}
+
+/// Whether a file whose channels `has` names carries the guide channels: all of
+/// [`GUIDE_CHANNELS`] (true) or none (false); an error when it has only some. Their values
+/// must be finite everywhere (a denoiser's guide must be a number; a miss has albedo and normal
+/// 0), which [`StochasticFrames::with_guides`] checks.
+fn guides_present(path: &Path, has: impl Fn(&str) -> bool) -> Result<bool> {
+    let present: Vec<&str> = GUIDE_CHANNELS
+        .iter()
+        .copied()
+        .filter(|name| has(name))
+        .collect();
+    if present.is_empty() {
+        return Ok(false);
+    }
     if present.len() != GUIDE_CHANNELS.len() {
         let missing: Vec<&str> = GUIDE_CHANNELS
             .iter()
             .copied()
             .filter(|name| !present.contains(name))
             .collect();
-        return Err(layout(format!(
-            "guide channels come as all of {} or none; missing {}",
-            GUIDE_CHANNELS.join(", "),
-            missing.join(", ")
-        )));
+        return Err(Error::Layout {
+            path: path.to_path_buf(),
+            message: format!(
+                "guide channels come as all of {} or none; missing {}",
+                GUIDE_CHANNELS.join(", "),
+                missing.join(", ")
+            ),
+        });
     }
-    let mut columns = Vec::with_capacity(GUIDE_CHANNELS.len());
-    for name in GUIDE_CHANNELS {
-        columns.push(channels.take(name, path)?);
-    }
-    Ok(Some(columns))
+    Ok(true)
 }
 
 /// Parses `stochastic-frames version=1 width=W height=H spp=N`.
@@ -517,5 +651,141 @@ mod tests {
             None
         );
         assert_eq!(parse_attribute("other"), None);
+    }
+
+    /// Frames of `w x h` pixels at `spp` whose every channel value differs (and fits half
+    /// exactly), written with `compression`, `Z` stored as half: the file's data rows as the
+    /// format lays them out (row `k * h + y` holds sample `k` of row `y`).
+    fn write_with(path: &Path, frames: &StochasticFrames, compression: exr::prelude::Compression) {
+        use exr::prelude::*;
+        let (w, h, spp) = (frames.width, frames.height, frames.spp);
+        let guides = frames.guides.as_ref().expect("guides");
+        let row_of = |i: usize| (i % spp) * w * h + i / spp;
+        let mut columns: Vec<(&str, Vec<f32>)> = Vec::new();
+        for (c, name) in CHANNELS.iter().enumerate() {
+            let mut column = vec![0.0; w * h * spp];
+            for (i, s) in frames.samples.iter().enumerate() {
+                let v = [
+                    s.color[0],
+                    s.color[1],
+                    s.color[2],
+                    s.color[3],
+                    s.depth,
+                    s.lens[0],
+                    s.lens[1],
+                    s.time,
+                    s.motion[0],
+                    s.motion[1],
+                    s.jitter[0],
+                    s.jitter[1],
+                ];
+                column[row_of(i)] = v[c];
+            }
+            columns.push((name, column));
+        }
+        for (c, name) in GUIDE_CHANNELS.iter().enumerate() {
+            let mut column = vec![0.0; w * h * spp];
+            for (i, g) in guides.iter().enumerate() {
+                column[row_of(i)] = g.to_channels()[c];
+            }
+            columns.push((name, column));
+        }
+        let list: SmallVec<[AnyChannel<FlatSamples>; 4]> = columns
+            .into_iter()
+            .map(|(name, v)| {
+                let samples = if name == "Z" {
+                    FlatSamples::F16(v.into_iter().map(f16::from_f32).collect())
+                } else {
+                    FlatSamples::F32(v)
+                };
+                AnyChannel::new(Text::from(name), samples)
+            })
+            .collect();
+        let mut attributes = LayerAttributes::default();
+        attributes.other.insert(
+            Text::from(ATTRIBUTE),
+            AttributeValue::Text(Text::from(frames.attribute_value().as_str())),
+        );
+        let encoding = Encoding {
+            compression,
+            blocks: Blocks::ScanLines,
+            line_order: LineOrder::Increasing,
+        };
+        let layer = Layer::new((w, h * spp), attributes, encoding, AnyChannels::sort(list));
+        Image::from_layer(layer)
+            .write()
+            .to_file(path)
+            .expect("write");
+    }
+
+    fn distinct_frames(w: usize, h: usize, spp: usize) -> StochasticFrames {
+        let n = w * h * spp;
+        // Small integers and halves: exact in half as well as in f32.
+        let v = |i: usize, c: usize| ((i * 19 + c * 7) % 1024) as f32 * 0.5;
+        let samples = (0..n)
+            .map(|i| Sample::from_channels(std::array::from_fn(|c| v(i, c))))
+            .collect();
+        let guides = (0..n)
+            .map(|i| SampleGuides::from_channels(std::array::from_fn(|c| v(i, 20 + c))))
+            .collect();
+        StochasticFrames::new(w, h, spp, samples)
+            .with_guides(guides)
+            .expect("guides")
+    }
+
+    /// Block by block, every compression's rows land on their samples, whether or not the
+    /// blocks (1 to 32 rows) divide the frames' height, with a half channel among the floats:
+    /// the same as the whole-image read and as written.
+    #[test]
+    fn a_block_by_block_read_places_every_row_of_every_compression() {
+        use exr::prelude::Compression;
+        let dir = tempfile::tempdir().expect("dir");
+        for (w, h, spp) in [(5, 7, 3), (9, 40, 2), (4, 1, 1)] {
+            let frames = distinct_frames(w, h, spp);
+            for compression in [
+                Compression::Uncompressed,
+                Compression::RLE,
+                Compression::ZIP1,
+                Compression::ZIP16,
+                Compression::PIZ,
+            ] {
+                let path = dir
+                    .path()
+                    .join(format!("{compression:?}-{w}x{h}x{spp}.exr"));
+                write_with(&path, &frames, compression);
+                assert!(
+                    ScanlineBlocks::open(&path).expect("open").is_some(),
+                    "{compression:?}: a scanline file"
+                );
+                let blocks = StochasticFrames::read_exr(&path).expect("read");
+                let lists = StochasticFrames::read_channel_lists(&path).expect("read lists");
+                assert_eq!(blocks, lists, "{compression:?} {w}x{h}x{spp}");
+                assert_eq!(blocks, frames, "{compression:?} {w}x{h}x{spp}");
+            }
+        }
+    }
+
+    /// A file cut short anywhere, or with any byte changed, is an error or other frames of the
+    /// same size: never a panic.
+    #[test]
+    fn cut_or_changed_files_are_errors_not_panics() {
+        let dir = tempfile::tempdir().expect("dir");
+        let frames = distinct_frames(6, 5, 2);
+        let good = dir.path().join("good.exr");
+        write_with(&good, &frames, exr::prelude::Compression::ZIP1);
+        let bytes = std::fs::read(&good).expect("bytes");
+        let path = dir.path().join("bad.exr");
+        for len in 0..bytes.len() {
+            std::fs::write(&path, &bytes[..len]).expect("write");
+            assert!(StochasticFrames::read_exr(&path).is_err(), "cut at {len}");
+        }
+        for at in (0..bytes.len()).step_by(3) {
+            let mut changed = bytes.clone();
+            changed[at] ^= 0x5a;
+            std::fs::write(&path, &changed).expect("write");
+            if let Ok(read) = StochasticFrames::read_exr(&path) {
+                assert_eq!(read.samples.len(), frames.samples.len(), "byte {at}");
+            }
+        }
     }
 }
