@@ -621,11 +621,11 @@ fn splat_dense(band: &mut Band, r: &SplatRecord, db: &PsfDatabase, sampling: Rot
 }
 
 /// One or two unturned dense records at one centre (`r`, and `next` when the two are drawn
-/// together), row by row: each row is clipped to the band and to each PSF once, so the loop
-/// over pixels tests nothing but the PSFs' zeros. The sums, and their order, are those of
-/// [`splat_dense`] and [`splat_dense_pair`]: a pixel where only one PSF is non-zero adds that
-/// PSF's weighted value, one where both are adds their sum, one where both are zero adds
-/// nothing.
+/// together), row by row: each row is clipped to the band and to each PSF's non-zero span once,
+/// and a pair's row split where one PSF, the other or both reach, so the loops over pixels test
+/// nothing. The sums, and their order, are those of [`splat_dense`] and [`splat_dense_pair`]: a
+/// pixel where only one PSF reaches adds that PSF's weighted value, one where both do adds
+/// their sum (a zero adds nothing: colours are finite, and no pixel holds -0).
 fn splat_dense_upright(
     band: &mut Band,
     r: &SplatRecord,
@@ -710,14 +710,7 @@ fn splat_dense_upright(
                 let start = (y - band.y0) as usize * width;
                 let pixels = &mut band.data[start + lo as usize..start + hi as usize];
                 let values = &values[(lo - ax0) as usize * ch..(hi - ax0) as usize * ch];
-                for (px, vals) in pixels.iter_mut().zip(values.chunks_exact(ch)) {
-                    if !zero(vals) {
-                        let (p, q) = (weighted(ca, vals), weighted(*cb, vals));
-                        for k in 0..4 {
-                            px[k] += p[k] + q[k];
-                        }
-                    }
-                }
+                add_pair_row(pixels, values, values, ch, (ca, *cb));
             }
             return;
         }
@@ -747,45 +740,108 @@ fn splat_dense_upright(
                 }
             }
             Some((bv, cb, sb)) => {
-                let rb = row_of(bv, *sb, y);
-                // Only the columns where either row is non-zero.
-                let (x_lo, x_hi) = match (ra, rb) {
-                    (None, None) => continue,
-                    (Some((x0, n, _)), None) | (None, Some((x0, n, _))) => (x0, x0 + n as i32),
-                    (Some((a0, na, _)), Some((b0, nb, _))) => {
-                        (a0.min(b0), (a0 + na as i32).max(b0 + nb as i32))
-                    }
-                };
-                let (x_lo, x_hi) = (x_lo.max(0), x_hi.min(band.width));
-                // A PSF's values at band column x, `None` outside its box.
-                fn at(rv: Option<(i32, usize, &[f32])>, x: i32, ch: usize) -> Option<&[f32]> {
-                    match rv {
-                        Some((x0, n, values)) if x >= x0 && x < x0 + n as i32 => {
-                            let k = (x - x0) as usize * ch;
-                            Some(&values[k..k + ch])
-                        }
-                        _ => None,
-                    }
+                // Each PSF's non-zero span of the row clipped to the band: its columns and
+                // their values.
+                fn clip(
+                    rv: Option<(i32, usize, &[f32])>,
+                    width: i32,
+                    ch: usize,
+                ) -> Option<(usize, usize, &[f32])> {
+                    let (x0, n, values) = rv?;
+                    let (lo, hi) = (x0.max(0), (x0 + n as i32).min(width));
+                    let at = |x: i32| (x - x0) as usize * ch;
+                    (lo < hi).then(|| (lo as usize, hi as usize, &values[at(lo)..at(hi)]))
                 }
-                for x in x_lo..x_hi {
-                    let va = at(ra, x, ch).filter(|v| !zero(v));
-                    let vb = at(rb, x, ch).filter(|v| !zero(v));
-                    let value = match (va, vb) {
-                        (Some(va), Some(vb)) => {
-                            let (p, q) = (weighted(ca, va), weighted(*cb, vb));
-                            std::array::from_fn(|k| p[k] + q[k])
+                let (ra, rb) = (clip(ra, band.width, ch), clip(row_of(bv, *sb, y), band.width, ch));
+                match (ra, rb) {
+                    (None, None) => {}
+                    (Some((lo, hi, va)), None) => add_row(&mut row[lo..hi], va, ch, ca),
+                    (None, Some((lo, hi, vb))) => add_row(&mut row[lo..hi], vb, ch, *cb),
+                    (Some((a_lo, a_hi, va)), Some((b_lo, b_hi, vb))) => {
+                        // Where one PSF alone reaches a pixel it adds its value, where both do
+                        // they add their sum: each pixel one addition, in stretches of plain
+                        // loops.
+                        let (lo, hi) = (a_lo.max(b_lo), a_hi.min(b_hi));
+                        if lo >= hi {
+                            add_row(&mut row[a_lo..a_hi], va, ch, ca);
+                            add_row(&mut row[b_lo..b_hi], vb, ch, *cb);
+                            continue;
                         }
-                        (Some(va), None) => weighted(ca, va),
-                        (None, Some(vb)) => weighted(*cb, vb),
-                        (None, None) => continue,
-                    };
-                    let px = &mut row[x as usize];
-                    for k in 0..4 {
-                        px[k] += value[k];
+                        for (from, to, values, colour) in [(a_lo, a_hi, va, ca), (b_lo, b_hi, vb, *cb)]
+                        {
+                            let at = |x: usize| (x - from) * ch;
+                            if from < lo {
+                                add_row(&mut row[from..lo], &values[..at(lo)], ch, colour);
+                            }
+                            if hi < to {
+                                add_row(&mut row[hi..to], &values[at(hi)..], ch, colour);
+                            }
+                        }
+                        let a = &va[(lo - a_lo) * ch..(hi - a_lo) * ch];
+                        let b = &vb[(lo - b_lo) * ch..(hi - b_lo) * ch];
+                        add_pair_row(&mut row[lo..hi], a, b, ch, (ca, *cb));
                     }
                 }
             }
         }
+    }
+}
+
+/// `pixels[i] += weighted(colour, values of pixel i)` along a row (`values` channel-interleaved,
+/// `channels` a pixel). A PSF's zeros add nothing to a pixel (colours are finite and no pixel
+/// holds -0), so they are added rather than tested, and the loop is straight.
+#[inline]
+fn add_row(pixels: &mut [[f32; 4]], values: &[f32], channels: usize, colour: [f32; 4]) {
+    let add = |px: &mut [f32; 4], value: [f32; 4]| {
+        for k in 0..4 {
+            px[k] += value[k];
+        }
+    };
+    match channels {
+        1 => pixels.iter_mut().zip(values).for_each(|(px, &v)| add(px, weighted(colour, &[v]))),
+        3 => pixels
+            .iter_mut()
+            .zip(values.chunks_exact(3))
+            .for_each(|(px, v)| add(px, weighted(colour, &[v[0], v[1], v[2]]))),
+        _ => pixels
+            .iter_mut()
+            .zip(values.chunks_exact(channels.max(1)))
+            .for_each(|(px, v)| add(px, weighted(colour, v))),
+    }
+}
+
+/// `pixels[i] += weighted(colours.0, a_i) + weighted(colours.1, b_i)` along a row: two PSFs at
+/// one centre (or one PSF under two records' colours), their sum added in one step, as
+/// [`splat_dense_pair`] adds it. Zeros are added, not tested, as in [`add_row`].
+#[inline]
+fn add_pair_row(
+    pixels: &mut [[f32; 4]],
+    a: &[f32],
+    b: &[f32],
+    channels: usize,
+    colours: ([f32; 4], [f32; 4]),
+) {
+    let add = |px: &mut [f32; 4], p: [f32; 4], q: [f32; 4]| {
+        for k in 0..4 {
+            px[k] += p[k] + q[k];
+        }
+    };
+    let (ca, cb) = colours;
+    match channels {
+        1 => pixels
+            .iter_mut()
+            .zip(a.iter().zip(b))
+            .for_each(|(px, (&u, &v))| add(px, weighted(ca, &[u]), weighted(cb, &[v]))),
+        3 => pixels
+            .iter_mut()
+            .zip(a.chunks_exact(3).zip(b.chunks_exact(3)))
+            .for_each(|(px, (u, v))| {
+                add(px, weighted(ca, &[u[0], u[1], u[2]]), weighted(cb, &[v[0], v[1], v[2]]))
+            }),
+        _ => pixels
+            .iter_mut()
+            .zip(a.chunks_exact(channels.max(1)).zip(b.chunks_exact(channels.max(1))))
+            .for_each(|(px, (u, v))| add(px, weighted(ca, u), weighted(cb, v))),
     }
 }
 
