@@ -56,26 +56,35 @@ pub(super) fn edge_split(
     let bright = |c: [f32; 4]| c[..3].iter().any(|&v| v > hdr_threshold);
     // The nearest neighbour of the four sharing an edge, or a bright one in the 5x5 window.
     let mut best: Option<(usize, i32, i32, f32)> = None;
-    // Without a bright pixel in the 5x5 window the outer ring holds no candidate: only the
-    // 3x3 window is walked, in the same order.
-    let reach = if bright_near.get(i).copied().unwrap_or(true) { 2 } else { 1 };
-    for dy in -reach..=reach {
-        for dx in -reach..=reach {
-            if dx == 0 && dy == 0 {
-                continue;
-            }
-            let Some(j) = index(xi + dx, yi + dy) else {
-                continue;
-            };
-            let sharing_an_edge = dx == 0 || dy == 0;
-            let outer = dx.abs() == 2 || dy.abs() == 2;
-            if (outer || !sharing_an_edge) && !bright(g.color[j]) {
-                continue;
-            }
+    let mut consider = |dx: i32, dy: i32| {
+        if let Some(j) = index(xi + dx, yi + dy) {
             let dj = depth_at(j);
             if dj < best.map_or(d, |b| b.3) {
                 best = Some((j, dx, dy, dj));
             }
+        }
+    };
+    if bright_near.get(i).copied().unwrap_or(true) {
+        // Diagonal neighbours and the outer ring count only where bright.
+        for dy in -2i32..=2 {
+            for dx in -2i32..=2 {
+                if dx == 0 && dy == 0 {
+                    continue;
+                }
+                let sharing_an_edge = dx == 0 || dy == 0;
+                let outer = dx.abs() == 2 || dy.abs() == 2;
+                let dim = || index(xi + dx, yi + dy).is_none_or(|j| !bright(g.color[j]));
+                if (outer || !sharing_an_edge) && dim() {
+                    continue;
+                }
+                consider(dx, dy);
+            }
+        }
+    } else {
+        // Without a bright pixel in the 5x5 window only the four pixels sharing an edge are
+        // candidates: those alone are looked at, in the window's order.
+        for (dx, dy) in [(0, -1), (-1, 0), (1, 0), (0, 1)] {
+            consider(dx, dy);
         }
     }
     let (j, dx, dy, dj) = best?;
