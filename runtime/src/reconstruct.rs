@@ -644,9 +644,15 @@ impl<'a> PlacedSamples<'a> {
             slot_of[k] = *place;
             *place += 1;
         }
+        // Made in the samples' order (each sample, its move and its colour read in order), then
+        // gathered: one random read a sample rather than three.
+        let in_sample_order: Vec<FragmentSeed> = (0..self.len())
+            .into_par_iter()
+            .map(|k| self.fragment_seed(k))
+            .collect();
         let seeds = order
             .par_iter()
-            .map(|&k| self.fragment_seed(k as usize))
+            .map(|&k| in_sample_order[k as usize])
             .collect();
         (seeds, slot_of)
     }
