@@ -156,11 +156,6 @@ impl ScanlineBlocks {
         self.channel_names.iter().position(|n| n == name)
     }
 
-    /// The number of blocks, top to bottom.
-    pub fn block_count(&self) -> usize {
-        self.blocks.len()
-    }
-
     /// Decodes block `index` (rows `index * rows_per_block` onwards); an error naming the file
     /// where it is missing, does not decompress, or decompresses to the wrong size.
     pub fn decode(&self, index: usize) -> Result<DecodedBlock<'_>> {

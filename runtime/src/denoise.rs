@@ -95,11 +95,7 @@ pub fn denoise_samples(
     let reach = (CUTOFF_SIGMAS * sigma).ceil() as i64;
     // Samples indexed by the pixel their moved position falls in (counting sort), for those
     // inside the frame.
-    let cell_of = |m: &MovedSample| -> Option<usize> {
-        let (x, y) = (m.q[0].floor(), m.q[1].floor());
-        (x >= 0.0 && y >= 0.0 && (x as usize) < w && (y as usize) < h)
-            .then(|| y as usize * w + x as usize)
-    };
+    let cell_of = |m: &MovedSample| m.pixel(w, h);
     // Members and pixels are numbered in 32 bits (no frame that fits in memory has 4 G
     // samples); such a frame would keep its colours.
     let too_large = frames.samples.len() >= NOT_A_MEMBER as usize || w * h >= NOT_A_MEMBER as usize;

@@ -151,6 +151,16 @@ pub struct MovedSample {
     pub depth: f32,
 }
 
+impl MovedSample {
+    /// The pixel of a `width x height` frame (row-major index) its position `q` falls in;
+    /// `None` outside the frame.
+    pub fn pixel(&self, width: usize, height: usize) -> Option<usize> {
+        let (x, y) = (self.q[0].floor(), self.q[1].floor());
+        (x >= 0.0 && y >= 0.0 && (x as usize) < width && (y as usize) < height)
+            .then(|| y as usize * width + x as usize)
+    }
+}
+
 /// Every sample moved back to the lens and shutter centre (`docs/STOCHASTIC.md`), in the order
 /// of `frames.samples`; `None` for a sample that carries nothing (all zero) or has a label
 /// that is not finite.
@@ -619,13 +629,9 @@ impl<'a> PlacedSamples<'a> {
     /// misses again than the sample, its move and its denoised colour.
     fn fragment_seeds_by_pixel(&self, width: usize, height: usize) -> (Vec<FragmentSeed>, Vec<u32>) {
         let cells = width * height;
-        let cell_of = |k: usize| -> usize {
+        let cell_of = |k: usize| {
             self.moved[k]
-                .and_then(|m| {
-                    let (x, y) = (m.q[0].floor(), m.q[1].floor());
-                    (x >= 0.0 && y >= 0.0 && (x as usize) < width && (y as usize) < height)
-                        .then(|| y as usize * width + x as usize)
-                })
+                .and_then(|m| m.pixel(width, height))
                 .unwrap_or(cells)
         };
         let keys: Vec<u32> = (0..self.len()).into_par_iter().map(|k| cell_of(k) as u32).collect();

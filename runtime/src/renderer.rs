@@ -521,7 +521,7 @@ impl Renderer {
         }
         // A software adapter (lavapipe) is slower than the CPU path: `auto` sets it aside
         // without opening a device on it.
-        use crate::gpu::{GpuContext, Opened, SoftwareAdapter};
+        use crate::gpu::{adapter_label, GpuContext, Opened, SoftwareAdapter};
         let software = match backend {
             Backend::Gpu => SoftwareAdapter::Open,
             Backend::Auto | Backend::Cpu => SoftwareAdapter::SetAside,
@@ -533,7 +533,7 @@ impl Renderer {
             }))),
             Opened::Software(info) => {
                 self.emit(Event::CpuFallback {
-                    reason: format!("{} ({:?}) is a software adapter", info.name, info.backend),
+                    reason: format!("{} is a software adapter", adapter_label(&info)),
                 });
                 Ok(Device::Cpu)
             }

@@ -41,6 +41,11 @@ pub fn gpu_required() -> bool {
     std::env::var(REQUIRE_GPU_ENV).is_ok_and(|v| v.trim() == "1")
 }
 
+/// An adapter's name and backend, for reports (e.g. `llvmpipe (LLVM 15.0.7, 256 bits) (Vulkan)`).
+pub fn adapter_label(info: &wgpu::AdapterInfo) -> String {
+    format!("{} ({:?})", info.name, info.backend)
+}
+
 /// What [`GpuContext::open`] does with a software adapter (lavapipe, llvmpipe), which draws
 /// slower than the CPU path.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -137,7 +142,7 @@ impl GpuContext {
 
     /// The adapter's name and backend, for reports (e.g. `llvmpipe (LLVM 15.0.7, 256 bits) (Vulkan)`).
     pub fn adapter_name(&self) -> String {
-        format!("{} ({:?})", self.info.name, self.info.backend)
+        adapter_label(&self.info)
     }
 
     /// Full adapter information.

@@ -31,7 +31,7 @@ pub mod tiles;
 pub mod util;
 
 pub use ::shaders::shader_sources_for_validation;
-pub use context::{GpuContext, Opened, SoftwareAdapter, REQUIRE_GPU_ENV};
+pub use context::{adapter_label, GpuContext, Opened, SoftwareAdapter, REQUIRE_GPU_ENV};
 pub use error::GpuError;
 pub use filter::{filter_gpu, GpuFilter};
 pub use frontend::render_gpu;

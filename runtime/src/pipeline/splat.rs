@@ -695,7 +695,6 @@ fn splat_dense_upright(
         Some((s.0 + first as i32, end - first, &v.data[(at + first) * ch..(at + end) * ch]))
     }
     let ca = r.color;
-    let zero = |vals: &[f32]| vals.iter().all(|&x| x == 0.0);
     // Two records of one image (a reconstructed pixel's samples of one surface that did not
     // merge): its own spans, each pixel weighted by both colours and the two summed, as the
     // general pair below sums them, without looking each pixel up in two rows.
@@ -729,15 +728,7 @@ fn splat_dense_upright(
                 let values = &values[(lo - ax0) as usize * ch..(hi - ax0) as usize * ch];
                 // Grey and RGB images are drawn by `splat_upright_rows`; other channel
                 // counts here.
-                let pixels = row[lo as usize..hi as usize].iter_mut();
-                for (px, vals) in pixels.zip(values.chunks_exact(ch)) {
-                    if !zero(vals) {
-                        let value = weighted(ca, vals);
-                        for k in 0..4 {
-                            px[k] += value[k];
-                        }
-                    }
-                }
+                add_row(&mut row[lo as usize..hi as usize], values, ch, ca);
             }
             Some((bv, cb, sb)) => {
                 // Each PSF's non-zero span of the row clipped to the band: its columns and
