@@ -19,6 +19,7 @@ use formats::RgbaImage;
 use psf_db::PsfDatabase;
 
 use super::composite::{finish_pixel, fold_layer_pixel, CompositeOptions};
+use super::sparse_runs::LayerRuns;
 use super::splat::{draw_band, BandRows, Drawing, Planes, SplatOptions};
 use super::types::Classified;
 
@@ -78,7 +79,7 @@ pub fn splat_composite(
                     continue;
                 }
                 let recs = &classified.records[info.first_record..][..info.record_count];
-                let Some(band) = draw_band(recs, Planes::Direct, band_rows, &drawing, &mut scratch.band)
+                let Some(band) = draw_band(recs, &LayerRuns::default(), Planes::Direct, band_rows, &drawing, &mut scratch.band)
                 else {
                     continue;
                 };

@@ -17,6 +17,7 @@ pub mod direct;
 pub mod integrate;
 pub mod packed;
 pub mod splat;
+mod sparse_runs;
 pub mod types;
 pub mod wide;
 

@@ -9,14 +9,16 @@
 //! exact under integration and keeps a rotated streak straight instead of stair-stepped.
 //!
 //! Determinism: the padded layer is cut into fixed bands of rows; each (layer, band) task
-//! walks the layer's records in their order and adds only inside its band, so every pixel
-//! sums its contributions in the same order whatever the thread count.
+//! walks the layer's records in their order, then the layer's runs of sparse records
+//! (`sparse_runs`), and adds only inside its band, so every pixel sums its contributions in the
+//! same order whatever the thread count.
 
 use poisson::Plane;
 use psf_db::PsfDatabase;
 use rayon::prelude::*;
 
 use super::packed::{MirroredImage, PackedImages};
+use super::sparse_runs::{draw_run, drawn_in_run, find_runs, LayerRuns};
 use super::wide::{WideImage, WideImages};
 use super::types::{psf_reach, Classified, FrameParams, SplatPath, SplatRecord};
 
@@ -153,6 +155,25 @@ pub fn splat(
     let bands = ph.div_ceil(BAND_ROWS);
     let n_layers = frame.layers as usize;
     let drawing = Drawing::new(classified, db, options);
+    let runs = match db {
+        Some(db) if classified.layers.iter().any(|l| l.sparse > 0) => {
+            let layers: Vec<(usize, usize)> = classified
+                .layers
+                .iter()
+                .map(|l| (l.first_record, if l.sparse > 0 { l.record_count } else { 0 }))
+                .collect();
+            find_runs(
+                &classified.records,
+                &layers,
+                db,
+                &drawing.reach,
+                pw as i32,
+                drawing.in_row_order,
+            )
+        }
+        _ => Vec::new(),
+    };
+    let no_runs = LayerRuns::default();
 
     // Per (layer, kind), with kind 0 = Laplacian, 1 = direct: whether any record draws in it.
     let present = |l: usize, kind: usize| {
@@ -203,7 +224,8 @@ pub fn splat(
             let y1 = ((b + 1) * BAND_ROWS).min(ph) as i32;
             let kind = if kind == 0 { Planes::Laplacian } else { Planes::Direct };
             let rows = BandRows { y0, y1, width: pw };
-            let band = draw_band(recs, kind, rows, &drawing, buffer)?;
+            let layer_runs = runs.get(l).unwrap_or(&no_runs);
+            let band = draw_band(recs, layer_runs, kind, rows, &drawing, buffer)?;
             let [r, g, bl, a] = out;
             for ((((px, r), g), bl), a) in band.data.iter().zip(r).zip(g).zip(bl).zip(a) {
                 (*r, *g, *bl, *a) = (px[0], px[1], px[2], px[3]);
@@ -300,10 +322,12 @@ impl<'a> Drawing<'a> {
 }
 
 /// Draws the records of one layer (`recs`, in row order) that go into planes of `kind` and
-/// reach `rows`, in record order, into a band that takes `buffer`'s memory (give it back
-/// with `*buffer = band.data`); `None`, and `buffer` untouched, where no record draws there.
+/// reach `rows`, in record order, then (Laplacian planes) the layer's `runs` of sparse
+/// records, into a band that takes `buffer`'s memory (give it back with `*buffer =
+/// band.data`); `None`, and `buffer` untouched, where no record draws there.
 pub(super) fn draw_band(
     recs: &[SplatRecord],
+    runs: &LayerRuns,
     kind: Planes,
     rows: BandRows,
     drawing: &Drawing,
@@ -327,6 +351,19 @@ pub(super) fn draw_band(
     // rows no record reaches are never cleared or written (a depth layer of a slanted surface
     // covers a strip of the frame).
     let mut band: Option<Band> = None;
+    let new_band = |buffer: &mut Vec<[f32; 4]>| {
+        let mut data = std::mem::take(buffer);
+        data.clear();
+        data.resize((y1 - y0) as usize * width, [0.0f32; 4]);
+        Band {
+            data,
+            width: width as i32,
+            y0,
+            y1,
+        }
+    };
+    let channels = db.map_or(0, PsfDatabase::channels);
+    let all_recs = recs;
     let recs = &recs[lo..hi];
     let mut i = 0;
     while i < recs.len() {
@@ -341,20 +378,13 @@ pub(super) fn draw_band(
             Planes::Laplacian => r.path == SplatPath::Sparse as u32,
             Planes::Direct => r.path == SplatPath::Dense as u32 || r.path == SplatPath::Copy as u32,
         };
-        if !drawn_here {
+        if !drawn_here
+            || (kind == Planes::Laplacian
+                && drawn_in_run(r, reach, width as i32, in_row_order, channels))
+        {
             continue;
         }
-        let band = band.get_or_insert_with(|| {
-            let mut data = std::mem::take(buffer);
-            data.clear();
-            data.resize((y1 - y0) as usize * width, [0.0f32; 4]);
-            Band {
-                data,
-                width: width as i32,
-                y0,
-                y1,
-            }
-        });
+        let band = band.get_or_insert_with(|| new_band(buffer));
         match (kind, r.path) {
             (Planes::Laplacian, _) => {
                 if let Some(db) = db {
@@ -397,15 +427,29 @@ pub(super) fn draw_band(
             }
         }
     }
+    // Then the records drawn a row of pixels at a time, in the runs' order.
+    if let (Planes::Laplacian, Some(db)) = (kind, db) {
+        let lo = runs.runs.partition_point(|r| r.center_y < y0 - extent);
+        let hi = runs.runs.partition_point(|r| r.center_y < y1 + extent);
+        let mut colors = Vec::new();
+        for run in &runs.runs[lo..hi] {
+            let k = reach.get(run.psf_index as usize).copied().unwrap_or(extent);
+            if run.center_y + k < y0 || run.center_y - k >= y1 {
+                continue;
+            }
+            let band = band.get_or_insert_with(|| new_band(buffer));
+            draw_run(band, run, runs, all_recs, db, &mut colors);
+        }
+    }
     band
 }
 
 /// Rows `[y0, y1)` of a padded layer, RGBA interleaved.
 pub(super) struct Band {
     pub(super) data: Vec<[f32; 4]>,
-    width: i32,
-    y0: i32,
-    y1: i32,
+    pub(super) width: i32,
+    pub(super) y0: i32,
+    pub(super) y1: i32,
 }
 
 impl Band {
@@ -1169,6 +1213,38 @@ mod tests {
     /// record's centre plus the spreadlet's offset: checked against a plain sum.
     #[test]
     fn unturned_sparse_records_land_where_their_spreadlets_say() {
+        let (db, psfs) = patterned_sparse_database();
+        let n = psfs.len();
+        let (w, h, pad) = (30u32, 120u32, 6u32);
+        let (pw, ph) = ((w + 2 * pad) as i32, (h + 2 * pad) as i32);
+        let centres = [(20, 30), (3, 63), (pw - 1, 64), (17, 65), (pw - 2, ph - 1), (10, 127)];
+        let records: Vec<SplatRecord> = centres
+            .iter()
+            .enumerate()
+            .map(|(k, &(cx, cy))| SplatRecord {
+                center_x: cx,
+                center_y: cy,
+                psf_index: (k % n) as u32,
+                layer: 0,
+                rot_cos: 1.0,
+                rot_sin: 0.0,
+                weight: 1.0,
+                path: SplatPath::Sparse as u32,
+                color: [0.9, 0.5, 0.2, 1.0],
+            })
+            .collect();
+        let classified = one_layer(&records, w, h, pad);
+        let stack = splat(&classified, Some(&db), &SplatOptions::default());
+        let expected = sparse_sum(&records, &psfs, pw, ph);
+        assert_planes_hold(&stack.laplacian, &expected, pw);
+    }
+
+    /// A sparse PSF's spreadlets: offsets and values.
+    type Spreadlets = (Vec<[i16; 2]>, Vec<f32>);
+
+    /// A thin-lens database of sparse PSFs of radius 2 to 7 px with patterned spreadlets of
+    /// both signs, in row order, and each PSF's spreadlets.
+    fn patterned_sparse_database() -> (PsfDatabase, Vec<Spreadlets>) {
         use psf_db::{DatabaseBuilder, DbHeader, ParamSpace, PsfModel};
         let space = ParamSpace::for_model(PsfModel::ThinLens, &[[0.0, 8.0]], 8).expect("space");
         let n = space.psf_count() as usize;
@@ -1191,28 +1267,14 @@ mod tests {
         }
         let db = builder.finish().expect("database");
         assert!(db.spreadlets_in_row_order());
-        let (w, h, pad) = (30u32, 120u32, 6u32);
-        let (pw, ph) = ((w + 2 * pad) as i32, (h + 2 * pad) as i32);
-        let centres = [(20, 30), (3, 63), (pw - 1, 64), (17, 65), (pw - 2, ph - 1), (10, 127)];
-        let records: Vec<SplatRecord> = centres
-            .iter()
-            .enumerate()
-            .map(|(k, &(cx, cy))| SplatRecord {
-                center_x: cx,
-                center_y: cy,
-                psf_index: (k % n) as u32,
-                layer: 0,
-                rot_cos: 1.0,
-                rot_sin: 0.0,
-                weight: 1.0,
-                path: SplatPath::Sparse as u32,
-                color: [0.9, 0.5, 0.2, 1.0],
-            })
-            .collect();
-        let classified = one_layer(&records, w, h, pad);
-        let stack = splat(&classified, Some(&db), &SplatOptions::default());
+        (db, psfs)
+    }
+
+    /// Every record's spreadlets times its colour, summed in f64 on a `pw x ph` padded
+    /// layer, clipped to it.
+    fn sparse_sum(records: &[SplatRecord], psfs: &[Spreadlets], pw: i32, ph: i32) -> Vec<[f64; 4]> {
         let mut expected = vec![[0.0f64; 4]; (pw * ph) as usize];
-        for r in &records {
+        for r in records {
             let (positions, values) = &psfs[r.psf_index as usize];
             for (p, &v) in positions.iter().zip(values) {
                 let (x, y) = (r.center_x + i32::from(p[0]), r.center_y + i32::from(p[1]));
@@ -1224,7 +1286,59 @@ mod tests {
                 }
             }
         }
-        assert_planes_hold(&stack.laplacian, &expected, pw);
+        expected
+    }
+
+    /// Rows of sparse records as a defocused surface gives them: every pixel draws two PSFs
+    /// (a blend across a cell boundary), interleaved, the PSFs changing along the row and
+    /// from row to row, a pixel drawn twice with one PSF, rows across a band boundary and
+    /// pixels near the padded frame's edges (drawn alone). Drawn in runs, they add what a plain
+    /// sum of every record's spreadlets adds.
+    #[test]
+    fn rows_of_sparse_records_drawn_in_runs_land_where_their_spreadlets_say() {
+        let (db, psfs) = patterned_sparse_database();
+        let n = psfs.len() as u32;
+        let (w, h, pad) = (40u32, 100u32, 8u32);
+        let (pw, ph) = ((w + 2 * pad) as i32, (h + 2 * pad) as i32);
+        let mut records = Vec::new();
+        for y in (BAND_ROWS as i32 - 6)..(BAND_ROWS as i32 + 6) {
+            for x in 0..pw {
+                let psf = ((x / 9 + y / 4) as u32) % n;
+                for (k, index) in [psf, (psf + 1) % n].into_iter().enumerate() {
+                    let t = (x * 7 + y * 3 + k as i32) as f32 * 0.01;
+                    records.push(SplatRecord {
+                        center_x: x,
+                        center_y: y,
+                        psf_index: index,
+                        layer: 0,
+                        rot_cos: 1.0,
+                        rot_sin: 0.0,
+                        weight: 0.5,
+                        path: SplatPath::Sparse as u32,
+                        color: [0.5 + t.sin() * 0.4, 0.3, 0.2 + t.cos() * 0.1, 0.5],
+                    });
+                }
+                if x % 13 == 5 {
+                    let mut again = records[records.len() - 1];
+                    again.color = [0.1, 0.2, 0.3, 0.4];
+                    records.push(again);
+                }
+            }
+        }
+        let classified = one_layer(&records, w, h, pad);
+        let drawing = Drawing::new(&classified, Some(&db), &SplatOptions::default());
+        let runs = find_runs(
+            &records,
+            &[(0, records.len())],
+            &db,
+            &drawing.reach,
+            pw,
+            drawing.in_row_order,
+        );
+        let longest = runs[0].runs.iter().map(|r| r.len).max().unwrap_or(0);
+        assert!(longest >= 5, "runs of neighbours found (longest {longest})");
+        let stack = splat(&classified, Some(&db), &SplatOptions::default());
+        assert_planes_hold(&stack.laplacian, &sparse_sum(&records, &psfs, pw, ph), pw);
     }
 
     /// Unturned dense records, alone and in blended pairs whose PSFs differ in size and
