@@ -326,6 +326,7 @@ pub fn filter_plan(
         smear_motion: false,
         // Each pixel gathers its own PSF, at the frame's resolution.
         reduced_resolution: false,
+        few_sparse_images: false,
         copy_threshold_px: options.copy_threshold_px,
         ..ClassifyOptions::default()
     };

@@ -127,6 +127,9 @@ fn one_layer(integrator: Integrator) -> SynthOptions {
             // resolution (beyond the database's range: the lookup's own clamp).
             continuous_lookup: false,
             reduced_resolution: false,
+            // Every sparse record splatted as spreadlets (a layer's few sparse records are
+            // otherwise drawn from their PSFs' images).
+            few_sparse_images: false,
             ..ClassifyOptions::default()
         },
         integrator,

@@ -34,6 +34,8 @@ fn plain_options(integrator: Integrator) -> SynthOptions {
             // Each record drawn at its own turn from the database's own PSF (a frame's few
             // sparse records are otherwise drawn from images turned for the frame).
             shared_turns: false,
+            // And every sparse record splatted as spreadlets, however few.
+            few_sparse_images: false,
             ..ClassifyOptions::default()
         },
         integrator,
@@ -404,6 +406,92 @@ fn a_few_sparse_records_are_drawn_from_turned_images() {
         shared.pixels.iter().all(|p| p.iter().all(|&v| v >= 0.0)),
         "no pixel below zero around the drops"
     );
+}
+
+/// A thin-lens frame through a five-bladed aperture whose sparse records are a few defocused
+/// points, some behind the focus (upright PSFs) and some in front of it (the pentagon turned
+/// half a turn): each layer's few sparse records are drawn from their PSF's image, so no layer
+/// has a Laplacian plane to integrate, and the frame is what splatting them as spreadlets and
+/// integrating gives (the independent path).
+#[test]
+fn a_layers_few_sparse_records_are_drawn_from_their_psfs_images() {
+    let mut cfg = support::test_config(PsfModel::ThinLens);
+    cfg.blades = 5;
+    let (raw, _) = precompute::build_database(&cfg, false).expect("five-bladed database");
+    let db = &spreadlet::condition::condition(&raw).expect("condition").0;
+    // Wide enough for a CoC of several pixels behind the focus (at 512 px the thin lens's
+    // CoC tends to 9.4 px far away).
+    let (w, h) = (512usize, 80usize);
+    let mut cam = camera(w as u32, h as u32, true, 0.0);
+    cam.aperture_blades = 5;
+    let mut color = vec![[0.0f32; 4]; w * h];
+    let mut depth = vec![1.0f32; w * h];
+    // (x, y, signed CoC in px: positive in front of the focus), a colour each.
+    let points = [
+        (60, 20, 6.0),
+        (200, 22, 6.0),
+        (300, 40, 4.5),
+        (120, 60, -6.0),
+        (400, 58, -6.0),
+        (460, 30, -5.0),
+    ];
+    for (k, &(x, y, coc)) in points.iter().enumerate() {
+        color[y * w + x] = [0.9, 0.3 + 0.1 * k as f32, 0.6, 1.0];
+        depth[y * w + x] = depth_for_coc(&cam, coc) as f32;
+    }
+    let g = GBuffer::from_planes(w, h, color, Some(depth), None).expect("g");
+    let run = |few_sparse_images: bool| {
+        let options = SynthOptions {
+            classify: ClassifyOptions {
+                few_sparse_images,
+                ..ClassifyOptions::default()
+            },
+            ..SynthOptions::default()
+        };
+        synthesize(&g, &cam, &set(db), &options).expect("synth")
+    };
+    let (sparse, sparse_stats) = run(false);
+    let (imaged, imaged_stats) = run(true);
+    assert!(
+        sparse_stats.counts.sparse >= points.len(),
+        "the test database stores these PSFs sparse: {:?}",
+        sparse_stats.counts
+    );
+    assert_eq!(imaged_stats.counts.sparse, 0, "{:?}", imaged_stats.counts);
+    assert_eq!(
+        imaged_stats.counts.sparse_as_images, sparse_stats.counts.sparse,
+        "every sparse record drawn from an image"
+    );
+    // No Laplacian plane is left to integrate.
+    let dbs = set(db);
+    let c = classify(&g, &cam, &dbs, &ClassifyOptions::default()).expect("classify");
+    let stack = splat(
+        &c,
+        c.database_or(dbs.combined.as_ref()),
+        &SplatOptions::default(),
+    );
+    assert!(stack.laplacian.iter().all(Plane::is_empty));
+    // Around each point, to the sparse fit's negative residue (which the image clamps; the
+    // Test profile's coarse fits leave about 1.5 %): a PSF landing mirrored differs by 9-16 %.
+    for &(x, y, coc) in &points {
+        let (mut diff, mut level) = (0.0f64, 0.0f64);
+        for yy in y.saturating_sub(12)..(y + 12).min(h) {
+            for xx in x - 12..x + 12 {
+                let (p, q) = (sparse.pixels[yy * w + xx], imaged.pixels[yy * w + xx]);
+                for c in 0..3 {
+                    diff += f64::from((p[c] - q[c]).abs());
+                    level += f64::from(p[c].abs());
+                }
+            }
+        }
+        assert!(
+            diff < 0.03 * level,
+            "point at ({x}, {y}), CoC {coc}: difference {:.4} of its level",
+            diff / level
+        );
+    }
+    let (_, worst) = colour_difference(&sparse, &imaged);
+    assert!(worst < 0.01, "largest difference {worst}");
 }
 
 /// A uniform grey surface out of focus seen through a real lens stays even on the optical axis.

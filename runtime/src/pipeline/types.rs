@@ -135,6 +135,10 @@ pub struct PathCounts {
     /// radial direction that other records share ([`super::ClassifyOptions::shared_turns`];
     /// also in `dense`).
     pub turned: usize,
+    /// Sparse records drawn from their PSF's image, in layers whose few sparse records cost
+    /// less drawn so than the layer's integration
+    /// ([`super::ClassifyOptions::few_sparse_images`]; also in `dense`).
+    pub sparse_as_images: usize,
 }
 
 impl PathCounts {

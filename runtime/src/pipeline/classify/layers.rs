@@ -644,6 +644,13 @@ pub fn classify_fragments(
             classified.counts.turned += turned;
         }
     }
+    if options.few_sparse_images && classified.counts.sparse > 0 {
+        let frame_db = classified.database.clone();
+        if let Some(base) = frame_db.as_deref().or(dbs.combined.as_ref()) {
+            classified.counts.sparse_as_images +=
+                super::few_sparse::draw_few_sparse_from_images(&mut classified, base)?;
+        }
+    }
     Ok(classified)
 }
 

@@ -29,6 +29,7 @@
 mod bend;
 mod deep;
 mod edge_split;
+mod few_sparse;
 mod fragments;
 mod frame_edges;
 mod hidden;
@@ -104,6 +105,9 @@ pub enum ClassifyError {
     /// A physical-lens database describes another camera or lacks its prescription.
     #[error("physical-lens database: {0}")]
     PhysicalLens(String),
+    /// The frame's own database (its PSFs' images beside the database's) could not be made.
+    #[error("the frame's PSF images: {0}")]
+    FrameDatabase(String),
     /// A moving pixel's lens PSF could not be smeared along its motion.
     #[error("motion blur: {0}")]
     MotionSmear(crate::motion_smear::SmearError),
@@ -194,6 +198,10 @@ pub struct ClassifyOptions {
     /// instead of four bilinear taps, and turned with a sharper cubic), the turn quantised so
     /// that the PSF's rim is at most 1/4 px from the record's own turn (`turned`). Off: every record drawn at its own turn.
     pub shared_turns: bool,
+    /// In a layer whose sparse records are few, draw each from its PSF integrated once on its
+    /// own small plane, so that the layer has no Laplacian plane to integrate (`few_sparse`).
+    /// Off: every sparse record is splatted as spreadlets.
+    pub few_sparse_images: bool,
     /// Keep the frame's own grey and RGB PSF images (the lens PSFs smeared along each moving
     /// pixel's motion) packed, as their rows' non-zero spans ([`Classified::packed`]), rather
     /// than in their boxes in the frame's database: a streak's box is mostly zeros, and tens
@@ -234,6 +242,7 @@ impl Default for ClassifyOptions {
             coarse_above_px: f32::INFINITY,
             continue_layers: true,
             shared_turns: true,
+            few_sparse_images: true,
             pack_images: false,
             scaled_blends: true,
             smeared_values_budget: crate::motion_smear::MAX_FRAME_SMEARED_VALUES,

@@ -693,7 +693,7 @@ fn split_pairs(classified: &mut Classified) {
 }
 
 /// Each layer's path counts, and the frame's, from its records as they are now.
-fn count_paths_again(classified: &mut Classified) {
+pub(super) fn count_paths_again(classified: &mut Classified) {
     let records = &classified.records;
     let counts = &mut classified.counts;
     (counts.sparse, counts.dense, counts.copied) = (0, 0, 0);
