@@ -10,7 +10,11 @@
 //! the one the record-by-record loop makes (`c v`, then added); only the order in which a pixel
 //! receives them differs, which is fixed by the records and the band, not by the threads.
 //!
-//! Runs are found once per frame. A record is drawn in a run when the single-record loop would
+//! Runs are found once per frame, each row on its own thread: a row mostly draws one or two
+//! PSFs and comes in column order, so it is grouped by PSF by scanning it once per PSF (16 ms
+//! for the 2.36 M records of a 1024 px bokeh frame, where sorting each row and joining the
+//! runs on one thread took about 50).
+//! A record is drawn in a run when the single-record loop would
 //! draw it without any test per spreadlet: upright, one value per spreadlet, spreadlets in row
 //! order, and its whole PSF inside the padded layer's columns.
 
@@ -93,49 +97,92 @@ pub(super) fn find_runs(
                 rows.push(start..end);
                 start = end;
             }
-            // Per row, its records drawn in runs, ordered by PSF, then column, then record.
-            let ordered: Vec<Vec<u32>> = rows
+            // Per row, on every thread: its records drawn in runs, ordered by PSF, then column,
+            // then record, and its runs (`first` counted from the row's first member).
+            let per_row: Vec<(Vec<Run>, Vec<u32>)> = rows
                 .into_par_iter()
                 .map(|row| {
-                    let mut members: Vec<u32> = row
+                    let members: Vec<u32> = row
                         .filter(|&i| drawn_in_run(&recs[i], reach, width, true, 1))
                         .map(|i| i as u32)
                         .collect();
-                    members.sort_unstable_by_key(|&i| {
+                    let members = ordered_by_psf(members, recs);
+                    let mut runs: Vec<Run> = Vec::new();
+                    let mut previous: Option<&SplatRecord> = None;
+                    for (k, &i) in members.iter().enumerate() {
                         let r = &recs[i as usize];
-                        (r.psf_index, r.center_x, i)
-                    });
-                    members
+                        let continues = previous.is_some_and(|p| {
+                            p.psf_index == r.psf_index && p.center_x + 1 == r.center_x
+                        });
+                        match runs.last_mut() {
+                            Some(run) if continues => run.len += 1,
+                            _ => runs.push(Run {
+                                center_y: r.center_y,
+                                center_x: r.center_x,
+                                psf_index: r.psf_index,
+                                first: k as u32,
+                                len: 1,
+                            }),
+                        }
+                        previous = Some(r);
+                    }
+                    (runs, members)
                 })
                 .collect();
             let mut out = LayerRuns {
-                runs: Vec::new(),
-                members: Vec::with_capacity(ordered.iter().map(Vec::len).sum()),
+                runs: Vec::with_capacity(per_row.iter().map(|(runs, _)| runs.len()).sum()),
+                members: Vec::with_capacity(per_row.iter().map(|(_, m)| m.len()).sum()),
             };
-            for members in ordered {
-                let mut previous: Option<&SplatRecord> = None;
-                for i in members {
-                    let r = &recs[i as usize];
-                    let continues = previous.is_some_and(|p| {
-                        p.psf_index == r.psf_index && p.center_x + 1 == r.center_x
-                    });
-                    match out.runs.last_mut() {
-                        Some(run) if continues => run.len += 1,
-                        _ => out.runs.push(Run {
-                            center_y: r.center_y,
-                            center_x: r.center_x,
-                            psf_index: r.psf_index,
-                            first: out.members.len() as u32,
-                            len: 1,
-                        }),
-                    }
-                    out.members.push(i);
-                    previous = Some(r);
-                }
+            for (runs, members) in per_row {
+                let base = out.members.len() as u32;
+                out.runs.extend(runs.into_iter().map(|run| Run {
+                    first: run.first + base,
+                    ..run
+                }));
+                out.members.extend_from_slice(&members);
             }
             out
         })
         .collect()
+}
+
+/// Most PSFs one row's records may draw for [`ordered_by_psf`] to group them by scanning once
+/// per PSF rather than sorting.
+const MOST_PSFS_PER_ROW_SCANNED: usize = 8;
+
+/// `members` (indices into `recs`, one row's, in index order) ordered by PSF, then column, then
+/// index. A row mostly draws one or two PSFs and comes ordered by column already, so it is
+/// grouped by scanning it once per PSF; otherwise sorted.
+fn ordered_by_psf(members: Vec<u32>, recs: &[SplatRecord]) -> Vec<u32> {
+    let psf = |i: u32| recs[i as usize].psf_index;
+    let mut psfs: Vec<u32> = Vec::new();
+    let by_column = members
+        .windows(2)
+        .all(|w| recs[w[0] as usize].center_x <= recs[w[1] as usize].center_x);
+    if by_column {
+        for &i in &members {
+            if !psfs.contains(&psf(i)) {
+                psfs.push(psf(i));
+                if psfs.len() > MOST_PSFS_PER_ROW_SCANNED {
+                    break;
+                }
+            }
+        }
+    }
+    if !by_column || psfs.len() > MOST_PSFS_PER_ROW_SCANNED {
+        let mut members = members;
+        members.sort_unstable_by_key(|&i| {
+            let r = &recs[i as usize];
+            (r.psf_index, r.center_x, i)
+        });
+        return members;
+    }
+    psfs.sort_unstable();
+    let mut ordered = Vec::with_capacity(members.len());
+    for &p in &psfs {
+        ordered.extend(members.iter().filter(|&&i| psf(i) == p));
+    }
+    ordered
 }
 
 /// Adds the spreadlets of `run` (its records in `runs.members`, indices into `recs`) that fall
@@ -172,6 +219,61 @@ pub(super) fn draw_run(
         let source: &[f32] = bytemuck::cast_slice(colors);
         for (px, &c) in lanes.iter_mut().zip(source) {
             *px += c * v;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// One row of sparse records at columns `xs`, drawing `psfs`.
+    fn row(xs: &[i32], psfs: &[u32]) -> Vec<SplatRecord> {
+        xs.iter()
+            .zip(psfs)
+            .map(|(&x, &psf)| SplatRecord {
+                center_x: x,
+                center_y: 7,
+                psf_index: psf,
+                layer: 0,
+                rot_cos: 1.0,
+                rot_sin: 0.0,
+                weight: 1.0,
+                path: SplatPath::Sparse as u32,
+                color: [1.0; 4],
+            })
+            .collect()
+    }
+
+    /// Grouping a row by scanning it once per PSF orders it as sorting by (PSF, column,
+    /// index) does: rows in column order with pairs of PSFs per pixel and repeated columns, a
+    /// row of many PSFs, and a row out of column order.
+    #[test]
+    fn a_row_grouped_by_psf_is_the_row_sorted() {
+        let mut state = 12345u32;
+        let mut next = |n: u32| {
+            state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (state >> 8) % n
+        };
+        for (count, psfs, in_order) in [(40, 2, true), (60, 5, true), (50, 20, true), (30, 3, false)]
+        {
+            let mut xs: Vec<i32> = (0..count).map(|_| next(25) as i32).collect();
+            if in_order {
+                xs.sort_unstable();
+            }
+            let ps: Vec<u32> = (0..count).map(|_| 3 + next(psfs)).collect();
+            let recs = row(&xs, &ps);
+            let members: Vec<u32> = (0..count).collect();
+            let mut sorted = members.clone();
+            sorted.sort_unstable_by_key(|&i| {
+                let r = &recs[i as usize];
+                (r.psf_index, r.center_x, i)
+            });
+            assert_eq!(
+                ordered_by_psf(members, &recs),
+                sorted,
+                "{count} records, {psfs} PSFs, in column order: {in_order}"
+            );
         }
     }
 }
