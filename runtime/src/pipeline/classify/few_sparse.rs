@@ -7,8 +7,8 @@
 //! the focus) pays as much. There, each sparse PSF the layer draws is integrated once on its
 //! own small plane ([`psf_image`]) and the records draw that image in the layer's direct
 //! planes; the layer then has no Laplacian plane. It pays where drawing the records' images
-//! and building them ([`IMAGE_BUILD_COST`] per pixel) costs less than integrating the layer
-//! ([`LAYER_INTEGRATION_COST`] per padded pixel).
+//! and building them ([`super::turned::IMAGE_BUILD_COST`] per pixel) costs less than
+//! integrating the layer ([`LAYER_INTEGRATION_COST`] per padded pixel).
 //!
 //! Only upright records and those turned half a turn (a lens images its aperture so in front
 //! of the focus plane) are drawn so: a half turn maps pixels onto pixels, so its image is the
@@ -20,7 +20,7 @@ use std::sync::Arc;
 use psf_db::PsfDatabase;
 use rayon::prelude::*;
 
-use super::turned::{count_paths_again, IMAGE_BUILD_COST, LAYER_INTEGRATION_COST};
+use super::turned::{count_paths_again, images_cost, LAYER_INTEGRATION_COST};
 use super::ClassifyError;
 use crate::motion_smear::{psf_image, PsfImage};
 use crate::pipeline::types::{psf_reach, Classified, SplatPath, SplatRecord};
@@ -58,12 +58,7 @@ fn layer_drawn_from_images(records: &[SplatRecord], reach: &[i32], plane: usize)
         }
         keys.push((r.psf_index, turn));
     }
-    keys.sort_unstable();
-    keys.dedup();
-    cost += keys
-        .iter()
-        .map(|&(psf, _)| side(psf).pow(2) * IMAGE_BUILD_COST)
-        .sum::<usize>();
+    cost += images_cost(&mut keys, side);
     !keys.is_empty() && cost <= most
 }
 

@@ -323,13 +323,19 @@ fn turns_every_sparse_record(records: &[SplatRecord], reach: &[i32], frame: Fram
             (r.psf_index, step_of_angle(turn_angle(r), steps))
         })
         .collect();
+    cost += images_cost(&mut keys, side);
+    !keys.is_empty() && cost <= most
+}
+
+/// What building one image per distinct key of `keys` (PSF, and how it is turned) costs, each
+/// `side(psf)` pixels square, in [`IMAGE_BUILD_COST`] per pixel; `keys` is left sorted and
+/// without repeats.
+pub(super) fn images_cost<K: Ord>(keys: &mut Vec<(u32, K)>, side: impl Fn(u32) -> usize) -> usize {
     keys.sort_unstable();
     keys.dedup();
-    cost += keys
-        .iter()
+    keys.iter()
         .map(|&(psf, _)| side(psf).pow(2) * IMAGE_BUILD_COST)
-        .sum::<usize>();
-    !keys.is_empty() && cost <= most
+        .sum()
 }
 
 /// Redirects the dense records of `classified` whose (PSF, turn step) is shared to that PSF
