@@ -234,8 +234,23 @@ pub(super) fn run_config(
                         )?;
                         state.synths.insert(key.clone(), s);
                     }
+                    let ctx = &state.ctx;
                     let Some(synth) = state.synths.get_mut(&key) else {
                         bail!("GPU synthesizer missing");
+                    };
+                    // A frame with PSF images of its own (a layer's few sparse records drawn
+                    // from images, PSFs smeared along the motion) uploads its database for
+                    // that frame alone, as `Renderer` does.
+                    let mut draw = |frame: spreadlet::PreparedFrame| -> Result<_> {
+                        if frame.database_or(None).is_some() {
+                            let mut own = spreadlet::gpu::GpuSynthesizer::for_database(
+                                ctx,
+                                frame.database_or(None),
+                                spreadlet::gpu::GpuSynthOptions::from_synth(&options),
+                            )?;
+                            return Ok(spreadlet::gpu::render_gpu(&mut own, frame, dbs)?);
+                        }
+                        Ok(spreadlet::gpu::render_gpu(synth, frame, dbs)?)
                     };
                     let prepared = || {
                         spreadlet::Plan::new(
@@ -246,9 +261,9 @@ pub(super) fn run_config(
                         .prepare(dbs)
                     };
                     // Warm-up: pipelines compiled, buffers allocated.
-                    spreadlet::gpu::render_gpu(synth, prepared()?, dbs)?;
+                    draw(prepared()?)?;
                     for _ in 0..runs {
-                        let (image, st, _) = spreadlet::gpu::render_gpu(synth, prepared()?, dbs)?;
+                        let (image, st, _) = draw(prepared()?)?;
                         let t = st.times;
                         times.push([
                             t.total_ms,
