@@ -24,7 +24,8 @@
 //! `fragments.rs` turns pixels into fragments, `lookup.rs` finds each fragment's PSF,
 //! `layers.rs` layers fragments into sorted records; `deep.rs` (deep input), `edge_split.rs`,
 //! `hidden.rs` (background continued behind occluders) and `frame_edges.rs` are the special
-//! cases.
+//! cases; `turned.rs` (PSFs turned once per frame and shared) and `few_sparse.rs` (a layer's
+//! few sparse records drawn from their PSFs' images) give the frame PSF images of its own.
 
 mod bend;
 mod deep;
