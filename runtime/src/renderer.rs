@@ -392,7 +392,7 @@ impl Renderer {
         let plan = match self.device()? {
             Device::Cpu => plan.with_images_packed(),
             #[cfg(feature = "gpu")]
-            Device::Gpu(_) => plan,
+            Device::Gpu(_) => plan.with_sparse_records_kept(),
         };
         let prepared = plan.prepare(&selected.set)?;
         self.run(prepared, selected)

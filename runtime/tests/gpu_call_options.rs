@@ -117,3 +117,70 @@ fn a_bad_input_is_the_same_typed_error_on_both_devices() {
         );
     }
 }
+
+/// A renderer on the GPU keeps a layer's few sparse records sparse (it integrates a layer in a
+/// fraction of the CPU's time, and PSF images of the frame's own would be uploaded with each
+/// frame): it draws what the CPU draws with them kept sparse. The CPU draws them from their
+/// PSFs' images, which keep their light.
+#[test]
+fn a_layers_few_sparse_records_stay_sparse_on_the_gpu() {
+    use spreadlet::{Backend, Renderer, RendererOptions};
+    if context().is_none() {
+        return;
+    }
+    // At 512 px the thin lens's CoC in front of the focus grows fast: a few points at 20 px,
+    // whose PSFs the default database stores sparse, alone in their depth layer.
+    let (w, h) = (512usize, 64usize);
+    let camera = support::camera(w as u32, h as u32, true, 0.0);
+    let mut color = vec![[0.0f32; 4]; w * h];
+    let mut depth = vec![1.0f32; w * h];
+    for (k, x) in [80usize, 250, 420].into_iter().enumerate() {
+        color[32 * w + x] = [0.8, 0.4 + 0.1 * k as f32, 0.3, 1.0];
+        depth[32 * w + x] = support::depth_for_coc(&camera, 20.0) as f32;
+    }
+    let gbuffer = spreadlet::GBuffer::from_planes(w, h, color, Some(depth), None).expect("g");
+    let render = |backend: Backend, few_sparse_images: bool| {
+        let mut options = SynthOptions::default();
+        options.classify.few_sparse_images = few_sparse_images;
+        Renderer::new(RendererOptions {
+            backend,
+            ..Default::default()
+        })
+        .expect("renderer")
+        .synthesize(&gbuffer, &camera, &options)
+        .expect("synthesis")
+    };
+    let gpu = render(Backend::Gpu, true);
+    let cpu = render(Backend::Cpu, true);
+    let cpu_kept = render(Backend::Cpu, false);
+    assert!(
+        cpu.stats.counts.sparse_as_images > 0,
+        "the CPU draws the few sparse records from images: {:?}",
+        cpu.stats.counts
+    );
+    assert_eq!(
+        gpu.stats.counts.sparse_as_images, 0,
+        "{:?}",
+        gpu.stats.counts
+    );
+    assert_eq!(gpu.stats.counts.sparse, cpu_kept.stats.counts.sparse);
+    let (diff, level) = max_diff(&flat(&gpu.image), &flat(&cpu_kept.image));
+    assert!(diff <= 0.01 * level, "largest difference {diff} of {level}");
+    let light = |frame: &spreadlet::Frame| -> f64 {
+        frame
+            .image
+            .pixels
+            .iter()
+            .map(|p| f64::from(p[0] + p[1] + p[2]))
+            .sum()
+    };
+    let ratio = light(&cpu) / light(&gpu);
+    assert!(
+        (ratio - 1.0).abs() < 0.01,
+        "light drawn from images {ratio:.4} of the GPU's"
+    );
+}
+
+fn flat(image: &spreadlet::RgbaImage) -> Vec<f32> {
+    image.pixels.iter().flatten().copied().collect()
+}

@@ -225,6 +225,9 @@ pub(super) fn run_config(
                     let Some(state) = gpu.as_mut() else {
                         bail!("no GPU adapter");
                     };
+                    // Every sparse record kept sparse, as `Renderer` classifies for the GPU.
+                    let mut options = options.clone();
+                    options.classify.few_sparse_images = false;
                     let key = cfg.db.key();
                     if !state.synths.contains_key(&key) {
                         let s = spreadlet::gpu::GpuSynthesizer::for_database(
@@ -238,9 +241,8 @@ pub(super) fn run_config(
                     let Some(synth) = state.synths.get_mut(&key) else {
                         bail!("GPU synthesizer missing");
                     };
-                    // A frame with PSF images of its own (a layer's few sparse records drawn
-                    // from images, PSFs smeared along the motion) uploads its database for
-                    // that frame alone, as `Renderer` does.
+                    // A frame with PSF images of its own (PSFs smeared along the motion)
+                    // uploads its database for that frame alone, as `Renderer` does.
                     let mut draw = |frame: spreadlet::PreparedFrame| -> Result<_> {
                         if frame.database_or(None).is_some() {
                             let mut own = spreadlet::gpu::GpuSynthesizer::for_database(
