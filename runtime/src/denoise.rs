@@ -45,7 +45,7 @@
 use formats::{SampleGuides, StochasticFrames};
 use rayon::prelude::*;
 
-use crate::reconstruct::MovedSample;
+use crate::reconstruct::{MovedSample, SamplesByPixel};
 
 /// Spatial standard deviation of the filter at one sample per pixel, pixels; it narrows as
 /// `spp^(-1/4)`, so more samples buy both less noise and less blur.
@@ -103,37 +103,31 @@ pub fn denoise_samples(
         return frames.samples.iter().map(|s| s.color).collect();
     }
     let hit = |k: usize| frames.samples[k].color[3] > 0.0;
-    // Each sample's pixel, NOT_A_MEMBER for a miss or outside the frame; then a counting sort
-    // of the sample indices by it, so that only 4 bytes a sample move serially and the
-    // members themselves are built in parallel, in their final place.
+    // Each sample's pixel (`w * h`, sorting last, for a miss or outside the frame); then the
+    // sample indices sorted by it, so that the members are built in parallel, in their final
+    // place.
     let cells: Vec<u32> = moved
         .par_iter()
         .enumerate()
         .map(|(k, m)| match m.as_ref().and_then(cell_of) {
             Some(cell) if hit(k) => cell as u32,
-            _ => NOT_A_MEMBER,
+            _ => (w * h) as u32,
         })
         .collect();
-    let mut starts = vec![0usize; w * h + 1];
-    for &cell in cells.iter().filter(|&&c| c != NOT_A_MEMBER) {
-        starts[cell as usize + 1] += 1;
-    }
-    for i in 0..w * h {
-        starts[i + 1] += starts[i];
-    }
-    let mut fill = starts.clone();
-    let mut order = vec![0u32; starts[w * h]];
-    // Each sample's place among the members (NOT_A_MEMBER outside the frame or for a miss).
-    let mut member_of = vec![NOT_A_MEMBER; frames.samples.len()];
-    for (k, &cell) in cells.iter().enumerate() {
-        if cell != NOT_A_MEMBER {
-            let place = &mut fill[cell as usize];
-            order[*place] = k as u32;
-            member_of[k] = *place as u32;
-            *place += 1;
-        }
-    }
+    let SamplesByPixel {
+        starts,
+        mut order,
+        place,
+    } = SamplesByPixel::new(&cells, w * h);
     drop(cells);
+    // The members, pixel by pixel; each sample's place among them (NOT_A_MEMBER outside the
+    // frame or for a miss).
+    let members_count = starts[w * h];
+    order.truncate(members_count);
+    let member_of: Vec<u32> = place
+        .into_iter()
+        .map(|p| if (p as usize) < members_count { p } else { NOT_A_MEMBER })
+        .collect();
     // Every member as the filter reads it, gathered in pixel order: one gather of each
     // sample's colour, guides and moved position, on every thread, after which the grouping
     // reads its members in order. (Built in the samples' order first and then looked up in

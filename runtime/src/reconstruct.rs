@@ -161,6 +161,46 @@ impl MovedSample {
     }
 }
 
+/// Sample indices `0..keys.len()` in the order of their pixel, by a counting sort: `keys[k]`
+/// is sample `k`'s pixel, or `pixels` for one that has none (it sorts last).
+pub(crate) struct SamplesByPixel {
+    /// Where each pixel's samples start in `order` (`pixels + 2` entries: the samples
+    /// without a pixel from `starts[pixels]`).
+    pub starts: Vec<usize>,
+    /// The sample indices, pixel by pixel, each pixel's in the samples' order.
+    pub order: Vec<u32>,
+    /// Each sample's place in `order`.
+    pub place: Vec<u32>,
+}
+
+impl SamplesByPixel {
+    /// Sorts the samples by `keys` (each at most `pixels`). Only 4 bytes a sample move
+    /// serially; what is gathered in this order can be built in parallel in its final place.
+    pub(crate) fn new(keys: &[u32], pixels: usize) -> Self {
+        let mut starts = vec![0usize; pixels + 2];
+        for &key in keys {
+            starts[key as usize + 1] += 1;
+        }
+        for c in 0..=pixels {
+            starts[c + 1] += starts[c];
+        }
+        let mut fill = starts.clone();
+        let mut order = vec![0u32; keys.len()];
+        let mut place = vec![0u32; keys.len()];
+        for (k, &key) in keys.iter().enumerate() {
+            let slot = &mut fill[key as usize];
+            order[*slot] = k as u32;
+            place[k] = *slot as u32;
+            *slot += 1;
+        }
+        SamplesByPixel {
+            starts,
+            order,
+            place,
+        }
+    }
+}
+
 /// Every sample moved back to the lens and shutter centre (`docs/STOCHASTIC.md`), in the order
 /// of `frames.samples`; `None` for a sample that carries nothing (all zero) or has a label
 /// that is not finite.
@@ -635,21 +675,12 @@ impl<'a> PlacedSamples<'a> {
                 .unwrap_or(cells)
         };
         let keys: Vec<u32> = (0..self.len()).into_par_iter().map(|k| cell_of(k) as u32).collect();
-        let mut starts = vec![0u32; cells + 2];
-        for &key in &keys {
-            starts[key as usize + 1] += 1;
-        }
-        for c in 0..=cells {
-            starts[c + 1] += starts[c];
-        }
-        let mut order = vec![0u32; keys.len()];
-        let mut slot_of = vec![0u32; keys.len()];
-        for (k, &key) in keys.iter().enumerate() {
-            let place = &mut starts[key as usize];
-            order[*place as usize] = k as u32;
-            slot_of[k] = *place;
-            *place += 1;
-        }
+        let SamplesByPixel {
+            order,
+            place: slot_of,
+            ..
+        } = SamplesByPixel::new(&keys, cells);
+        drop(keys);
         // Made in the samples' order (each sample, its move and its colour read in order), then
         // gathered: one random read a sample rather than three.
         let in_sample_order: Vec<FragmentSeed> = (0..self.len())
@@ -937,6 +968,20 @@ pub fn normalize_density(image: &mut RgbaImage) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The counting sort keeps each pixel's samples in their order, puts samples without a
+    /// pixel last, and each sample's place is where `order` holds it.
+    #[test]
+    fn samples_sort_by_pixel_stably_with_the_pixelless_last() {
+        let pixels = 4;
+        let keys = [2u32, 4, 0, 2, 1, 4, 2, 0];
+        let sorted = SamplesByPixel::new(&keys, pixels);
+        assert_eq!(sorted.order, [2, 7, 4, 0, 3, 6, 1, 5]);
+        assert_eq!(sorted.starts, [0, 2, 3, 6, 6, 8]);
+        for (k, &place) in sorted.place.iter().enumerate() {
+            assert_eq!(sorted.order[place as usize], k as u32);
+        }
+    }
     use formats::Sample;
 
     fn camera() -> Camera {
