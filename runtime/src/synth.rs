@@ -240,7 +240,7 @@ fn render_classified(
     for level in &classified.coarse {
         let coarse = draw(&level.classified, &mut stats.times);
         let t = Instant::now();
-        crate::pipeline::integrate::add_upsampled(&mut layers, &coarse, level.scale);
+        crate::pipeline::integrate::add_upsampled(&mut layers, coarse, level.scale);
         stats.times.integrate_ms += ms_since(t);
     }
 

@@ -583,6 +583,7 @@ fn layers_of(pixels: &[Option<[f32; 4]>]) -> IntegratedLayers {
         },
         planes,
         rows: Vec::new(),
+        coarse: Vec::new(),
     }
 }
 

@@ -110,12 +110,13 @@ fn with_coarse_levels(
             frame: frame.frame,
             planes,
             rows: Vec::new(),
+            coarse: Vec::new(),
         })
     };
     let mut layers = layers_of(classified)?;
     for level in &classified.coarse {
         let coarse = layers_of(&level.classified)?;
-        crate::pipeline::integrate::add_upsampled(&mut layers, &coarse, level.scale);
+        crate::pipeline::integrate::add_upsampled(&mut layers, coarse, level.scale);
     }
     times.integrate_ms = ms_since(t);
     let t = Instant::now();

@@ -158,14 +158,21 @@ pub fn composite_with_sharpness(
     let (w, h) = (f.width as usize, f.height as usize);
     let (pw, pad) = (f.padded_width as usize, f.pad as usize);
     let mut out = RgbaImage::new(w, h);
-    // Each drawn layer: its planes, sharpness and the padded rows it may be non-zero in. A
-    // zero pixel leaves every sum as it was, so the rows outside are skipped, unread.
-    let drawn: Vec<(&[Plane], f32, [usize; 2])> = (0..f.layers as usize)
+    // Each drawn layer: its index, its planes (`None` where coarse levels add to them, read a
+    // row at a time through `layer_row`), sharpness and the padded rows it may be non-zero
+    // in. A zero pixel leaves every sum as it was, so the rows outside are skipped, unread.
+    type Drawn<'a> = (usize, Option<&'a [Plane]>, f32, [usize; 2]);
+    let drawn: Vec<Drawn> = (0..f.layers as usize)
         .filter_map(|l| {
-            let planes = &layers.planes[l * 4..l * 4 + 4];
             let rows = layers.rows.get(l).copied().unwrap_or([0, usize::MAX]);
-            (!planes.iter().any(|p| p.is_empty()))
-                .then(|| (planes, sharpness.get(l).copied().unwrap_or(1.0), rows))
+            let sharpness = sharpness.get(l).copied().unwrap_or(1.0);
+            if layers.has_coarse(l) {
+                return (0..4)
+                    .all(|c| layers.has_plane(l * 4 + c))
+                    .then_some((l, None, sharpness, rows));
+            }
+            let planes = layers.planes.get(l * 4..l * 4 + 4)?;
+            (!planes.iter().any(|p| p.is_empty())).then_some((l, Some(planes), sharpness, rows))
         })
         .collect();
     // Row by row on every thread, the sums in the row's own buffers (the image is written
@@ -182,20 +189,33 @@ pub fn composite_with_sharpness(
             // Coverage-weighted sharpness: of what "over" shows, summed over the layers, and
             // of what hid something.
             let mut sharp = vec![[0.0f32; 3]; w];
+            // A layer's row with its coarse levels' light added.
+            let mut layer_row = Vec::new();
             let row = (y + pad) * pw + pad;
-            for &(planes, s, [first, end]) in &drawn {
+            for &(l, planes, s, [first, end]) in &drawn {
                 if y + pad < first || y + pad >= end {
                     continue;
                 }
-                for x in 0..w {
-                    let k = row + x;
-                    let c = [
-                        planes[0].data[k],
-                        planes[1].data[k],
-                        planes[2].data[k],
-                        planes[3].data[k],
-                    ];
-                    fold_layer_pixel(c, s, &mut over[x], &mut total[x], &mut sharp[x]);
+                match planes {
+                    Some(planes) => {
+                        for x in 0..w {
+                            let k = row + x;
+                            let c = [
+                                planes[0].data[k],
+                                planes[1].data[k],
+                                planes[2].data[k],
+                                planes[3].data[k],
+                            ];
+                            fold_layer_pixel(c, s, &mut over[x], &mut total[x], &mut sharp[x]);
+                        }
+                    }
+                    None => {
+                        layer_row.resize(w, [0.0f32; 4]);
+                        layers.layer_row(l, y, &mut layer_row);
+                        for (x, &c) in layer_row.iter().enumerate() {
+                            fold_layer_pixel(c, s, &mut over[x], &mut total[x], &mut sharp[x]);
+                        }
+                    }
                 }
             }
             for (((dst, mut px), sum), sharp) in out_row.iter_mut().zip(over).zip(&total).zip(&sharp)
