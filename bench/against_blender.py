@@ -11,11 +11,13 @@ Blender application (3.4 from Debian) and, with `--bpy`, current Blender as the 
 the machine's load hits all alike. Reports medians, spreads (min-max) and the ratios of medians
 from one run, per call (spreadlet's synthesis against Blender's render call) and per process,
 each against the faster Blender; spreadlet's per-stage breakdown (from its --stats); and every
-result's SSIM and FLIP against the reference.
+result's SSIM and FLIP against the reference. With `--warm-calls`, each tool's warm calls too
+(the second and third in one process, as an add-on caller rendering a sequence waits for each
+frame after the first), timed in processes of their own so the per-process figures stay whole.
 
     python3 bench/against_blender.py --out target/against-blender [--rounds 3] [--ref-spp 256] \
         [--cycles OUT] \
-        [--bpy target/bpy-env/bin/python]
+        [--bpy target/bpy-env/bin/python] [--warm-calls]
 
 Needs `target/release/{spreadlet,spreadlet-scene}` (cargo build --release), Blender
 (`apt-get install blender`) and, for `--bpy`, a Python with `bpy` (`pip install bpy==5.0.1` on
@@ -104,6 +106,36 @@ def time_spreadlet(bin_dir, g, cam, out, stats):
     return wall, stages, s["synthesis"]["times"]["total_ms"] / 1000.0
 
 
+def time_spreadlet_warm(bin_dir, g, cam, work):
+    """spreadlet's warm calls: frames 2 and 3 of one `--frames 1-3` process over the same
+    G-buffer (its `--stats` totals), what an add-on or library caller waits for on each frame
+    after the first; seconds."""
+    os.makedirs(work, exist_ok=True)
+    for frame in (1, 2, 3):
+        link = os.path.join(work, f"g{frame:04}.exr")
+        if os.path.lexists(link):
+            os.remove(link)
+        os.symlink(os.path.abspath(g), link)
+    run([os.path.join(bin_dir, "spreadlet"), "synth", "--input", os.path.join(work, "g####.exr"),
+         "--frames", "1-3", "--camera", cam, "--out", os.path.join(work, "o####.exr"),
+         "--backend", "cpu", "--stats", os.path.join(work, "s####.json"), "-q"])
+    calls = []
+    for frame in (2, 3):
+        with open(os.path.join(work, f"s{frame:04}.json")) as f:
+            calls.append(json.load(f)["synthesis"]["times"]["total_ms"] / 1000.0)
+    return calls
+
+
+def time_blender_warm(command, g, cam, out, extra=()):
+    """Blender's warm render calls: the second and third of three in one process; seconds."""
+    done = run(command + [os.path.join(ROOT, "bench", "blender_compositor.py"), "--",
+                          "--input", g, "--camera", cam, "--out", out, "--calls", "3", *extra])
+    m = re.search(r"further render calls ([0-9. ]+) s", done.stdout + done.stderr)
+    if not m:
+        sys.exit(f"no further render-call times in Blender's output:\n{done.stdout[-2000:]}")
+    return [float(v) for v in m.group(1).split()]
+
+
 def time_blender(command, g, cam, out, extra=()):
     """Runs bench/blender_compositor.py with `command` (the Blender application with its
     flags, or a Python with bpy); (process wall time, render call time), seconds."""
@@ -165,6 +197,10 @@ def main():
                    "cycles-SCENE")
     p.add_argument("--bin", default=os.path.join(ROOT, "target", "release"))
     p.add_argument("--shared", default=os.path.join(ROOT, "..", "shared", "examples"))
+    p.add_argument("--warm-calls", action="store_true",
+                   help="also time each tool's warm calls (the second and third in one process: "
+                   "spreadlet frames 2-3 of a --frames run, Blender's render call twice more), "
+                   "in processes of their own, and report their ratio")
     args = p.parse_args()
     os.makedirs(args.out, exist_ok=True)
     items = inputs(args, args.bin, os.path.join(args.out, "inputs"))
@@ -180,8 +216,10 @@ def main():
             coc = largest_coc_px(g, cam)
             if coc is not None:
                 extra[name]["blender5"] = ["--blur-max", f"{math.ceil(coc) + 1:.0f}"]
+    kinds = ("call", "process", "warm") if args.warm_calls else ("call", "process")
     times = {name: {"spreadlet": [], "spreadlet_call": [], "stages": [],
-                    **{f"{t}_{k}": [] for t in tools for k in ("call", "process")}}
+                    **({"spreadlet_warm": []} if args.warm_calls else {}),
+                    **{f"{t}_{k}": [] for t in tools for k in kinds}}
              for name, *_ in items}
 
     def one_round(record):
@@ -202,6 +240,16 @@ def main():
                 if record:
                     t[f"{tool}_process"].append(process)
                     t[f"{tool}_call"].append(call)
+            if not args.warm_calls:
+                continue
+            warm = time_spreadlet_warm(args.bin, g, cam, os.path.join(d, "warm"))
+            if record:
+                t["spreadlet_warm"] += warm
+            for tool, command in tools.items():
+                warm = time_blender_warm(command, g, cam, os.path.join(d, f"{tool}_warm.exr"),
+                                         extra[name].get(tool, ()))
+                if record:
+                    t[f"{tool}_warm"] += warm
 
     # One warm-up of each (file caches, the databases built once), not timed.
     one_round(False)
@@ -221,6 +269,9 @@ def main():
             "input": name, "times_s": summaries,
             "ratio_per_call": summaries["spreadlet_call"]["median"] / faster_call,
             "ratio_per_process": summaries["spreadlet"]["median"] / faster_process,
+            **({"ratio_per_warm_call": summaries["spreadlet_warm"]["median"]
+                / min(summaries[f"{tool}_warm"]["median"] for tool in tools)}
+               if args.warm_calls else {}),
             "spreadlet_stages_ms": stages,
             "scores": {tool: scores(args.bin, os.path.join(d, f"{tool}.exr"), ref)
                        for tool in ["spreadlet", *tools]},
@@ -244,6 +295,15 @@ def main():
             + f" | {r['ratio_per_call']:.2f} | {fmt(ts['spreadlet'])} | "
             + " | ".join(fmt(ts[f"{t}_process"]) for t in tools)
             + f" | {r['ratio_per_process']:.2f} |")
+    if args.warm_calls:
+        lines += ["", f"| {args.size} px input | spreadlet warm call (s) | "
+                  + " | ".join(f"{label.get(t, t)} warm call (s)" for t in tools)
+                  + " | ratio to the faster |", "|" + " --- |" * (3 + len(tools))]
+        for r in results:
+            ts = r["times_s"]
+            lines.append(f"| {r['input']} | {fmt(ts['spreadlet_warm'])} | "
+                         + " | ".join(fmt(ts[f"{t}_warm"]) for t in tools)
+                         + f" | {r['ratio_per_warm_call']:.2f} |")
     names = ["spreadlet", *tools]
     lines += ["", "| input (SSIM / FLIP mean / FLIP p99) | "
               + " | ".join(label.get(n, n) for n in names) + " |",
