@@ -384,61 +384,82 @@ impl BuildPlan {
 }
 
 /// The progress a build shows on stderr when asked to: an indicatif bar with the
-/// `progress-bar` feature (the `precompute` binary's), else one plain line per tenth of the
-/// PSFs, so that a library build needs no terminal crate.
+/// `progress-bar` feature (the `precompute` binary's) on a terminal; else (a library build, or
+/// stderr going to a farm job's log, where a bar draws nothing) one plain line per tenth of the
+/// PSFs with the time so far, so that a build of many minutes is never silent.
 struct StderrProgress {
     #[cfg(feature = "progress-bar")]
-    bar: indicatif::ProgressBar,
-    #[cfg(not(feature = "progress-bar"))]
-    label: Option<(String, u32)>,
+    bar: Option<indicatif::ProgressBar>,
+    /// Label and PSF count of the plain lines, when they are shown.
+    lines: Option<(String, u32)>,
+    start: std::time::Instant,
 }
 
 impl StderrProgress {
     fn new(show: bool, total: u32, label: String) -> Self {
+        let start = std::time::Instant::now();
         #[cfg(feature = "progress-bar")]
-        {
-            let bar = if show {
-                let b = indicatif::ProgressBar::new(u64::from(total));
-                if let Ok(style) = indicatif::ProgressStyle::with_template(
-                    "{msg} [{elapsed_precise}] {wide_bar} {pos}/{len} PSFs (eta {eta})",
-                ) {
-                    b.set_style(style);
-                }
-                b.set_message(label);
-                b
-            } else {
-                indicatif::ProgressBar::hidden()
-            };
-            Self { bar }
-        }
-        #[cfg(not(feature = "progress-bar"))]
-        {
-            Self {
-                label: show.then_some((label, total)),
+        if show && std::io::IsTerminal::is_terminal(&std::io::stderr()) {
+            let bar = indicatif::ProgressBar::new(u64::from(total));
+            if let Ok(style) = indicatif::ProgressStyle::with_template(
+                "{msg} [{elapsed_precise}] {wide_bar} {pos}/{len} PSFs (eta {eta})",
+            ) {
+                bar.set_style(style);
             }
+            bar.set_message(label);
+            return Self {
+                bar: Some(bar),
+                lines: None,
+                start,
+            };
+        }
+        Self {
+            #[cfg(feature = "progress-bar")]
+            bar: None,
+            lines: show.then_some((label, total)),
+            start,
         }
     }
 
-    /// `finished` PSFs are done (from any worker thread).
+    /// `finished` PSFs are done (from any worker thread; each count is reported once).
     fn tick(&self, finished: u32) {
         #[cfg(feature = "progress-bar")]
-        {
-            let _ = finished;
-            self.bar.inc(1);
+        if let Some(bar) = &self.bar {
+            bar.inc(1);
+            return;
         }
-        #[cfg(not(feature = "progress-bar"))]
-        if let Some((label, total)) = &self.label {
-            let tenth = (*total / 10).max(1);
-            if finished.is_multiple_of(tenth) || finished == *total {
-                eprintln!("{label}: {finished}/{total} PSFs");
+        if let Some((label, total)) = &self.lines {
+            if let Some(line) = progress_line(label, finished, *total, self.start.elapsed()) {
+                eprintln!("{line}");
             }
         }
     }
 
     fn finish(self) {
         #[cfg(feature = "progress-bar")]
-        self.bar.finish_and_clear();
+        if let Some(bar) = self.bar {
+            bar.finish_and_clear();
+        }
     }
+}
+
+/// The plain progress line for `finished` of `total` PSFs after `elapsed`, at every tenth of
+/// them and at the last; `None` in between.
+fn progress_line(
+    label: &str,
+    finished: u32,
+    total: u32,
+    elapsed: std::time::Duration,
+) -> Option<String> {
+    let tenth = (total / 10).max(1);
+    (finished.is_multiple_of(tenth) || finished == total).then(|| {
+        let s = elapsed.as_secs();
+        format!(
+            "{label}: {finished}/{total} PSFs, {}:{:02} min",
+            s / 60,
+            s % 60
+        )
+    })
 }
 
 /// Eccentricity boxes per inverse-depth box of the physical-lens grid: the PSF's size moves
@@ -678,4 +699,35 @@ fn push_dense(builder: &mut DatabaseBuilder, img: &PsfImage) -> Result<(), Preco
     ];
     builder.push_dense(origin, cw as u16, chh as u16, &data)?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::time::Duration;
+
+    /// Without a terminal a build says how far it is at every tenth of its PSFs and at its
+    /// last, with the time so far, and nothing in between.
+    #[test]
+    fn a_plain_progress_line_comes_at_every_tenth_and_the_last() {
+        let lines: Vec<(u32, String)> = (1..=45)
+            .filter_map(|n| {
+                progress_line(
+                    "thin-lens quick",
+                    n,
+                    45,
+                    Duration::from_secs(u64::from(n) * 7),
+                )
+                .map(|l| (n, l))
+            })
+            .collect();
+        let at: Vec<u32> = lines.iter().map(|(n, _)| *n).collect();
+        assert_eq!(at, [4, 8, 12, 16, 20, 24, 28, 32, 36, 40, 44, 45]);
+        assert_eq!(lines[0].1, "thin-lens quick: 4/45 PSFs, 0:28 min");
+        assert_eq!(lines[11].1, "thin-lens quick: 45/45 PSFs, 5:15 min");
+        assert_eq!(
+            progress_line("x", 1, 3, Duration::ZERO).as_deref(),
+            Some("x: 1/3 PSFs, 0:00 min")
+        );
+    }
 }
