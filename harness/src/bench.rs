@@ -198,14 +198,9 @@ pub fn scene_frame(
     }
     Classified {
         frame: FrameParams {
-            width,
-            height,
-            pad,
-            layers,
-            padded_width: width + 2 * pad,
-            padded_height: height + 2 * pad,
             record_count: records.len() as u32,
             db_channels: db.channels() as u32,
+            ..FrameParams::padded(width, height, pad, layers)
         },
         records,
         layers: infos,

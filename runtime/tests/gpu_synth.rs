@@ -141,14 +141,9 @@ fn classified(
     }
     Classified {
         frame: FrameParams {
-            width,
-            height,
-            pad,
-            layers,
-            padded_width: width + 2 * pad,
-            padded_height: height + 2 * pad,
             record_count: records.len() as u32,
             db_channels: 1,
+            ..FrameParams::padded(width, height, pad, layers)
         },
         records,
         layers: infos,

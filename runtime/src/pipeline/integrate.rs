@@ -235,18 +235,6 @@ mod tests {
     use super::*;
     use crate::pipeline::{composite, CompositeOptions};
 
-    fn frame(width: u32, height: u32, pad: u32, layers: u32) -> FrameParams {
-        FrameParams {
-            width,
-            height,
-            pad,
-            layers,
-            padded_width: width + 2 * pad,
-            padded_height: height + 2 * pad,
-            ..FrameParams::default()
-        }
-    }
-
     /// Layers whose planes hold `value(layer, channel, padded x, padded y)`, or none where
     /// `drawn(layer)` is false.
     fn layers_from(
@@ -282,10 +270,10 @@ mod tests {
         // Layer 0: its own planes and both levels; layer 1: only the scale-4 level; layer 2:
         // nothing anywhere.
         let fine_value = |l: usize, c: usize, x: usize, y: usize| (l + c) as f32 * 0.01 + (x * y) as f32 * 1e-3;
-        let mut fine = layers_from(frame(w as u32, h as u32, 2, 3), |l| l == 0, fine_value);
+        let mut fine = layers_from(FrameParams::padded(w as u32, h as u32, 2, 3), |l| l == 0, fine_value);
         let linear = |s: f32| move |l: usize, c: usize, x: usize, y: usize| 0.1 * s + 0.02 * (l + c) as f32 + 0.03 * x as f32 - 0.01 * y as f32;
-        let half = layers_from(frame(6, 4, 3, 3), |l| l == 0, linear(1.0));
-        let quarter = layers_from(frame(3, 2, 2, 3), |l| l <= 1, linear(2.0));
+        let half = layers_from(FrameParams::padded(6, 4, 3, 3), |l| l == 0, linear(1.0));
+        let quarter = layers_from(FrameParams::padded(3, 2, 2, 3), |l| l <= 1, linear(2.0));
         add_upsampled(&mut fine, half, 2);
         add_upsampled(&mut fine, quarter, 4);
         assert_eq!(fine.rows[0], [0, h + 4]);

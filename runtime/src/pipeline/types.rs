@@ -67,6 +67,23 @@ pub struct FrameParams {
     pub db_channels: u32,
 }
 
+impl FrameParams {
+    /// A `width x height` frame (pixels) of `layers` depth layers padded by `pad` pixels on
+    /// every side; no records yet, one colour channel per spreadlet value.
+    pub fn padded(width: u32, height: u32, pad: u32, layers: u32) -> Self {
+        Self {
+            width,
+            height,
+            pad,
+            layers,
+            padded_width: width + 2 * pad,
+            padded_height: height + 2 * pad,
+            record_count: 0,
+            db_channels: 1,
+        }
+    }
+}
+
 /// Per-layer summary.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct LayerInfo {
