@@ -968,6 +968,7 @@ pub fn normalize_density(image: &mut RgbaImage) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use formats::Sample;
 
     /// The counting sort keeps each pixel's samples in their order, puts samples without a
     /// pixel last, and each sample's place is where `order` holds it.
@@ -982,7 +983,6 @@ mod tests {
             assert_eq!(sorted.order[place as usize], k as u32);
         }
     }
-    use formats::Sample;
 
     fn camera() -> Camera {
         Camera::from_json_str(
