@@ -79,6 +79,7 @@ internal_modules!(
     reconstruct,
     renderer,
     sample_density,
+    sample_mean,
     sample_merge,
     smear_symmetry,
     synth,

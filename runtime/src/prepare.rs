@@ -163,6 +163,12 @@ impl<'a> Plan<'a> {
             options,
             effects,
         } = self;
+        let sample_means = match input {
+            Input::Samples(frames, _) if options.classify.lean_to_sample_means => {
+                crate::sample_mean::PixelSampleMeans::of(frames)
+            }
+            _ => None,
+        };
         let (content, mut stats) = match input {
             Input::Flat(g) => prepare_flat(g, camera, effects, dbs, &options)?,
             Input::Layers(layers) => match layers {
@@ -186,6 +192,7 @@ impl<'a> Plan<'a> {
             content,
             stats,
             normalize_density: matches!(input, Input::Samples(..)),
+            sample_means,
             options,
             started,
         })
@@ -201,6 +208,9 @@ pub struct PreparedFrame {
     pub(crate) options: SynthOptions,
     /// Divide by the accumulated coverage after compositing (stochastic samples land unevenly).
     pub(crate) normalize_density: bool,
+    /// After the normalisation, lean the image towards these per-pixel sample means
+    /// ([`crate::sample_mean`]).
+    pub(crate) sample_means: Option<crate::sample_mean::PixelSampleMeans>,
     /// When preparation started: the frame's total time counts from here.
     pub(crate) started: Instant,
 }

@@ -145,6 +145,7 @@ pub fn render_cpu(frame: PreparedFrame, dbs: &DbSet) -> (RgbaImage, SynthStats) 
         mut stats,
         options,
         normalize_density,
+        sample_means,
         started,
     } = frame;
     let mut image = match content {
@@ -153,6 +154,9 @@ pub fn render_cpu(frame: PreparedFrame, dbs: &DbSet) -> (RgbaImage, SynthStats) 
     };
     if normalize_density {
         crate::reconstruct::normalize_density(&mut image);
+    }
+    if let Some(means) = &sample_means {
+        means.lean(&mut image);
     }
     stats.times.total_ms = ms_since(started);
     (image, stats)

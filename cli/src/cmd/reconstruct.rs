@@ -36,6 +36,11 @@ pub(crate) struct ReconstructArgs {
     /// neighbours at the lens and shutter centre (docs/STOCHASTIC.md).
     #[arg(long)]
     pub(crate) no_denoise: bool,
+    /// Keep reconstruction as drawn: from 8 samples per pixel it is otherwise leaned, pixel by
+    /// pixel, towards the plain mean of the pixel's samples where it departs from them by more
+    /// than their noise explains (docs/STOCHASTIC.md).
+    #[arg(long)]
+    pub(crate) no_sample_mean: bool,
     /// Frame range A-B of a sequence (# in the paths is replaced by the frame number).
     #[arg(long)]
     pub(crate) frames: Option<String>,
@@ -86,6 +91,7 @@ pub(crate) fn run(args: ReconstructArgs) -> Result<()> {
         classify: ClassifyOptions {
             layers: args.layers,
             smear_motion: !args.motion_database,
+            lean_to_sample_means: !args.no_sample_mean,
             ..ClassifyOptions::default()
         },
         integrator: args.integrate,

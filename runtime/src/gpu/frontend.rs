@@ -39,6 +39,7 @@ pub fn render_gpu(
         mut stats,
         options,
         normalize_density,
+        sample_means,
         started,
     } = frame;
     let classified = match content {
@@ -70,6 +71,9 @@ pub fn render_gpu(
     let (mut image, gpu_times) = result?;
     if normalize_density {
         crate::reconstruct::normalize_density(&mut image);
+    }
+    if let Some(means) = &sample_means {
+        means.lean(&mut image);
     }
     stats.times.splat_ms = gpu_times.splat_ms;
     stats.times.integrate_ms = gpu_times.integrate_ms;

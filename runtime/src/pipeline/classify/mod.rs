@@ -223,6 +223,12 @@ pub struct ClassifyOptions {
     /// (counted in `reduced`); where it still needs more, or cannot be reduced (a real lens),
     /// classification fails with a clear error instead of allocating without bound.
     pub smeared_values_budget: usize,
+    /// Reconstruction from frames of at least [`crate::sample_mean::MIN_SPP`] samples per
+    /// pixel: lean each pixel towards its samples' plain mean where reconstruction departs
+    /// from it by more than the samples' noise explains ([`crate::sample_mean`]), so that
+    /// more samples bring the image closer to the scene's and not to reconstruction's own
+    /// approximations. Off: reconstruction as drawn. Synthesis ignores it.
+    pub lean_to_sample_means: bool,
 }
 
 impl Default for ClassifyOptions {
@@ -247,6 +253,7 @@ impl Default for ClassifyOptions {
             pack_images: false,
             scaled_blends: true,
             smeared_values_budget: crate::motion_smear::MAX_FRAME_SMEARED_VALUES,
+            lean_to_sample_means: true,
         }
     }
 }
