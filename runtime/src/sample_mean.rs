@@ -22,6 +22,13 @@
 //! Below [`MIN_SPP`] samples a pixel's variance says too little: a pixel whose four samples all
 //! missed the bright lamp it lies in reads as quiet, and the mix would punch it dark. There
 //! reconstruction is kept as it is.
+//!
+//! Nor is the mean the pixel's where every sample lies at its pixel centre (Blender's pinhole
+//! sub-renders, [`crate::reconstruct::from_pinhole_sub_renders`]): it is then a point sample,
+//! the staircase of an in-focus edge that reconstruction's pixel filter smooths, not the
+//! pixel's box. Such frames are kept as drawn too (leaned, Cycles frames of the shared `fence`
+//! at 64 paths lost SSIM 0.9936 -> 0.9844, and 0.9926 with the mean filtered as reconstruction
+//! filters it).
 
 use formats::{RgbaImage, StochasticFrames};
 use rayon::prelude::*;
@@ -52,10 +59,14 @@ pub struct PixelSampleMeans {
 }
 
 impl PixelSampleMeans {
-    /// The means of `frames`, or `None` below [`MIN_SPP`] samples per pixel.
+    /// The means of `frames`, or `None` below [`MIN_SPP`] samples per pixel and for frames
+    /// sampled at their pixel centres alone (module documentation).
     pub fn of(frames: &StochasticFrames) -> Option<Self> {
         let spp = frames.spp;
-        if spp < MIN_SPP || frames.samples.len() != frames.width * frames.height * spp {
+        if spp < MIN_SPP
+            || frames.samples.len() != frames.width * frames.height * spp
+            || crate::reconstruct::from_pinhole_sub_renders(frames)
+        {
             return None;
         }
         let (mean, variance_of_mean) = frames
@@ -167,7 +178,7 @@ mod tests {
             lens: [0.0, 0.0],
             time: 0.0,
             motion: [0.0, 0.0],
-            jitter: [0.0, 0.0],
+            jitter: [0.25, -0.125],
         }
     }
 
@@ -260,11 +271,18 @@ mod tests {
         }
     }
 
-    /// Too few samples per pixel to trust their spread: no means, nothing leaned.
+    /// Too few samples per pixel to trust their spread, or samples all at their pixel
+    /// centres: no means, nothing leaned.
     #[test]
-    fn fewer_samples_than_the_minimum_give_no_means() {
-        let frames = frames(3, 3, MIN_SPP - 1, |_, _| vec![0.5; MIN_SPP - 1]);
-        assert!(PixelSampleMeans::of(&frames).is_none());
+    fn fewer_samples_than_the_minimum_or_unjittered_give_no_means() {
+        let few = frames(3, 3, MIN_SPP - 1, |_, _| vec![0.5; MIN_SPP - 1]);
+        assert!(PixelSampleMeans::of(&few).is_none());
+        let mut centred = frames(3, 3, MIN_SPP, |_, _| vec![0.5; MIN_SPP]);
+        assert!(PixelSampleMeans::of(&centred).is_some());
+        for s in &mut centred.samples {
+            s.jitter = [0.0, 0.0];
+        }
+        assert!(PixelSampleMeans::of(&centred).is_none());
     }
 
     /// A sample that is not finite leaves its pixel's reconstruction as it is and does not
