@@ -908,6 +908,12 @@ pub(crate) fn classify_samples(
         },
         |x, y, slot, share| seeds[slot as usize].at(x, y, share),
     );
+    // The samples' moves, colours and seeds (about 90 bytes a sample) are not needed past the
+    // merge: freed before the fragments are evened out and classified, when the frame's
+    // memory peaks.
+    let blurred = placed.blurred_samples();
+    let dropped = placed.dropped;
+    drop((seeds, slot_of, placed));
     let reach = crate::sample_density::reach_px(frames.spp);
     crate::sample_density::even_out(
         &mut fragments,
@@ -921,11 +927,12 @@ pub(crate) fn classify_samples(
         frames.width,
         frames.height,
         reach,
-        &placed.blurred_samples(),
+        &blurred,
         crate::sample_merge::signed_coc_of(camera),
     );
+    drop(blurred);
     let counts = PathCounts {
-        dropped: placed.dropped,
+        dropped,
         ..PathCounts::default()
     };
     // Samples are not one surface per pixel: nothing to continue across the layers.
