@@ -165,7 +165,7 @@ impl<'a> Plan<'a> {
         } = self;
         let sample_means = match input {
             Input::Samples(frames, _) if options.classify.lean_to_sample_means => {
-                crate::sample_mean::PixelSampleMeans::of(frames)
+                crate::sample_mean::PixelSampleMeans::of(frames, camera)
             }
             _ => None,
         };
