@@ -4,13 +4,13 @@
 //! The plain mean `A` of a pixel's samples is an unbiased estimate of the pixel (a box over the
 //! pixel, the lens and the shutter), noisy with the variance `v` its samples show.
 //! Reconstruction `R` has next to no noise but keeps the bias `b` of its approximations: a PSF
-//! pre-filtered over its cell, an edge placed by samples moved back to the lens centre. As the samples grow more,
-//! `v` falls below `b²`, and a reconstruction that ignored the mean would stop converging to
-//! the image. Of the mixes `R + α (A - R)` of an estimate with bias `b` and none of noise and
-//! one with no bias and variance `v`, the one of least expected squared error has
+//! pre-filtered over its cell, an edge placed by samples moved back to the lens centre. As the
+//! samples grow more, `v` falls below `b²`, and there the mean is the better estimate. Of the
+//! mixes `R + α (A - R)` of an estimate with bias `b` and none of noise and one with no bias
+//! and variance `v`, the one of least expected squared error has `α = b² / (b² + v)`; here
 //!
 //! ```text
-//! α = b² / (b² + v),    b² ≈ max(⟨(R - A)²⟩ - K ⟨v⟩, 0)
+//! α = b² / (b² + ⟨v⟩),    b² ≈ max(⟨(R - A)²⟩ - K ⟨v⟩, 0)
 //! ```
 //!
 //! since `E[(R - A)²] = b² + v`; `⟨⟩` is the mean over the pixel's 3 x 3 neighbourhood, and
@@ -18,7 +18,8 @@
 //! where `R` is right the mix stays `R`. All on luminance, one `α` for the four channels
 //! (premultiplied alpha stays consistent). The corrections `α (A - R)` are smoothed by a
 //! Gaussian of [`CORRECTION_SIGMA_PX`] before they are added, so that the mean's own noise,
-//! which comes with them, does not show as speckles.
+//! which comes with them, does not show as speckles; detail finer than about two pixels is
+//! then corrected only in part (a 2 px stripe by about half).
 //!
 //! Below [`MIN_SPP`] samples a pixel's variance says too little: a pixel whose four samples all
 //! missed the bright lamp it lies in reads as quiet, and the mix would punch it dark. There
@@ -30,8 +31,11 @@
 //! its disc hold none of them. Their samples agree on the dark background and say nothing of
 //! the light they missed: leaned, the disc of `physical` at 8 spp came out punched with holes
 //! (SSIM 0.9838 -> 0.9588). Such pixels keep reconstruction, which draws the light over its
-//! whole disc: every pixel within twice a light's sample's blur (CoC radius and half its
-//! motion over the shutter) of it.
+//! whole disc: every pixel within a square reaching twice a light's sample's blur (CoC radius
+//! and half its motion over the shutter, plus a pixel) from it. A miss whose background is
+//! that bright (an HDR sky) counts as a light too. Pixels with a sample that is not finite
+//! keep reconstruction, and so do those with a sample that missed (alpha 0): there the mean's
+//! alpha is the hits' share where reconstruction's is normalised to 1.
 //!
 //! Nor is the mean the pixel's where every sample lies at its pixel centre (Blender's pinhole
 //! sub-renders, [`crate::reconstruct::from_pinhole_sub_renders`]): it is then a point sample,
@@ -79,9 +83,9 @@ pub struct PixelSampleMeans {
     /// variance of the mean); infinite where a sample is not finite, so the pixel keeps
     /// reconstruction's value.
     pub variance_of_mean: Vec<f64>,
-    /// Per pixel: whether a light's sample may reach it ([`LIGHT_SAMPLE`]); such pixels keep
-    /// reconstruction's value.
-    pub near_light: Vec<bool>,
+    /// Per pixel: whether it keeps reconstruction's value: a light's sample may reach it
+    /// ([`LIGHT_SAMPLE`]), or one of its samples is not finite or missed.
+    pub keep: Vec<bool>,
 }
 
 impl PixelSampleMeans {
@@ -89,13 +93,17 @@ impl PixelSampleMeans {
     /// pixel and for frames sampled at their pixel centres alone (module documentation).
     pub fn of(frames: &StochasticFrames, camera: &Camera) -> Option<Self> {
         let spp = frames.spp;
+        let count = frames
+            .width
+            .checked_mul(frames.height)
+            .and_then(|n| n.checked_mul(spp));
         if spp < MIN_SPP
-            || frames.samples.len() != frames.width * frames.height * spp
+            || count != Some(frames.samples.len())
             || crate::reconstruct::from_pinhole_sub_renders(frames)
         {
             return None;
         }
-        let (mean, variance_of_mean) = frames
+        let (mean, variance_of_mean): (Vec<[f32; 4]>, Vec<f64>) = frames
             .samples
             .par_chunks(spp)
             .map(|pixel| {
@@ -116,12 +124,21 @@ impl PixelSampleMeans {
                 (mean, if finite { variance } else { f64::INFINITY })
             })
             .unzip();
+        let mut keep = near_lights(frames, camera);
+        for ((k, pixel), v) in keep
+            .iter_mut()
+            .zip(frames.samples.chunks(spp))
+            .zip(&variance_of_mean)
+        {
+            let hits = pixel.iter().filter(|s| s.color[3] > 0.0).count();
+            *k |= !v.is_finite() || hits != spp;
+        }
         Some(Self {
             width: frames.width,
             height: frames.height,
             mean,
             variance_of_mean,
-            near_light: near_lights(frames, camera),
+            keep,
         })
     }
 
@@ -148,7 +165,7 @@ impl PixelSampleMeans {
         let correction: Vec<[f32; 4]> = (0..w * h)
             .into_par_iter()
             .map(|i| {
-                if self.near_light[i] {
+                if self.keep[i] {
                     return [0.0; 4];
                 }
                 let bias = (departure[i] - NOISE_MARGIN * noise[i]).max(0.0);
@@ -167,7 +184,12 @@ impl PixelSampleMeans {
             .pixels
             .par_iter_mut()
             .zip(&smoothed)
-            .for_each(|(p, c)| {
+            .zip(&self.keep)
+            .for_each(|((p, c), &keep)| {
+                // The smoothing spreads a neighbour's correction onto a kept pixel too.
+                if keep {
+                    return;
+                }
                 for (v, &d) in p.iter_mut().zip(c) {
                     // Untouched pixels keep their bytes (adding 0 would turn -0 into +0).
                     if d != 0.0 {
@@ -222,7 +244,7 @@ fn near_lights(frames: &StochasticFrames, camera: &Camera) -> Vec<bool> {
         let coc = lens.map_or(0.0, |l| l.signed_coc_px(s.depth as f64).abs() as f32);
         let smear = 0.5 * shutter * s.motion[0].hypot(s.motion[1]);
         let reach = 2.0 * (coc + smear) + 1.0;
-        // Not finite (a miss's depth, labels out of range): the whole frame.
+        // Not finite (a depth of zero or NaN, motion out of range): the whole frame.
         if reach.is_finite() {
             (reach.ceil() as usize).min(largest)
         } else {
@@ -243,17 +265,19 @@ fn near_lights(frames: &StochasticFrames, camera: &Camera) -> Vec<bool> {
         })
         .collect();
     let mut near = vec![false; w * h];
-    let mut radius = 1usize;
+    let mut bound = 1usize;
     let mut below = 0usize;
     while below < largest {
-        let seeds: Vec<bool> = reach.iter().map(|&r| r > below && r <= radius).collect();
-        if seeds.iter().any(|&s| s) {
+        let in_level = |r: usize| r > below && r <= bound;
+        let seeds: Vec<bool> = reach.iter().map(|&r| in_level(r)).collect();
+        // Grown by the level's largest reach, not its bound: at most twice each reach apart.
+        if let Some(radius) = reach.iter().copied().filter(|&r| in_level(r)).max() {
             for (n, d) in near.iter_mut().zip(dilate(&seeds, w, h, radius)) {
                 *n |= d;
             }
         }
-        below = radius;
-        radius *= 2;
+        below = bound;
+        bound *= 2;
     }
     near
 }
@@ -435,39 +459,37 @@ mod tests {
         assert!(PixelSampleMeans::of(&centred, &camera()).is_none());
     }
 
-    /// A defocused light seen by one sample of one pixel: reconstruction spreads it over its
-    /// disc, where every other sample saw the dark wall. Those pixels keep reconstruction;
-    /// without the light the same departure is leaned away.
+    /// A light seen by one sample of one pixel, a little out of focus: the pixels within a
+    /// square reaching twice its blur keep reconstruction (its spread light), bit for bit;
+    /// beyond it the same departure from the samples is leaned away.
     #[test]
     fn the_pixels_a_lights_blur_reaches_keep_reconstruction() {
-        let (w, h, spp) = (21, 21, 8);
-        let with_light = |light: f32| {
-            let mut frames = frames(w, h, spp, |_, _| vec![0.1; spp]);
-            for s in &mut frames.samples {
-                s.depth = 2.0; // behind the focus plane: CoC radius about 5.8 px
-            }
-            frames.samples[(10 * w + 10) * spp + 3].color = [light, light, light, 1.0];
-            frames
-        };
-        let disc = |x: usize, y: usize| (x as f32 - 10.0).hypot(y as f32 - 10.0) <= 5.0;
-        let recon = image(w, h, |x, y| if disc(x, y) { 0.3 } else { 0.1 });
-
-        let means = PixelSampleMeans::of(&with_light(50.0), &camera()).expect("8 spp");
-        assert!(means.near_light.iter().all(|&n| n), "the light's reach covers the frame");
-        let mut leaned = recon.clone();
-        means.lean(&mut leaned);
-        assert_eq!(leaned.pixels, recon.pixels);
-
-        let dark = PixelSampleMeans::of(&with_light(0.1), &camera()).expect("8 spp");
-        assert!(dark.near_light.iter().all(|&n| !n));
-        let mut leaned = recon.clone();
-        dark.lean(&mut leaned);
-        // Two pixels or more inside the disc the smoothed correction is whole.
+        let (w, h, spp) = (40, 40, 8);
+        let (lx, ly) = (12usize, 20usize);
+        let mut frames = frames(w, h, spp, |_, _| vec![0.1; spp]);
+        for s in &mut frames.samples {
+            s.depth = 1.05; // CoC radius about 0.56 px: reach 2.1 px, a square of side 7
+        }
+        frames.samples[(ly * w + lx) * spp + 3].color = [50.0, 50.0, 50.0, 1.0];
+        let means = PixelSampleMeans::of(&frames, &camera()).expect("8 spp");
+        let near = |x: usize, y: usize| x.abs_diff(lx) <= 3 && y.abs_diff(ly) <= 3;
         for y in 0..h {
             for x in 0..w {
-                let got = leaned.pixels[y * w + x][0];
-                if (x as f32 - 10.0).hypot(y as f32 - 10.0) <= 2.3 {
-                    assert!((got - 0.1).abs() < 1e-5, "({x},{y}) {got}");
+                assert_eq!(means.keep[y * w + x], near(x, y), "({x},{y})");
+            }
+        }
+        // Reconstruction 0.2 too bright round the light and in a band far from it.
+        let band = |x: usize| (26..=34).contains(&x);
+        let recon = image(w, h, |x, y| if near(x, y) || band(x) { 0.3 } else { 0.1 });
+        let mut leaned = recon.clone();
+        means.lean(&mut leaned);
+        for y in 0..h {
+            for x in 0..w {
+                let (got, was) = (leaned.pixels[y * w + x], recon.pixels[y * w + x]);
+                if near(x, y) {
+                    assert_eq!(got, was, "({x},{y}) near the light");
+                } else if (28..=32).contains(&x) {
+                    assert!((got[0] - 0.1).abs() < 1e-5, "({x},{y}) {got:?}");
                 }
             }
         }
@@ -488,22 +510,31 @@ mod tests {
         }
     }
 
-    /// A sample that is not finite leaves its pixel's reconstruction as it is and does not
-    /// spread NaN to its neighbours.
+    /// A sample that is not finite leaves its pixel's reconstruction as it is, while its
+    /// neighbours are leaned, and does not spread NaN or infinity to them.
     #[test]
     fn a_pixel_with_a_non_finite_sample_keeps_reconstruction() {
-        let (w, h, spp) = (3, 3, 8);
+        let (w, h, spp) = (11, 11, 8);
         let frames = frames(w, h, spp, |x, y| {
             let mut v = vec![0.5; spp];
-            if (x, y) == (1, 1) {
-                v[3] = f32::INFINITY;
+            if (x, y) == (5, 5) {
+                v[3] = f32::NAN;
             }
             v
         });
         let means = PixelSampleMeans::of(&frames, &camera()).expect("8 spp");
+        assert!(means.keep[5 * w + 5]);
+        // A pixel with a sample that missed (alpha 0) is kept too.
+        let mut missed = frames.clone();
+        missed.samples[(2 * w + 2) * spp].color = [0.5, 0.5, 0.5, 0.0];
+        let missed = PixelSampleMeans::of(&missed, &camera()).expect("8 spp");
+        assert!(missed.keep[2 * w + 2] && !missed.keep[2 * w + 3]);
         let mut recon = image(w, h, |_, _| 0.8);
         means.lean(&mut recon);
         assert!(recon.pixels.iter().all(|p| p.iter().all(|c| c.is_finite())));
-        assert_eq!(recon.pixels[4][0], 0.8);
+        assert_eq!(recon.pixels[5 * w + 5][0], 0.8, "kept");
+        // Away from it and from the frame's edge the correction is whole.
+        assert!((recon.pixels[5 * w + 1][0] - 0.5).abs() < 1e-5, "{:?}", recon.pixels[5 * w + 1]);
+        assert!(recon.pixels[5 * w + 4][0] < 0.8, "a neighbour is leaned");
     }
 }

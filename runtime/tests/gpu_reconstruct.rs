@@ -21,7 +21,23 @@ const MAX_REL_DIFF: f32 = 1e-4;
 
 #[test]
 fn gpu_reconstruction_matches_cpu() {
-    let Some(ctx) = context() else { return };
+    matches_cpu(2, true);
+}
+
+/// From 8 spp the image is also leaned towards each pixel's own samples
+/// (`spreadlet::sample_mean`), after the GPU's stages as after the CPU's.
+#[test]
+fn gpu_reconstruction_leaned_towards_the_samples_matches_cpu() {
+    let (Some(leaned), Some(drawn)) = (matches_cpu(8, true), matches_cpu(8, false)) else {
+        return;
+    };
+    assert_ne!(leaned, drawn, "the lean changed nothing at 8 spp");
+}
+
+/// Reconstructs `spp` samples per pixel of `crossing` on the CPU and the GPU, checks that they
+/// match, and returns the GPU's image (`None` without a GPU).
+fn matches_cpu(spp: usize, lean: bool) -> Option<Vec<f32>> {
+    let ctx = context()?;
     let scene = scene::builtin("crossing")
         .and_then(|s| s.with_size(SIZE, SIZE))
         .expect("scene");
@@ -31,7 +47,7 @@ fn gpu_reconstruction_matches_cpu() {
         progress: false,
         ..Default::default()
     };
-    let frames = scene::render_stochastic(&scene, 2, &render).expect("frames");
+    let frames = scene::render_stochastic(&scene, spp, &render).expect("frames");
     let db = |m| {
         precompute::build_database(
             &precompute::BuildConfig::new(m, precompute::Profile::Test),
@@ -42,7 +58,8 @@ fn gpu_reconstruction_matches_cpu() {
     };
     let dbs =
         DbSet::new(Some(db(PsfModel::ThinLens)), Some(db(PsfModel::LensMotion))).expect("db set");
-    let options = SynthOptions::default();
+    let mut options = SynthOptions::default();
+    options.classify.lean_to_sample_means = lean;
     let (cpu, cpu_stats) = reconstruct(&frames, &camera, &dbs, &options).expect("CPU");
     let prepared = Plan::new(Input::samples(&frames), &camera, &options)
         .and_then(|plan| plan.prepare(&dbs))
@@ -68,4 +85,5 @@ fn gpu_reconstruction_matches_cpu() {
         d <= MAX_REL_DIFF * m.max(1.0),
         "max difference {d} (max {m})"
     );
+    Some(a)
 }
