@@ -150,11 +150,17 @@ impl PixelSampleMeans {
         if image.width != w || image.height != h || w == 0 || h == 0 {
             return;
         }
+        // A kept pixel's departure says nothing of reconstruction's bias (a rare light missed,
+        // alpha normalised differently): it does not count towards its neighbours'.
         let squared_departure: Vec<f64> = image
             .pixels
             .par_iter()
             .zip(&self.mean)
-            .map(|(r, a)| {
+            .zip(&self.keep)
+            .map(|((r, a), &keep)| {
+                if keep {
+                    return 0.0;
+                }
                 let d = luminance(*r) - luminance(*a);
                 d * d
             })
