@@ -31,6 +31,7 @@
 //! blurred background), and they are kept. Far from any blurred sample nothing changes, so
 //! frames without blur keep their bytes.
 
+use crate::grid::dilate;
 use crate::pipeline::classify::Fragment;
 use crate::sample_density::{MIN_BLUR_PX, SAME_SURFACE_PARALLAX};
 use rayon::prelude::*;
@@ -127,8 +128,8 @@ pub fn fill_behind_blur(
     let has_blur: Vec<bool> = blurred.iter().map(|b| b.share > 0.0).collect();
     // Pixels within the tent of a pixel that lost samples to blur (only there do weights
     // move), and within it of a sharp fragment (only there can a hole be filled).
-    let near_blur = dilate(&has_blur, w, h, radius);
-    let near_sharp = dilate(&has_sharp, w, h, radius);
+    let near_blur = dilate(&has_blur, w, h, radius as usize);
+    let near_sharp = dilate(&has_sharp, w, h, radius as usize);
     // Each pixel's sharp fragments summed: the least and largest parallax, and the weight.
     let surface_at: Vec<Option<PixelSurface>> = (0..w * h)
         .into_par_iter()
@@ -310,25 +311,6 @@ pub fn fill_behind_blur(
 struct PixelSurface {
     parallax: [f32; 2],
     weight: f32,
-}
-
-/// `mask` grown by `radius` pixels on every side (a square), over a `w` x `h` frame.
-fn dilate(mask: &[bool], w: usize, h: usize, radius: i64) -> Vec<bool> {
-    let r = radius.max(0) as usize;
-    let mut rows = vec![false; w * h];
-    for y in 0..h {
-        let row = &mask[y * w..(y + 1) * w];
-        for x in 0..w {
-            rows[y * w + x] = row[x.saturating_sub(r)..(x + r + 1).min(w)].iter().any(|&m| m);
-        }
-    }
-    let mut out = vec![false; w * h];
-    for y in 0..h {
-        for x in 0..w {
-            out[y * w + x] = (y.saturating_sub(r)..(y + r + 1).min(h)).any(|yy| rows[yy * w + x]);
-        }
-    }
-    out
 }
 
 /// A surface's sharp fragments round a hole: their summed weight, weighted sums of colour,

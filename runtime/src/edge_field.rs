@@ -29,6 +29,7 @@
 
 use rayon::prelude::*;
 
+use crate::grid::gaussian_blur;
 use crate::reconstruct::{push_normalized, tap_span};
 
 /// How much longer than across it a footprint grows along a perfectly straight edge, minus
@@ -243,54 +244,6 @@ fn cell_of([a, b, c]: [f32; 3]) -> [f32; 3] {
         return [1.0, 0.0, 0.0];
     }
     [vx / norm, vy / norm, coherence]
-}
-
-/// `plane` (`width x height`, row-major) blurred by a Gaussian of `sigma_px`, separably, each
-/// channel on its own, the border clamped, each pass on every thread.
-fn gaussian_blur<const N: usize>(
-    plane: &mut [[f32; N]],
-    width: usize,
-    height: usize,
-    sigma_px: f32,
-) {
-    let r = (3.0 * sigma_px).ceil() as isize;
-    let kernel: Vec<f32> = (-r..=r)
-        .map(|d| (-(d * d) as f32 / (2.0 * sigma_px * sigma_px)).exp())
-        .collect();
-    let norm: f32 = kernel.iter().sum();
-    let kernel: Vec<f32> = kernel.iter().map(|k| k / norm).collect();
-    let mut rows = vec![[0.0f32; N]; plane.len()];
-    rows.par_chunks_mut(width)
-        .zip(plane.par_chunks(width))
-        .for_each(|(out, row)| {
-            for (x, o) in out.iter_mut().enumerate() {
-                for c in 0..N {
-                    o[c] = (-r..=r)
-                        .zip(&kernel)
-                        .map(|(d, k)| {
-                            let xx = (x as isize + d).clamp(0, width as isize - 1) as usize;
-                            k * row[xx][c]
-                        })
-                        .sum();
-                }
-            }
-        });
-    plane
-        .par_chunks_mut(width)
-        .enumerate()
-        .for_each(|(y, out)| {
-            for (x, o) in out.iter_mut().enumerate() {
-                for c in 0..N {
-                    o[c] = (-r..=r)
-                        .zip(&kernel)
-                        .map(|(d, k)| {
-                            let yy = (y as isize + d).clamp(0, height as isize - 1) as usize;
-                            k * rows[yy * width + x][c]
-                        })
-                        .sum();
-                }
-            }
-        });
 }
 
 #[cfg(test)]

@@ -73,6 +73,7 @@ internal_modules!(
     error,
     #[cfg(feature = "gpu")]
     gpu,
+    grid,
     motion_smear,
     pipeline,
     prepare,
