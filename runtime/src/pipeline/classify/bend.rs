@@ -68,8 +68,7 @@ pub(crate) fn path_bends(
                 if color[j][3] <= 0.0 {
                     return None;
                 }
-                let dj = depth_at(j);
-                if !(dj == d || (dj - d).abs() <= SAME_SURFACE_DEPTH * d.min(dj)) {
+                if !same_surface_depth(d, depth_at(j)) {
                     return None;
                 }
                 let mj = motion[j];
@@ -144,6 +143,12 @@ pub(crate) fn path_bends(
             across(m, len, dx, dy)
         })
         .collect()
+}
+
+/// Whether two neighbouring pixels' planar depths can be one surface's: within
+/// [`SAME_SURFACE_DEPTH`] of the nearer (infinite depths equal).
+pub(super) fn same_surface_depth(a: f32, b: f32) -> bool {
+    a == b || (a - b).abs() <= SAME_SURFACE_DEPTH * a.min(b)
 }
 
 /// Every pixel's path bend (px, `Fragment::bend`, for the motion given) from its own

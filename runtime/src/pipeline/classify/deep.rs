@@ -166,6 +166,7 @@ fn hidden_behind_deep(
         &[],
         &coc_at,
         &depth_at,
+        &|i: usize| if motion_blur { motion[i] } else { [0.0; 2] },
         &blur_along,
         hdr_threshold,
         &own,

@@ -308,6 +308,7 @@ pub(super) fn pixel_fragments(
             &split_hidden,
             &coc_at,
             &depth_at,
+            &motion_at,
             &blur_along,
             options.hdr_dense_threshold,
             &own,

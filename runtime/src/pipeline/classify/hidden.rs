@@ -1,6 +1,7 @@
 //! The background hidden behind the silhouettes of sharper occluders, continued from the
 //! visible background beside them (so a blurred background does not darken along them).
 
+use super::bend::same_surface_depth;
 use super::Fragment;
 use crate::gbuffer::GBuffer;
 use rayon::prelude::*;
@@ -88,6 +89,7 @@ pub(super) fn hidden_background(
     split_hidden: &[f32],
     coc_at: &(impl Fn(usize) -> f32 + Sync),
     depth_at: &(impl Fn(usize) -> f32 + Sync),
+    motion_at: &(impl Fn(usize) -> [f32; 2] + Sync),
     blur_along: &(impl Fn(usize, (i32, i32)) -> f32 + Sync),
     hdr_threshold: f32,
     own: &impl Fn(usize) -> Fragment,
@@ -138,6 +140,7 @@ pub(super) fn hidden_background(
                         // add light).
                         let opaque = g.color[q][3] >= 0.5;
                         (dq < db
+                            && !one_surface((db, motion_at(b)), (dq, motion_at(q)))
                             && (coc_at(q).abs() + SHARPER_BY_PX < coc_b.abs()
                                 || (!bright && opaque && blur_along(q, d) > blur_b + 1.0)))
                             .then_some(q)
@@ -235,6 +238,35 @@ pub(super) fn hidden_background(
     out.extend(veil_fragments(veils, depth_at, own));
     out
 }
+
+/// Whether two neighbouring pixels, each a planar depth and a motion (px), can be one surface,
+/// with nothing hidden between them: depths within [`same_surface_depth`], and motions both
+/// shorter than [`SAME_DIRECTION_MIN_PX`] or both longer and pointing within
+/// [`SAME_DIRECTION_MIN_COS`] of each other. A surface tilted a little away from the camera is
+/// nearer a pixel on, and where it also spins, it moves differently there: continued behind
+/// itself, its copies carried the motion of pixels several apart, along arcs off its own, and
+/// drew a halo outside a spinning disc's rim. Its anti-aliased rim pixels move as it does, only
+/// less (their vectors are blended with the background's), so the directions are compared, not
+/// the lengths. An occluder moving over a still background a little behind it is not one
+/// surface with it.
+fn one_surface((da, ma): (f32, [f32; 2]), (db, mb): (f32, [f32; 2])) -> bool {
+    if !same_surface_depth(da, db) {
+        return false;
+    }
+    let la = (ma[0] * ma[0] + ma[1] * ma[1]).sqrt();
+    let lb = (mb[0] * mb[0] + mb[1] * mb[1]).sqrt();
+    match (la < SAME_DIRECTION_MIN_PX, lb < SAME_DIRECTION_MIN_PX) {
+        (true, true) => true,
+        (false, false) => ma[0] * mb[0] + ma[1] * mb[1] >= SAME_DIRECTION_MIN_COS * la * lb,
+        _ => false,
+    }
+}
+
+/// Motions shorter than this (px over the shutter) count as still in [`one_surface`].
+const SAME_DIRECTION_MIN_PX: f32 = 2.0;
+/// The least cosine between two motions of one surface's neighbouring pixels in
+/// [`one_surface`] (about 25 degrees).
+const SAME_DIRECTION_MIN_COS: f32 = 0.9;
 
 /// A veil before it is a fragment: the pixel it lies on, the share of it covered, and the
 /// occluder's pixel.
@@ -468,6 +500,7 @@ mod tests {
             &[],
             &coc,
             &|i| depth[i],
+            &|_| [0.0; 2],
             &|i, _| coc(i),
             8.0,
             &own,
@@ -485,6 +518,91 @@ mod tests {
             let linear = (b * dark + a * light) / (a + b);
             assert!((sum - linear).abs() < 0.03, "column {x}: {sum} against {linear}");
         }
+    }
+
+    /// A disc tilted a little away from the camera (each pixel 0.01 % farther than the one
+    /// above it) spinning in place, its outermost pixels anti-aliased (their motion half the
+    /// disc's, blended with the still wall's): each rim pixel at the bottom is farther than
+    /// the one above it and moves by pixels less along the column, yet nothing of the disc is
+    /// continued behind itself. A bar moving over a still wall only 2 % behind it is an
+    /// occluder: the wall is continued behind it.
+    #[test]
+    fn a_tilted_spinning_disc_is_not_continued_behind_itself() {
+        let (w, h) = (48usize, 48usize);
+        let (cx, cy, radius, turn) = (24.0f32, 24.0f32, 20.0f32, 0.6f32);
+        let inside = |x: usize, y: usize| {
+            let (dx, dy) = (x as f32 + 0.5 - cx, y as f32 + 0.5 - cy);
+            dx * dx + dy * dy <= radius * radius
+        };
+        let (g, depth) = grey_frame(w, h, |x, y| {
+            if inside(x, y) {
+                (0.6, 1.0 + 1e-4 * y as f32)
+            } else {
+                (0.3, 1.6)
+            }
+        });
+        // A turn about the centre: the motion is `turn` times the offset turned a quarter.
+        let motion = |i: usize| -> [f32; 2] {
+            let (x, y) = ((i % w) as f32 + 0.5, (i / w) as f32 + 0.5);
+            if inside(i % w, i / w) {
+                let (dx, dy) = (x - cx, y - cy);
+                let rim = dx * dx + dy * dy > (radius - 1.0) * (radius - 1.0);
+                let share = if rim { 0.5 } else { 1.0 };
+                [-share * turn * dy, share * turn * dx]
+            } else {
+                [0.0; 2]
+            }
+        };
+        let blur_along = |i: usize, d: (i32, i32)| {
+            let m = motion(i);
+            0.5 * (m[0] * d.0 as f32 + m[1] * d.1 as f32).abs()
+        };
+        let own = |i: usize| Fragment {
+            motion: motion(i),
+            ..own_fragment(&g, &depth, i)
+        };
+        let filled = hidden_background(
+            &g,
+            &vec![false; w * h],
+            &[],
+            &|_| 0.0,
+            &|i| depth[i],
+            &motion,
+            &blur_along,
+            8.0,
+            &own,
+        );
+        let behind_itself = filled
+            .iter()
+            .filter(|f| f.source != VEIL_SOURCE && f.depth < 1.5)
+            .count();
+        assert_eq!(behind_itself, 0, "{} of {} continued", behind_itself, filled.len());
+        // The disc covers the wall: the wall is continued behind it, as before.
+        assert!(filled.iter().any(|f| f.source != VEIL_SOURCE && f.depth > 1.5));
+
+        // A bar moving 12 px to the right over a still wall 2 % behind it.
+        let (w, h) = (32usize, 6usize);
+        let bar = |x: usize| (12..20).contains(&x);
+        let (g, depth) = grey_frame(w, h, |x, _| if bar(x) { (0.9, 1.0) } else { (0.3, 1.02) });
+        let motion = |i: usize| if bar(i % w) { [12.0, 0.0] } else { [0.0; 2] };
+        let blur_along = |i: usize, d: (i32, i32)| 0.5 * (motion(i)[0] * d.0 as f32).abs();
+        let own = |i: usize| own_fragment(&g, &depth, i);
+        let filled = hidden_background(
+            &g,
+            &vec![false; w * h],
+            &[],
+            &|_| 0.0,
+            &|i| depth[i],
+            &motion,
+            &blur_along,
+            8.0,
+            &own,
+        );
+        let wall_behind_bar = filled
+            .iter()
+            .filter(|f| f.source != VEIL_SOURCE && bar(f.x as usize))
+            .count();
+        assert!(wall_behind_bar >= 2 * 6 * 6, "{wall_behind_bar}");
     }
 
     /// The anti-aliased pixel beside a blurred bar, split into the bar's share (0.4) and the
@@ -506,6 +624,7 @@ mod tests {
             &split_hidden,
             &coc,
             &|i| depth[i],
+            &|_| [0.0; 2],
             &|i, _| coc(i),
             8.0,
             &own,
@@ -547,6 +666,7 @@ mod tests {
             &[],
             &|_| 0.0,
             &|i| depth[i],
+            &|_| [0.0; 2],
             &blur_along,
             8.0,
             &own,
