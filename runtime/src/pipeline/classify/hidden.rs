@@ -92,7 +92,7 @@ pub(super) fn hidden_background(
     motion_at: &(impl Fn(usize) -> [f32; 2] + Sync),
     blur_along: &(impl Fn(usize, (i32, i32)) -> f32 + Sync),
     hdr_threshold: f32,
-    own: &impl Fn(usize) -> Fragment,
+    own: &(impl Fn(usize) -> Fragment + Sync),
 ) -> Vec<Fragment> {
     let (w, h) = (g.width as i32, g.height as i32);
     const DIRECTIONS: [(i32, i32); 4] = [(1, 0), (-1, 0), (0, 1), (0, -1)];
@@ -219,22 +219,26 @@ pub(super) fn hidden_background(
     // Only the filled pixels' colours are read, each once per walk through it: found where
     // they are read rather than over the whole frame (a frame's worth of fresh memory).
     let color = |q: usize| smoothed_fill_color(&walked, &fills, (w, h), q);
-    let mut out = Vec::new();
-    for (b, d, start, first, steps) in walks {
-        let base = own(b);
-        let (bx, by) = ((b as i32) % w, (b as i32) / w);
-        for k in start..=steps {
-            let q = ((by + d.1 * k) * w + bx + d.0 * k) as usize;
-            let share = if k < first { hidden_share(q) } else { 1.0 };
-            out.push(Fragment {
-                x: base.x + d.0 * k,
-                y: base.y + d.1 * k,
-                weight: share * walk_weight(k) / fills[q],
-                color: color(q),
-                ..base
-            });
-        }
-    }
+    // On every thread, in the walks' order.
+    let (fills, color, hidden_share) = (&fills, &color, &hidden_share);
+    let mut out: Vec<Fragment> = walks
+        .par_iter()
+        .flat_map_iter(|&(b, d, start, first, steps)| {
+            let base = own(b);
+            let (bx, by) = ((b as i32) % w, (b as i32) / w);
+            (start..=steps).map(move |k| {
+                let q = ((by + d.1 * k) * w + bx + d.0 * k) as usize;
+                let share = if k < first { hidden_share(q) } else { 1.0 };
+                Fragment {
+                    x: base.x + d.0 * k,
+                    y: base.y + d.1 * k,
+                    weight: share * walk_weight(k) / fills[q],
+                    color: color(q),
+                    ..base
+                }
+            })
+        })
+        .collect();
     out.extend(veil_fragments(veils, depth_at, own));
     out
 }
@@ -318,14 +322,14 @@ fn walk_veils(
 fn veil_fragments(
     mut veils: Vec<Veil>,
     background_depth: &(impl Fn(usize) -> f32 + Sync),
-    own: &impl Fn(usize) -> Fragment,
+    own: &(impl Fn(usize) -> Fragment + Sync),
 ) -> Vec<Fragment> {
     // A total order (pixel, the most covered first, occluder), so the unstable sort's result
     // is the one order.
     veils.par_sort_unstable_by(|a, b| a.0.cmp(&b.0).then(b.1.total_cmp(&a.1)).then(a.2.cmp(&b.2)));
     veils.dedup_by_key(|v| v.0);
     veils
-        .into_iter()
+        .into_par_iter()
         .map(|(p, coverage, q)| {
             let at = own(p);
             Fragment {
