@@ -2,7 +2,9 @@
 //! parallax, occlusion between fragments that share a layer, and the records sorted by layer.
 
 use super::frame_edges::{distance_to, extend_beyond};
-use super::lookup::{front_turns_the_aperture, lookup_psf, Lookup};
+use super::lookup::{
+    across_first_box_edge, first_box_edges_px, front_turns_the_aperture, lookup_psf, Lookup,
+};
 use super::*;
 use crate::camera::Camera;
 use crate::dbset::{DbSet, NO_TWIN};
@@ -164,6 +166,13 @@ pub fn classify_fragments(
     let flip_front = front_turns_the_aperture(dbs);
 
     let centre = [w as f32 * 0.5, h as f32 * 0.5];
+    // Through a real lens, the outer edges of its first eccentricity boxes, px.
+    let first_box_edges = match (model, dbs.main.as_ref()) {
+        (Some(PsfModel::PhysicalLens), Some(db)) if options.continuous_lookup => {
+            first_box_edges_px(db, pixels_per_mm)
+        }
+        _ => Vec::new(),
+    };
     // Through a real lens, each moving fragment's lens PSF smeared along its motion: one key
     // per fragment (with whether its parameters were clamped), each key's PSF built once and
     // appended to the frame's own copy of the database. Through the thin lens the same, from
@@ -405,6 +414,15 @@ pub fn classify_fragments(
         counts.clamped += usize::from(lookup_clamped || smear.is_some_and(|(_, c)| c));
         let smeared_index = smear.and_then(|(k, _)| smeared.index_of(k));
         let round_share = if smeared_index.is_some() { 0.0 } else { round_share };
+        // Near the first eccentricity box's edge, a still pixel through a real lens draws
+        // part of the next box's PSF ([`super::lookup::first_box_edge`]).
+        let across_edge = (continuous && smeared_index.is_none() && level_of(index) == 0)
+            .then(|| {
+                let at = (frag.x, frag.y);
+                let edges = &first_box_edges[..];
+                across_first_box_edge(dbs, psf_index, at, frag.depth, centre, pixels_per_mm, edges)
+            })
+            .flatten();
         let (path, psf_index, blend) = match smeared_index {
             Some(i) => {
                 // Built in the image's frame at the fragment's own motion: drawn unrotated,
@@ -429,6 +447,17 @@ pub fn classify_fragments(
         if n_targets == 2 {
             counts.soft_split += 1;
         }
+        // The PSF, and across the first eccentricity box's edge the other box's, each with its
+        // share of the fragment.
+        let edge_share = across_edge.filter(|_| !to_twin).map_or(0.0, |a| a.share);
+        let own_draw = (path, psf_index, blend, round_share, 1.0 - edge_share);
+        let draws = [
+            Some(own_draw),
+            across_edge
+                .filter(|_| edge_share > 0.0)
+                .map(|a| (a.path, a.psf_index, a.blend, 0.0, a.share)),
+        ];
+        for (path, psf_index, blend, round_share, draw_share) in draws.into_iter().flatten() {
         // The fragment's PSF, or its cell's and its neighbour's with their shares.
         // A twin is already the PSF of the fragment's own sub-cell.
         // Two dense neighbours are drawn premixed ([`DbSet::dense_blend_for`]), as one record.
@@ -448,10 +477,11 @@ pub fn classify_fragments(
         }
         let n_parts = if parts[1].2 > 0.0 { 2 } else { 1 };
         for (t, &(layer, lw)) in targets[..n_targets].iter().enumerate() {
-            let weight = match &transmission {
-                Some(kept) => frag.weight * lw * kept[index][t],
-                None => frag.weight * lw,
-            };
+            let weight = draw_share
+                * match &transmission {
+                    Some(kept) => frag.weight * lw * kept[index][t],
+                    None => frag.weight * lw,
+                };
             // Near the optical axis, part of a real lens's PSF is drawn as its rotational
             // average, upright ([`DbSet::axis_round`]); the turned parts first, so that a blend's
             // two stay neighbours.
@@ -543,6 +573,7 @@ pub fn classify_fragments(
                     });
                 }
             }
+        }
         }
     
     };
