@@ -293,7 +293,19 @@ pub fn classify_fragments(
                     if found.path == SplatPath::Copy {
                         return None;
                     }
-                    let i = found.psf_index;
+                    // Near the first eccentricity box's edge, the other box's PSF for its
+                    // share of the pixels, dithered: a smear is one PSF, and along the motion
+                    // it averages its neighbours' choices.
+                    let across = (level_of(index) == 0)
+                        .then(|| {
+                            let at = (frag.x, frag.y);
+                            let edges = &first_box_edges[..];
+                            let i = found.psf_index;
+                            across_first_box_edge(dbs, i, at, frag.depth, centre, pixels_per_mm, edges)
+                        })
+                        .flatten()
+                        .filter(|a| ordered_dither(frag.x, frag.y) < a.share);
+                    let i = across.map_or(found.psf_index, |a| a.psf_index);
                     let reach = reach.get(i as usize).copied().unwrap_or(0) as f32;
                     let radial = [found.rot_cos, found.rot_sin];
                     Some(SmearKey::new(i, m, frag.bend, radial, reach))
