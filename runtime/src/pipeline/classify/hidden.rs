@@ -524,6 +524,20 @@ mod tests {
         }
     }
 
+    /// The continued background of a sharp frame `g` (depths `depth`, no pixel split) whose
+    /// pixel `i` moves `motion(i)` px over the shutter.
+    fn continued_sharp(
+        g: &GBuffer,
+        depth: &[f32],
+        motion: &(impl Fn(usize) -> [f32; 2] + Sync),
+        blur_along: &(impl Fn(usize, (i32, i32)) -> f32 + Sync),
+        own: &(impl Fn(usize) -> Fragment + Sync),
+    ) -> Vec<Fragment> {
+        let split = vec![false; g.width * g.height];
+        let depth_at = |i: usize| depth[i];
+        hidden_background(g, &split, &[], &|_| 0.0, &depth_at, motion, blur_along, 8.0, own)
+    }
+
     /// A disc tilted a little away from the camera (each pixel 0.01 % farther than the one
     /// above it) spinning in place, its outermost pixels anti-aliased (their motion half the
     /// disc's, blended with the still wall's): each rim pixel at the bottom is farther than
@@ -565,17 +579,7 @@ mod tests {
             motion: motion(i),
             ..own_fragment(&g, &depth, i)
         };
-        let filled = hidden_background(
-            &g,
-            &vec![false; w * h],
-            &[],
-            &|_| 0.0,
-            &|i| depth[i],
-            &motion,
-            &blur_along,
-            8.0,
-            &own,
-        );
+        let filled = continued_sharp(&g, &depth, &motion, &blur_along, &own);
         let behind_itself = filled
             .iter()
             .filter(|f| f.source != VEIL_SOURCE && f.depth < 1.5)
@@ -591,17 +595,7 @@ mod tests {
         let motion = |i: usize| if bar(i % w) { [12.0, 0.0] } else { [0.0; 2] };
         let blur_along = |i: usize, d: (i32, i32)| 0.5 * (motion(i)[0] * d.0 as f32).abs();
         let own = |i: usize| own_fragment(&g, &depth, i);
-        let filled = hidden_background(
-            &g,
-            &vec![false; w * h],
-            &[],
-            &|_| 0.0,
-            &|i| depth[i],
-            &motion,
-            &blur_along,
-            8.0,
-            &own,
-        );
+        let filled = continued_sharp(&g, &depth, &motion, &blur_along, &own);
         let wall_behind_bar = filled
             .iter()
             .filter(|f| f.source != VEIL_SOURCE && bar(f.x as usize))

@@ -470,124 +470,124 @@ pub fn classify_fragments(
                 .map(|a| (a.path, a.psf_index, a.blend, 0.0, a.share)),
         ];
         for (path, psf_index, blend, round_share, draw_share) in draws.into_iter().flatten() {
-        // The fragment's PSF, or its cell's and its neighbour's with their shares.
-        // A twin is already the PSF of the fragment's own sub-cell.
-        // Two dense neighbours are drawn premixed ([`DbSet::dense_blend_for`]), as one record.
-        let mut parts = [(path, psf_index, 1.0f32), (path, psf_index, 0.0)];
-        if let Some(b) = blend.filter(|b| !to_twin && b.psf_index != psf_index) {
-            let both_dense = path == SplatPath::Dense && b.path == SplatPath::Dense;
-            let premixed = both_dense
-                .then(|| dbs.dense_blend_for(psf_index, b.psf_index, b.share))
-                .flatten();
-            match premixed {
-                Some(mixed) => parts[0].1 = mixed,
-                None => {
-                    parts[0].2 = 1.0 - b.share;
-                    parts[1] = (b.path, b.psf_index, b.share);
+            // The fragment's PSF, or its cell's and its neighbour's with their shares.
+            // A twin is already the PSF of the fragment's own sub-cell.
+            // Two dense neighbours are drawn premixed ([`DbSet::dense_blend_for`]), as one record.
+            let mut parts = [(path, psf_index, 1.0f32), (path, psf_index, 0.0)];
+            if let Some(b) = blend.filter(|b| !to_twin && b.psf_index != psf_index) {
+                let both_dense = path == SplatPath::Dense && b.path == SplatPath::Dense;
+                let premixed = both_dense
+                    .then(|| dbs.dense_blend_for(psf_index, b.psf_index, b.share))
+                    .flatten();
+                match premixed {
+                    Some(mixed) => parts[0].1 = mixed,
+                    None => {
+                        parts[0].2 = 1.0 - b.share;
+                        parts[1] = (b.path, b.psf_index, b.share);
+                    }
                 }
             }
-        }
-        let n_parts = if parts[1].2 > 0.0 { 2 } else { 1 };
-        for (t, &(layer, lw)) in targets[..n_targets].iter().enumerate() {
-            let weight = draw_share
-                * match &transmission {
-                    Some(kept) => frag.weight * lw * kept[index][t],
-                    None => frag.weight * lw,
+            let n_parts = if parts[1].2 > 0.0 { 2 } else { 1 };
+            for (t, &(layer, lw)) in targets[..n_targets].iter().enumerate() {
+                let weight = draw_share
+                    * match &transmission {
+                        Some(kept) => frag.weight * lw * kept[index][t],
+                        None => frag.weight * lw,
+                    };
+                // Near the optical axis, part of a real lens's PSF is drawn as its rotational
+                // average, upright ([`DbSet::axis_round`]); the turned parts first, so that a blend's
+                // two stay neighbours.
+                let round_of = |psf: u32| {
+                    dbs.axis_round
+                        .get(psf as usize)
+                        .copied()
+                        .filter(|&i| round_share > 0.0 && i != NO_TWIN)
                 };
-            // Near the optical axis, part of a real lens's PSF is drawn as its rotational
-            // average, upright ([`DbSet::axis_round`]); the turned parts first, so that a blend's
-            // two stay neighbours.
-            let round_of = |psf: u32| {
-                dbs.axis_round
-                    .get(psf as usize)
-                    .copied()
-                    .filter(|&i| round_share > 0.0 && i != NO_TWIN)
-            };
-            let part_weight = |psf_index: u32, share: f32| {
-                let kept = if round_of(psf_index).is_some() { 1.0 - round_share } else { 1.0 };
-                weight * share * kept
-            };
-            // Two turned dense PSFs of a frame whose shared turns are drawn upright: one
-            // record, premixed there ([`super::turned::pack_pair`]).
-            let [(path_a, psf_a, share_a), (path_b, psf_b, share_b)] = parts;
-            let pair = (pack_pairs
-                && level_of(index) == 0
-                && n_parts == 2
-                && path_a == SplatPath::Dense
-                && path_b == SplatPath::Dense
-                && !(rot_cos == 1.0 && rot_sin == 0.0))
-                .then(|| {
-                    super::turned::pack_pair(
-                        (x, y),
-                        layer as u32,
-                        (rot_cos, rot_sin),
-                        color,
-                        (psf_a, part_weight(psf_a, share_a)),
-                        (psf_b, part_weight(psf_b, share_b)),
-                    )
-                })
-                .flatten();
-            if let Some(pair) = pair {
-                per_layer[layer].push(pair);
-            }
-            for &(path, psf_index, share) in &parts[..n_parts] {
-                if pair.is_some() {
-                    break;
+                let part_weight = |psf_index: u32, share: f32| {
+                    let kept = if round_of(psf_index).is_some() { 1.0 - round_share } else { 1.0 };
+                    weight * share * kept
+                };
+                // Two turned dense PSFs of a frame whose shared turns are drawn upright: one
+                // record, premixed there ([`super::turned::pack_pair`]).
+                let [(path_a, psf_a, share_a), (path_b, psf_b, share_b)] = parts;
+                let pair = (pack_pairs
+                    && level_of(index) == 0
+                    && n_parts == 2
+                    && path_a == SplatPath::Dense
+                    && path_b == SplatPath::Dense
+                    && !(rot_cos == 1.0 && rot_sin == 0.0))
+                    .then(|| {
+                        super::turned::pack_pair(
+                            (x, y),
+                            layer as u32,
+                            (rot_cos, rot_sin),
+                            color,
+                            (psf_a, part_weight(psf_a, share_a)),
+                            (psf_b, part_weight(psf_b, share_b)),
+                        )
+                    })
+                    .flatten();
+                if let Some(pair) = pair {
+                    per_layer[layer].push(pair);
                 }
-                let weight = part_weight(psf_index, share);
-                // Frame coordinates for now; shifted by the padding once it is known.
-                per_layer[layer].push(SplatRecord {
-                    center_x: x,
-                    center_y: y,
-                    psf_index,
-                    layer: layer as u32,
-                    rot_cos,
-                    rot_sin,
-                    weight,
-                    path: path as u32,
-                    color: color.map(|v| v * weight),
-                });
-            }
-            // The two PSFs' rotational averages, where both have one: one upright record,
-            // premixed as the turned pair is.
-            let round_pair = (pack_pairs && level_of(index) == 0 && n_parts == 2)
-                .then(|| {
-                    let (a, b) = (round_of(psf_a)?, round_of(psf_b)?);
-                    super::turned::pack_pair(
-                        (x, y),
-                        layer as u32,
-                        (1.0, 0.0),
-                        color,
-                        (a, weight * share_a * round_share),
-                        (b, weight * share_b * round_share),
-                    )
-                })
-                .flatten();
-            if let Some(pair) = round_pair {
-                per_layer[layer].push(pair);
-            }
-            for &(_, psf_index, share) in &parts[..n_parts] {
-                if round_pair.is_some() {
-                    break;
-                }
-                if let Some(round) = round_of(psf_index) {
-                    let weight = weight * share * round_share;
+                for &(path, psf_index, share) in &parts[..n_parts] {
+                    if pair.is_some() {
+                        break;
+                    }
+                    let weight = part_weight(psf_index, share);
+                    // Frame coordinates for now; shifted by the padding once it is known.
                     per_layer[layer].push(SplatRecord {
                         center_x: x,
                         center_y: y,
-                        psf_index: round,
+                        psf_index,
                         layer: layer as u32,
-                        rot_cos: 1.0,
-                        rot_sin: 0.0,
+                        rot_cos,
+                        rot_sin,
                         weight,
-                        path: SplatPath::Dense as u32,
+                        path: path as u32,
                         color: color.map(|v| v * weight),
                     });
                 }
+                // The two PSFs' rotational averages, where both have one: one upright record,
+                // premixed as the turned pair is.
+                let round_pair = (pack_pairs && level_of(index) == 0 && n_parts == 2)
+                    .then(|| {
+                        let (a, b) = (round_of(psf_a)?, round_of(psf_b)?);
+                        super::turned::pack_pair(
+                            (x, y),
+                            layer as u32,
+                            (1.0, 0.0),
+                            color,
+                            (a, weight * share_a * round_share),
+                            (b, weight * share_b * round_share),
+                        )
+                    })
+                    .flatten();
+                if let Some(pair) = round_pair {
+                    per_layer[layer].push(pair);
+                }
+                for &(_, psf_index, share) in &parts[..n_parts] {
+                    if round_pair.is_some() {
+                        break;
+                    }
+                    if let Some(round) = round_of(psf_index) {
+                        let weight = weight * share * round_share;
+                        per_layer[layer].push(SplatRecord {
+                            center_x: x,
+                            center_y: y,
+                            psf_index: round,
+                            layer: layer as u32,
+                            rot_cos: 1.0,
+                            rot_sin: 0.0,
+                            weight,
+                            path: SplatPath::Dense as u32,
+                            color: color.map(|v| v * weight),
+                        });
+                    }
+                }
             }
         }
-        }
-    
+
     };
     // Fragments in chunks on every thread, each chunk's records per layer appended in chunk
     // order: the same records in the same order as one pass over them.
