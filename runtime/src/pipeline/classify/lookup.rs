@@ -35,9 +35,12 @@ pub(super) struct AcrossEdge {
     pub(super) share: f32,
 }
 
-/// How far either side of the outer edge of a real lens's first eccentricity box (px) a
-/// pixel draws part of the PSF of the box across the edge ([`first_box_edge`]).
-pub(super) const FIRST_BOX_EDGE_BAND_PX: f32 = 8.0;
+/// How far either side of the outer edge of a real lens's first eccentricity box a pixel
+/// draws part of the PSF of the box across the edge ([`first_box_edge`]), mm on the sensor: 8
+/// px of a 512 px frame 36 mm wide. In millimetres because the PSFs' shapes, and the ring
+/// their difference leaves, scale with the frame's pixels per millimetre: at 1920 px the ring
+/// was 12 px wide, and a band of 8 px left half of it.
+pub(super) const FIRST_BOX_EDGE_BAND_MM: f32 = 0.5625;
 
 /// The outer edges of a physical-lens database's first eccentricity boxes (one per depth
 /// level of its grid, most often one in all), px from the optical axis at `pixels_per_mm`,
@@ -62,7 +65,7 @@ pub(super) fn first_box_edges_px(db: &PsfDatabase, pixels_per_mm: f32) -> Vec<f3
 /// (frame pixels; `centre` the frame's centre) through a real lens draws part of, at planar
 /// `depth` in its cell `psf_index` of the combined database (`dbs.main`'s offset by
 /// `dbs.main_offset`), and its share ([`first_box_edge`]); `None` beyond
-/// [`FIRST_BOX_EDGE_BAND_PX`] of every edge in `edges_px` ([`first_box_edges_px`]).
+/// [`FIRST_BOX_EDGE_BAND_MM`] of every edge in `edges_px` ([`first_box_edges_px`]).
 #[allow(clippy::too_many_arguments)]
 pub(super) fn across_first_box_edge(
     dbs: &DbSet,
@@ -76,9 +79,8 @@ pub(super) fn across_first_box_edge(
     let dx = x as f32 + 0.5 - centre[0];
     let dy = y as f32 + 0.5 - centre[1];
     let r = (dx * dx + dy * dy).sqrt();
-    let near = edges_px
-        .iter()
-        .any(|&e| (e - r).abs() < FIRST_BOX_EDGE_BAND_PX);
+    let band = FIRST_BOX_EDGE_BAND_MM * pixels_per_mm;
+    let near = edges_px.iter().any(|&e| (e - r).abs() < band);
     if !near {
         return None;
     }
@@ -102,7 +104,7 @@ pub(super) fn across_first_box_edge(
 
 /// For a pixel `r_px` from the optical axis whose physical-lens cell is `idx` (parameters `s`:
 /// inverse depth, eccentricity in mm; `pixels_per_mm` on the sensor), within
-/// [`FIRST_BOX_EDGE_BAND_PX`] of the first eccentricity box's outer edge: the parameters to
+/// [`FIRST_BOX_EDGE_BAND_MM`] of the first eccentricity box's outer edge: the parameters to
 /// look the box across the edge up at, and its share, `(1 - d / band) / 2` at `d` px from the
 /// edge. A box's PSF is traced at the middle of its eccentricities, and the first box is the
 /// widest (the boxes narrow outwards), its PSF the farthest from the lens's at its outer edge:
@@ -123,7 +125,7 @@ pub(super) fn first_box_edge(
     }
     let b = space.cell_box(idx)?;
     let (lo, hi) = (b.min[1] as f32, b.max[1] as f32);
-    let band = FIRST_BOX_EDGE_BAND_PX;
+    let band = FIRST_BOX_EDGE_BAND_MM * pixels_per_mm;
     let (across, d_px) = if lo <= 0.0 {
         (hi * (1.0 + 1e-4), hi * pixels_per_mm - r_px)
     } else {
