@@ -123,7 +123,7 @@ pub(super) fn hidden_background(
                     if !(nearer(1) || (split_next && nearer(2))) {
                         continue;
                     }
-                    let blur_b = blur_along(b, d);
+                    let (blur_b, motion_b) = (blur_along(b, d), motion_at(b));
                     // Hidden: nearer than the background, and sharper by more than
                     // SHARPER_BY_PX or blurred by more than a pixel along `d` than it. The
                     // first step may be the silhouette's anti-aliased pixel, which carries the
@@ -140,7 +140,7 @@ pub(super) fn hidden_background(
                         // add light).
                         let opaque = g.color[q][3] >= 0.5;
                         (dq < db
-                            && !one_surface((db, motion_at(b)), (dq, motion_at(q)))
+                            && !one_surface((db, motion_b), (dq, motion_at(q)))
                             && (coc_at(q).abs() + SHARPER_BY_PX < coc_b.abs()
                                 || (!bright && opaque && blur_along(q, d) > blur_b + 1.0)))
                             .then_some(q)
