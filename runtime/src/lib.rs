@@ -83,6 +83,7 @@ internal_modules!(
     sample_mean,
     sample_merge,
     smear_symmetry,
+    subpixel_psf,
     synth,
 );
 

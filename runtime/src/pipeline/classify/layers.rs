@@ -13,6 +13,7 @@ use crate::smear_symmetry::{
     canonical_key, is_grid_symmetric, transform_image, BoxImage, GridSymmetry,
 };
 use crate::pipeline::packed::{PackedImage, PackedImages};
+use crate::subpixel_psf::SubpixelPsf;
 use crate::pipeline::types::{psf_reach, CoarseLevel, FrameParams, SplatPath, SplatRecord};
 use psf_db::{PsfDatabase, PsfModel};
 use rayon::prelude::*;
@@ -334,6 +335,7 @@ pub fn classify_fragments(
                 SmearedPsfs::build(
                     &smear_keys,
                     all,
+                    thin_smear,
                     options.pack_images,
                     options.smeared_values_budget,
                 )
@@ -972,6 +974,7 @@ impl SmearedPsfs {
     fn build(
         fragment_keys: &[Option<(SmearKey, bool)>],
         all: &PsfDatabase,
+        thin_lens: Option<&PsfDatabase>,
         pack: bool,
         budget_values: usize,
     ) -> Result<Self, ClassifyError> {
@@ -1013,6 +1016,18 @@ impl SmearedPsfs {
                         .or_insert(i)
                 }
                 None => i,
+            })
+            .collect();
+        // A narrow thin-lens disc's images at sub-pixel shifts, for the first turn of each
+        // image: its taps then land where its path puts them.
+        let subpixel: Vec<Option<SubpixelPsf>> = bases
+            .par_iter()
+            .enumerate()
+            .map(|(t, base)| match (thin_lens, base) {
+                (Some(thin), Some(base)) if canonical[t] == t => {
+                    SubpixelPsf::of_cell(thin, turned[t].0, base)
+                }
+                _ => None,
             })
             .collect();
         let turn_of = |k: &SmearKey| {
@@ -1097,7 +1112,7 @@ impl SmearedPsfs {
         let mut unique_index = Vec::with_capacity(unique.len());
         for (&key, found) in unique.iter().zip(extents) {
             let index = found.map(|(base, extent, orbit)| {
-                drawn.push((key, base, extent, orbit));
+                drawn.push((key, base, extent, orbit, subpixel[turn_of(&key)].as_ref()));
                 first + drawn.len() as u32 - 1
             });
             unique_index.push(index);
@@ -1109,7 +1124,7 @@ impl SmearedPsfs {
             .collect();
         let boxes: Vec<_> = drawn
             .iter()
-            .map(|(_, _, e, _)| (e.origin, e.width, e.height))
+            .map(|(_, _, e, _, _)| (e.origin, e.width, e.height))
             .collect();
         let not_built = |e: psf_db::DbError| ClassifyError::PhysicalLens(e.to_string());
         // Packed images first, each smeared into a box of its thread's that is reused, so
@@ -1134,7 +1149,7 @@ impl SmearedPsfs {
         let packed_orbits: Vec<OrbitImages> = orbits
             .par_iter()
             .map_init(SmearScratch::default, |scratch, members| {
-                let (key, base, extent, orbit) = drawn[members[0]];
+                let (key, base, extent, orbit, sub) = drawn[members[0]];
                 if !packable(base) {
                     return Ok((Vec::new(), Vec::new()));
                 }
@@ -1145,11 +1160,11 @@ impl SmearedPsfs {
                     })
                 };
                 let Some(orbit) = orbit else {
-                    let smeared = scratch.smear(base, key, extent);
+                    let smeared = scratch.smear(base, sub, key, extent);
                     let image = PackedImage::pack(extent.origin, extent.width, ch, smeared.values, smeared.rows);
                     return Ok((vec![image.ok_or_else(not_finite)?], vec![(members[0], 0, [false, false])]));
                 };
-                scratch.smear(base, orbit.canonical, orbit.extent);
+                scratch.smear(base, sub, orbit.canonical, orbit.extent);
                 let mut images = Vec::with_capacity(2);
                 let mut which = [None, None];
                 let mut slots = Vec::with_capacity(members.len());
@@ -1187,18 +1202,25 @@ impl SmearedPsfs {
         let extension = crate::dbset::extend_with_dense(all, &boxes).map_err(not_built)?;
         let database = extension
             .fill_within(|i, out, written| {
-                let (k, base, extent, orbit) = drawn[i];
+                let (k, base, extent, orbit, sub) = drawn[i];
                 if packable(base) {
                     written.fill([0, 0]);
                     return;
                 }
                 let Some(orbit) = orbit else {
                     let (length, angle, bend) = (k.length_px(), k.angle_rad(), k.bend_px());
-                    crate::motion_smear::smear_within(base, length, angle, bend, extent, out, written);
+                    match sub {
+                        Some(sub) => crate::motion_smear::smear_within_subpixel(
+                            sub, base, length, angle, bend, extent, out, written,
+                        ),
+                        None => crate::motion_smear::smear_within(
+                            base, length, angle, bend, extent, out, written,
+                        ),
+                    }
                     return;
                 };
                 let mut scratch = SmearScratch::default();
-                scratch.smear(base, orbit.canonical, orbit.extent);
+                scratch.smear(base, sub, orbit.canonical, orbit.extent);
                 let moved = scratch.moved(orbit.symmetry);
                 let ch = base.channels;
                 for (v, (&span, w)) in moved.rows.iter().zip(written.iter_mut()).enumerate() {
@@ -1255,7 +1277,13 @@ struct ScratchImage<'a> {
 
 impl SmearScratch {
     /// `base` smeared as `key` says into the box `extent`.
-    fn smear(&mut self, base: &PsfImage, key: SmearKey, extent: SmearExtent) -> ScratchImage<'_> {
+    fn smear(
+        &mut self,
+        base: &PsfImage,
+        sub: Option<&SubpixelPsf>,
+        key: SmearKey,
+        extent: SmearExtent,
+    ) -> ScratchImage<'_> {
         let len = extent.width * extent.height * base.channels;
         if self.values.len() < len {
             self.values.resize(len, 0.0);
@@ -1264,7 +1292,12 @@ impl SmearScratch {
         self.rows.resize(extent.height, [0, 0]);
         let (length, angle, bend) = (key.length_px(), key.angle_rad(), key.bend_px());
         let out = &mut self.values[..len];
-        crate::motion_smear::smear_within(base, length, angle, bend, extent, out, &mut self.rows);
+        match sub {
+            Some(sub) => crate::motion_smear::smear_within_subpixel(
+                sub, base, length, angle, bend, extent, out, &mut self.rows,
+            ),
+            None => crate::motion_smear::smear_within(base, length, angle, bend, extent, out, &mut self.rows),
+        }
         self.extent = Some(extent);
         self.channels = base.channels;
         ScratchImage {
