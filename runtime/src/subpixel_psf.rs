@@ -12,15 +12,18 @@
 //! with soft sides where the reference's are crisp (a CoC of 1.2 px: the variance across the
 //! streak grows by two fifths).
 //!
-//! For the thin lens with a round aperture `P` is known: the uniform disc of radius `r`,
-//! averaged over the CoC radii of the PSF's cell where the database is pre-filtered (as its
-//! rays draw them). Its box-filtered image is computed here at shifts of `1 / STEPS` px on each
+//! For the thin lens `P` is known: the aperture's outline (a disc, or a regular polygon of
+//! its blades inscribed in it, squeezed by an anamorphic ratio) scaled by the CoC radius `r`
+//! and filled uniformly, averaged over the CoC radii of the PSF's cell where the database is
+//! pre-filtered (as its rays draw them), and turned half a turn where the database's image
+//! is (in front of the focus plane). A point lies in the outline scaled by `r` where its
+//! gauge, the smallest scale whose outline holds it, is at most `r`. Its box-filtered image is computed here at shifts of `1 / STEPS` px on each
 //! axis, on a grid `STEPS` times finer than the pixel's (each fine cell's mass from
 //! `SUBSAMPLES^2` points), summed over each shifted pixel's fine cells. A model that departs
 //! from the database's own image at no shift by more than [`MAX_DEPARTURE`] (relative L1) is
 //! not used, nor are PSFs narrower than [`MIN_RADIUS_PX`], whose exact smear is the staircase
 //! of a point sample (the bilinear line stands in for a reconstruction filter there), nor
-//! other apertures and models.
+//! user-drawn apertures and other models.
 
 use psf_db::{PsfDatabase, PsfModel};
 
@@ -39,7 +42,7 @@ const RADII: usize = 16;
 pub const MIN_RADIUS_PX: f64 = 1.0;
 
 /// Largest relative L1 difference between the model at no shift and the database's image:
-/// the quick database's narrow cells depart by 0.05-0.3 %.
+/// the quick databases' narrow cells depart by 0.05-0.6 % (round, pentagonal, squeezed).
 pub const MAX_DEPARTURE: f64 = 0.02;
 
 /// A grey PSF's box-filtered images at `STEPS x STEPS` sub-pixel shifts, each over the PSF's box
@@ -58,14 +61,15 @@ pub struct SubpixelPsf {
 
 impl SubpixelPsf {
     /// The model of cell `cell` of the thin-lens database `db`, whose image (trimmed, as
-    /// [`crate::motion_smear::psf_image`] gives it) is `base`; `None` where the model does
-    /// not apply or departs from `base` (module documentation).
-    pub fn of_cell(db: &PsfDatabase, cell: u32, base: &PsfImage) -> Option<Self> {
+    /// [`crate::motion_smear::psf_image`] gives it, and turned half a turn where
+    /// `half_turn`) is `base`; `None` where the model does not apply or departs from `base`
+    /// (module documentation).
+    pub fn of_cell(db: &PsfDatabase, cell: u32, base: &PsfImage, half_turn: bool) -> Option<Self> {
         let header = db.header();
         let aperture = header.aperture;
-        let round = aperture.blades == 0 && aperture.ratio == 1.0 && aperture.image_hash == 0;
         if header.model != PsfModel::ThinLens
-            || !round
+            || aperture.image_hash != 0
+            || !(aperture.ratio.is_finite() && aperture.ratio >= 1.0)
             || base.channels != 1
             || base.width.min(base.height) >= NARROW_PSF_PX
         {
@@ -75,7 +79,8 @@ impl SubpixelPsf {
         if !radii.iter().all(|r| r.is_finite()) || radii.iter().copied().fold(f64::INFINITY, f64::min) < MIN_RADIUS_PX {
             return None;
         }
-        let model = Self::of_radii(&radii, base.origin, base.width, base.height);
+        let outline = Outline::of(aperture.blades, f64::from(aperture.rotation_rad), f64::from(aperture.ratio), half_turn);
+        let model = Self::of_outline(&radii, &outline, base.origin, base.width, base.height);
         let base_sum: f64 = base.data.iter().map(|&v| f64::from(v)).sum();
         if !(base_sum.is_finite() && base_sum > 0.0) {
             return None;
@@ -107,6 +112,12 @@ impl SubpixelPsf {
     /// (px) centred on the PSF centre, over the box of `width x height` pixels at `origin`
     /// grown by one pixel right and down.
     pub fn of_radii(radii: &[f64], origin: [i32; 2], width: usize, height: usize) -> Self {
+        Self::of_outline(radii, &Outline::of(0, 0.0, 1.0, false), origin, width, height)
+    }
+
+    /// [`SubpixelPsf::of_radii`] for the mean of `outline` scaled by each of `radii` and
+    /// filled uniformly.
+    pub fn of_outline(radii: &[f64], outline: &Outline, origin: [i32; 2], width: usize, height: usize) -> Self {
         let (w, h) = (width + 1, height + 1);
         // Pixel `k` covers offsets `[k - 1/2, k + 1/2)` from the centre; shifted by `a /
         // STEPS`, its window is `[k - 1/2 - a / STEPS, ...)`. The fine grid starts a pixel
@@ -116,16 +127,20 @@ impl SubpixelPsf {
         let y0 = f64::from(origin[1]) - 1.5;
         let fine = 1.0 / STEPS as f64;
         let sub = fine / SUBSAMPLES as f64;
-        // The disc mixture's density at distance `rho` from the centre.
+        // The mixture's density at a point of gauge `g`: that of the outlines scaled by the
+        // radii of at least `g`.
         let mut sorted: Vec<f64> = radii.to_vec();
         sorted.sort_by(f64::total_cmp);
-        let squared: Vec<f64> = sorted.iter().map(|r| r * r).collect();
-        // `above[k]`: the density of the discs `k..` (those reaching at least `sorted[k]`).
+        // `above[k]`: the density of the outlines `k..` (those reaching at least `sorted[k]`).
         let mut above = vec![0.0f64; sorted.len() + 1];
         for k in (0..sorted.len()).rev() {
-            above[k] = above[k + 1] + 1.0 / (std::f64::consts::PI * squared[k] * sorted.len() as f64);
+            let area = outline.area() * sorted[k] * sorted[k];
+            above[k] = above[k + 1] + 1.0 / (area * sorted.len() as f64);
         }
-        let density = |rho2: f64| -> f64 { above[squared.partition_point(|&r2| r2 < rho2)] };
+        let density = |p: [f64; 2]| -> f64 {
+            let g = outline.gauge(p);
+            above[sorted.partition_point(|&r| r < g)]
+        };
         // Summed-area table of the fine cells' masses, one row and column of zeros first.
         let stride = fw + 1;
         let mut table = vec![0.0f64; stride * (fh + 1)];
@@ -137,7 +152,7 @@ impl SubpixelPsf {
                     let y = y0 + j as f64 * fine + (sj as f64 + 0.5) * sub;
                     for si in 0..SUBSAMPLES {
                         let x = x0 + i as f64 * fine + (si as f64 + 0.5) * sub;
-                        mass += density(x * x + y * y);
+                        mass += density([x, y]);
                     }
                 }
                 row_sum += mass * sub * sub;
@@ -181,6 +196,66 @@ impl SubpixelPsf {
         let n = self.width * self.height;
         let at = (b * STEPS + a) * n;
         &self.values[at..at + n]
+    }
+}
+
+/// The outline of a thin-lens aperture of unit radius (its circumradius for a polygon), as
+/// the precompute samples it: `blades` vertices on the unit circle, the first at
+/// `rotation_rad` counter-clockwise from +x (y down), or the disc for fewer than three; x then
+/// divided by `ratio`; and turned half a turn where `half_turn`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Outline {
+    /// Each edge's outward normal (x, y down) over the polygon's apothem; empty for the disc.
+    normals: Vec<[f64; 2]>,
+    ratio: f64,
+    half_turn: bool,
+    /// Area of the outline at unit radius, squeezed.
+    area: f64,
+}
+
+impl Outline {
+    /// The outline of an aperture of `blades` blades turned `rotation_rad`, squeezed by
+    /// `ratio`, turned half a turn where `half_turn`.
+    pub fn of(blades: u32, rotation_rad: f64, ratio: f64, half_turn: bool) -> Self {
+        use std::f64::consts::PI;
+        let (normals, area) = if blades < 3 {
+            (Vec::new(), PI)
+        } else {
+            let n = f64::from(blades);
+            let step = 2.0 * PI / n;
+            let apothem = (0.5 * step).cos();
+            let normals = (0..blades)
+                .map(|k| {
+                    let (s, c) = (rotation_rad + (f64::from(k) + 0.5) * step).sin_cos();
+                    [c / apothem, -s / apothem]
+                })
+                .collect();
+            (normals, 0.5 * n * step.sin())
+        };
+        Outline {
+            normals,
+            ratio,
+            half_turn,
+            area: area / ratio,
+        }
+    }
+
+    /// Area at unit radius.
+    pub fn area(&self) -> f64 {
+        self.area
+    }
+
+    /// The smallest radius whose outline holds `p` (px from the centre).
+    pub fn gauge(&self, p: [f64; 2]) -> f64 {
+        let sign = if self.half_turn { -1.0 } else { 1.0 };
+        let q = [sign * p[0] * self.ratio, sign * p[1]];
+        if self.normals.is_empty() {
+            return q[0].hypot(q[1]);
+        }
+        self.normals
+            .iter()
+            .map(|n| q[0] * n[0] + q[1] * n[1])
+            .fold(0.0, f64::max)
     }
 }
 

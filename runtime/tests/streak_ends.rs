@@ -278,7 +278,7 @@ fn the_sub_pixel_disc_model_agrees_with_every_narrow_traced_psf() {
             continue;
         }
         assert!(
-            SubpixelPsf::of_cell(&db, cell, &base).is_some(),
+            SubpixelPsf::of_cell(&db, cell, &base, false).is_some(),
             "cell {cell} (CoC from {smallest:.2} px, {}x{} px): the model departs from it",
             base.width,
             base.height
@@ -289,4 +289,47 @@ fn the_sub_pixel_disc_model_agrees_with_every_narrow_traced_psf() {
         modelled >= 3,
         "only {modelled} narrow cells of CoC 1 px and more"
     );
+}
+
+/// The outline the sub-pixel model fills is the precompute's aperture: a point lies within the
+/// outline scaled by `r` exactly where the light tracer's aperture holds it over `r` (turned
+/// half a turn: the point reflected), for discs, rotated polygons and squeezed ones.
+#[test]
+fn the_sub_pixel_outline_is_the_precomputes_aperture() {
+    use precompute::aperture::{ApertureShape, LensAperture};
+    use spreadlet::subpixel_psf::Outline;
+    let mut state = 0x9e37_79b9_7f4a_7c15u64;
+    let mut uniform = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    };
+    for (blades, rotation) in [(0u32, 0.0f64), (5, 0.35), (6, 0.0), (9, 1.2)] {
+        for ratio in [1.0f64, 2.0] {
+            for half_turn in [false, true] {
+                let outline = Outline::of(blades, rotation, ratio, half_turn);
+                let aperture = LensAperture {
+                    shape: ApertureShape::from_blades(blades, rotation),
+                    ratio,
+                    mask: None,
+                };
+                for r in [1.3f64, 2.7] {
+                    for _ in 0..2000 {
+                        let p = [
+                            (2.0 * uniform() - 1.0) * 1.2 * r,
+                            (2.0 * uniform() - 1.0) * 1.2 * r,
+                        ];
+                        let g = outline.gauge(p);
+                        if (g - r).abs() < 1e-9 {
+                            continue;
+                        }
+                        let sign = if half_turn { -1.0 } else { 1.0 };
+                        let held = aperture.contains([sign * p[0] / r, sign * p[1] / r]);
+                        assert_eq!(g <= r, held, "{blades} blades at {rotation}, ratio {ratio}, turned {half_turn}: {p:?}");
+                    }
+                }
+            }
+        }
+    }
 }

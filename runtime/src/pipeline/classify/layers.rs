@@ -1025,7 +1025,15 @@ impl SmearedPsfs {
             .enumerate()
             .map(|(t, base)| match (thin_lens, base) {
                 (Some(thin), Some(base)) if canonical[t] == t => {
-                    SubpixelPsf::of_cell(thin, turned[t].0, base)
+                    let (cell, turn_step, turn_steps) = turned[t];
+                    // A thin-lens key is upright or turned half a turn (in front of the focus),
+                    // to the nearest of its turn's steps.
+                    let angle = crate::motion_smear::turn_rad(turn_step, turn_steps);
+                    let step = std::f32::consts::TAU / turn_steps.max(1) as f32;
+                    let half_turn = (angle - std::f32::consts::PI).abs() < step;
+                    (turn_step == 0 || half_turn)
+                        .then(|| SubpixelPsf::of_cell(thin, cell, base, half_turn))
+                        .flatten()
                 }
                 _ => None,
             })
