@@ -63,6 +63,12 @@ pub const ALBEDO_SIGMA: f32 = 0.1;
 /// Neighbours farther than this many standard deviations (weight under 0.044) are left out.
 const CUTOFF_SIGMAS: f32 = 2.5;
 
+/// A neighbour whose weight's exponent (distance, guides and shading together) exceeds this
+/// weighs nothing (`e^-12`, six millionths). The exponent is cut there before it is
+/// exponentiated: far beyond it `expf` takes its slow underflow path (cut, a car driving at
+/// the camera reconstructs from 4 spp 6 % faster, to the same bytes).
+const WEIGHT_EXPONENT_CUT: f32 = 12.0;
+
 /// A neighbour's illumination counts at most this many times the mean round a sample without
 /// its brightest neighbour (luminance), in the filter's second pass.
 pub const FIREFLY_FACTOR: f32 = 8.0;
@@ -202,9 +208,10 @@ pub fn denoise_samples(
                 }
                 let (guides, cosine) = guide_terms(mi, mj, inv_depth);
                 let exponent = d2 * inv_two_var + guides;
-                let weight = (-exponent).exp() * cosine.powi(NORMAL_POWER) * entry.count;
+                let weight =
+                    (-exponent.min(WEIGHT_EXPONENT_CUT)).exp() * cosine.powi(NORMAL_POWER) * entry.count;
                 let keep = (cosine > 0.0)
-                    & (exponent <= 12.0)
+                    & (exponent <= WEIGHT_EXPONENT_CUT)
                     & (weight > 0.0)
                     & weight.is_finite();
                 out[kept] = (weight, entry.luminance, mj.illumination);
@@ -516,15 +523,17 @@ fn widen(
                     let shading = d * d / (2.0 * (NOISE_TOLERANCE * sigma).powi(2) + 1e-12);
                     let (guides, cosine) = guide_terms(&me.at, &other.at, inv_depth);
                     let exponent = shading + guides;
-                    let weight =
-                        tent * other.count * (-exponent).exp() * cosine.powi(NORMAL_POWER);
+                    let weight = tent
+                        * other.count
+                        * (-exponent.min(WEIGHT_EXPONENT_CUT)).exp()
+                        * cosine.powi(NORMAL_POWER);
                     // One test of every condition, without a branch for each: which of them
                     // fails is data (noise), and its mispredictions cost more than the
                     // arithmetic they skipped.
                     let keep = other.lit
                         & (cosine > 0.0)
                         & (shading <= 12.0)
-                        & (exponent <= 12.0)
+                        & (exponent <= WEIGHT_EXPONENT_CUT)
                         & (weight > 0.0)
                         & weight.is_finite();
                     for (acc, e) in sum.iter_mut().zip(other.at.illumination) {
@@ -640,11 +649,14 @@ fn spread_excess(
                 let first = target_starts[cell];
                 for (o, other) in nodes[first..target_starts[cell + 1]].iter().enumerate() {
                     let (guides, cosine) = guide_terms(&me.at, &other.at, inv_depth);
-                    let weight = tent * other.count * (-guides).exp() * cosine.powi(NORMAL_POWER);
+                    let weight = tent
+                        * other.count
+                        * (-guides.min(WEIGHT_EXPONENT_CUT)).exp()
+                        * cosine.powi(NORMAL_POWER);
                     // One test of every condition, as in the widening passes.
                     let keep = other.lit
                         & (cosine > 0.0)
-                        & (guides <= 12.0)
+                        & (guides <= WEIGHT_EXPONENT_CUT)
                         & (weight > 0.0)
                         & weight.is_finite();
                     for (acc, e) in sum.iter_mut().zip(excess[first + o]) {
