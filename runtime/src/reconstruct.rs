@@ -257,9 +257,20 @@ fn moved_samples_of(
             let coc = lens.map_or(0.0, |l| l.signed_coc_px(f64::from(s.depth)) as f32);
             let mut motion = if effects.motion { s.motion } else { [0.0; 2] };
             // A surface nearing or leaving the camera speeds up or slows down on screen.
-            let nearing = depth_motion
-                .as_ref()
-                .and_then(|d| d.nearing(pixel, s.depth, motion));
+            // Read where the surface point lies at the shutter centre (along a straight path):
+            // at its own pixel a sample from late in the shutter of a lamp driving at the
+            // camera lies where the road is at the frame time, whose fit is not the lamp's.
+            let centre_pixel = {
+                let cx = px + 0.5 + s.jitter[0] - coc * s.lens[0] - motion[0] * s.time;
+                let cy = py + 0.5 + s.jitter[1] - coc * s.lens[1] - motion[1] * s.time;
+                let inside = cx >= 0.0 && cy >= 0.0 && (cx as usize) < frames.width && (cy as usize) < frames.height;
+                inside.then(|| cy as usize * frames.width + cx as usize)
+            };
+            let nearing = depth_motion.as_ref().and_then(|d| {
+                centre_pixel
+                    .and_then(|c| d.nearing(c, s.depth, motion))
+                    .or_else(|| d.nearing(pixel, s.depth, motion))
+            });
             // Blender's labels are central differences over a frame each side: along a
             // nearing path, longer than the derivative.
             if let (Some(v), true) = (nearing, central_differences) {
@@ -306,6 +317,20 @@ fn moved_samples_of(
                 q = [q[0] + shift * a[0], q[1] + shift * a[1]];
                 motion = [motion[0] - t * a[0], motion[1] - t * a[1]];
             }
+            // A light nearing or leaving the camera widens or narrows along its streak, its
+            // CoC following its depth: drawn over the whole path at its own time's CoC, a
+            // lamp driving at the camera came out one width, where the reference's streak
+            // doubles. Such a sample draws the stratum of the path its time falls in instead,
+            // along the straight path its nearing gives (a bend read from the motion field
+            // there is the lamp's expansion seen across the road's and the body's motions).
+            if let (Some(v), Some(a), true) = (nearing, along, light) {
+                let coc_at = |z: f32| lens.map_or(0.0, |l| l.signed_coc_px(f64::from(z)) as f32);
+                let stratum = LightStratum::of(s.time, s.depth, v, shutter, coc_at);
+                if stratum.count > 1 {
+                    (q, motion) = stratum.segment(q, motion, a, shutter);
+                    bend = 0.0;
+                }
+            }
             // Along a bent path `p(t) = p0 + t m0 + t^2 a / 2` the label holds the motion at
             // the sample's own time, `m(t) = m0 + t a`: so `p0 = p(t) - t m(t) + t^2 a / 2`,
             // and the motion at the shutter centre is `m(t) - t a`.
@@ -318,6 +343,10 @@ fn moved_samples_of(
                     motion = [motion[0] - t * a[0], motion[1] - t * a[1]];
                 }
             }
+            // A light nearing or leaving the camera widens or narrows along its streak, its
+            // CoC following its depth: drawn over the whole path at its own time's CoC, a
+            // lamp driving at the camera came out one width, where the reference's streak
+            // doubles. Such a sample draws the stratum of the path its time falls in instead.
             Some(MovedSample {
                 q,
                 coc,
@@ -327,6 +356,72 @@ fn moved_samples_of(
             })
         })
         .collect()
+}
+
+/// Largest change of a light's CoC radius (px) along the part of its streak one of its samples
+/// draws ([`LightStratum`]).
+pub const LIGHT_STRATUM_COC_PX: f32 = 0.5;
+
+/// Most parts a light's streak is cut into ([`LightStratum`]).
+pub const MAX_LIGHT_STRATA: u32 = 8;
+
+/// The part of a nearing light's path over the shutter that one of its samples draws: the
+/// shutter cut into `count` equal strata, so that the light's CoC changes by at most
+/// [`LIGHT_STRATUM_COC_PX`] along each, and the one the sample's time falls in. Over a
+/// stratum's samples (their times uniform within it) each part of the path is drawn by the
+/// samples of its own time, at their own depth, so the streak widens as the light nears; its
+/// light stays where it was (each sample's over its part, the parts covering the path once).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LightStratum {
+    /// Number of strata, at least 1 (1: the whole path).
+    pub count: u32,
+    /// The sample's stratum, `0..count`.
+    pub index: u32,
+}
+
+impl LightStratum {
+    /// The stratum of a light's sample at time `t` (frames from the shutter centre) and depth
+    /// `depth`, nearing at `v` scene units per frame (its depth at time `tau` is `depth + v
+    /// (tau - t)`), over a shutter of `shutter` frames, where `coc_at` gives the signed CoC
+    /// radius (px) at a depth.
+    pub fn of(t: f32, depth: f32, v: f32, shutter: f32, coc_at: impl Fn(f32) -> f32) -> Self {
+        let at = |tau: f32| depth + v * (tau - t);
+        let (start, end) = (at(-0.5 * shutter), at(0.5 * shutter));
+        let whole = LightStratum { count: 1, index: 0 };
+        if !(start > 0.0 && end > 0.0 && shutter > 0.0 && t.is_finite()) {
+            return whole;
+        }
+        let change = (coc_at(end) - coc_at(start)).abs();
+        if !change.is_finite() {
+            return whole;
+        }
+        let count = ((change / LIGHT_STRATUM_COC_PX).ceil() as u32).clamp(1, MAX_LIGHT_STRATA);
+        let index = (((t / shutter + 0.5) * count as f32).floor().max(0.0) as u32).min(count - 1);
+        LightStratum { count, index }
+    }
+
+    /// The sample's part of the path `p(tau) = p0 + tau m0 + tau^2 a / 2` over the shutter
+    /// (`tau` in frames from its centre), given the path's middle `q` (`p0 + a S^2 / 8`, the
+    /// midpoint of its ends) and `m0`, px and px per frame: the part's midpoint, and the motion
+    /// (px per frame) that draws it over the shutter.
+    pub fn segment(&self, q: [f32; 2], m0: [f32; 2], a: [f32; 2], shutter: f32) -> ([f32; 2], [f32; 2]) {
+        if self.count <= 1 {
+            return (q, m0);
+        }
+        let s = shutter;
+        let p0 = [q[0] - 0.125 * s * s * a[0], q[1] - 0.125 * s * s * a[1]];
+        let p = |tau: f32| {
+            let h = 0.5 * tau * tau;
+            [p0[0] + tau * m0[0] + h * a[0], p0[1] + tau * m0[1] + h * a[1]]
+        };
+        let width = s / self.count as f32;
+        let tau0 = -0.5 * s + self.index as f32 * width;
+        let (from, to) = (p(tau0), p(tau0 + width));
+        (
+            [0.5 * (from[0] + to[0]), 0.5 * (from[1] + to[1])],
+            [(to[0] - from[0]) / s, (to[1] - from[1]) / s],
+        )
+    }
 }
 
 /// Whether the frames come from Blender's pinhole sub-renders
@@ -1002,6 +1097,42 @@ mod tests {
     /// The sharpened split keeps the bilinear split's sum and, over a pixel's uniformly
     /// jittered samples, its mean position, with half its spread; a quarter pixel from a
     /// centre it is that pixel alone.
+    /// A nearing light's strata: as many as its CoC's change over the shutter asks for, each
+    /// sample in the one its time falls in, and the strata's segments laid end to end along
+    /// the path from where it starts to where it ends.
+    #[test]
+    fn a_nearing_lights_strata_cover_its_path_once() {
+        // CoC radius 2 px per scene unit nearer than 3: from 4 px to 7 px over the shutter.
+        let coc_at = |z: f32| 2.0 * (3.0 - z);
+        // Nearing 1.5 scene units a frame: its depth from 1.755 to 0.255 over the shutter.
+        let (v, shutter) = (-1.5f32, 1.0f32);
+        let first = LightStratum::of(-0.5, 1.755, v, shutter, coc_at);
+        assert_eq!(first, LightStratum { count: 6, index: 0 });
+        let last = LightStratum::of(0.49, 0.27, v, shutter, coc_at);
+        assert_eq!(last, LightStratum { count: 6, index: 5 });
+        // No change of depth: the whole path.
+        assert_eq!(LightStratum::of(0.2, 1.0, 0.0, shutter, coc_at), LightStratum { count: 1, index: 0 });
+        // A CoC that changes by 20 px: no more than the most strata.
+        assert_eq!(LightStratum::of(0.0, 1.0, -1.0, shutter, |z: f32| 10.0 / z).count, MAX_LIGHT_STRATA);
+        // A depth that would reach the camera within the shutter: the whole path.
+        assert_eq!(LightStratum::of(0.0, 0.4, -1.0, shutter, coc_at).count, 1);
+        let (m0, a) = ([12.0f32, -5.0], [3.0f32, 2.0]);
+        let p = |tau: f32| [tau * m0[0] + 0.5 * tau * tau * a[0], tau * m0[1] + 0.5 * tau * tau * a[1]];
+        let middle = [0.125 * a[0], 0.125 * a[1]];
+        let mut end = p(-0.5);
+        for index in 0..6 {
+            let (q, m) = LightStratum { count: 6, index }.segment(middle, m0, a, shutter);
+            let (from, to) = ([q[0] - 0.5 * m[0], q[1] - 0.5 * m[1]], [q[0] + 0.5 * m[0], q[1] + 0.5 * m[1]]);
+            for c in 0..2 {
+                assert!((from[c] - end[c]).abs() < 1e-4, "stratum {index} starts at {from:?}, not {end:?}");
+            }
+            end = to;
+        }
+        for c in 0..2 {
+            assert!((end[c] - p(0.5)[c]).abs() < 1e-4, "the last stratum ends at {end:?}");
+        }
+    }
+
     #[test]
     fn the_sharpened_split_keeps_the_mean_position_and_halves_the_spread() {
         assert_eq!(sharpened_share(0.0), 0.0);
