@@ -257,20 +257,9 @@ fn moved_samples_of(
             let coc = lens.map_or(0.0, |l| l.signed_coc_px(f64::from(s.depth)) as f32);
             let mut motion = if effects.motion { s.motion } else { [0.0; 2] };
             // A surface nearing or leaving the camera speeds up or slows down on screen.
-            // Read where the surface point lies at the shutter centre (along a straight path):
-            // at its own pixel a sample from late in the shutter of a lamp driving at the
-            // camera lies where the road is at the frame time, whose fit is not the lamp's.
-            let centre_pixel = {
-                let cx = px + 0.5 + s.jitter[0] - coc * s.lens[0] - motion[0] * s.time;
-                let cy = py + 0.5 + s.jitter[1] - coc * s.lens[1] - motion[1] * s.time;
-                let inside = cx >= 0.0 && cy >= 0.0 && (cx as usize) < frames.width && (cy as usize) < frames.height;
-                inside.then(|| cy as usize * frames.width + cx as usize)
-            };
-            let nearing = depth_motion.as_ref().and_then(|d| {
-                centre_pixel
-                    .and_then(|c| d.nearing(c, s.depth, motion))
-                    .or_else(|| d.nearing(pixel, s.depth, motion))
-            });
+            let nearing = depth_motion
+                .as_ref()
+                .and_then(|d| d.nearing(pixel, s.depth, motion));
             // Blender's labels are central differences over a frame each side: along a
             // nearing path, longer than the derivative.
             if let (Some(v), true) = (nearing, central_differences) {

@@ -40,7 +40,7 @@ fn a_nearing_lamps_streaks_end_where_the_lamps_were() {
     // Moved back as if the car's path were even: RMS 0.257, 173 pixels off by over a
     // quarter (1,082 pixels at white in either); along the path that speeds up: 0.088, 33
     // (0.076, 30 since); each lamp sample drawing the stratum of the path its time falls in,
-    // at that time's width, so that the streak widens as the lamp nears: 0.060, 17.
+    // at that time's width, so that the streak widens as the lamp nears: 0.058, 17.
     assert!(
         rms < 0.068 && wrong < 24,
         "the lamps' streaks: RMS {rms:.4}, {wrong} pixels off by over 0.25"
