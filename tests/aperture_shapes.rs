@@ -214,15 +214,17 @@ fn a_drawn_aperture_is_upright_behind_the_focus_and_turned_in_front() {
 }
 
 /// The model a narrow thin-lens PSF is smeared from at sub-pixel shifts agrees with the
-/// light-traced database of a rotated pentagon and of a squeezed disc, upright and turned
-/// half a turn, in every narrow cell of CoC 1 px and more.
+/// light-traced database (the precompute's rays, binned per pixel) of a round aperture, a
+/// rotated pentagon and a squeezed disc, upright and turned half a turn, in every narrow cell
+/// of CoC 1 px and more: a streak's sides are drawn from the PSF the database holds.
 #[test]
-fn the_sub_pixel_model_agrees_with_polygonal_and_squeezed_databases() {
+fn the_sub_pixel_model_agrees_with_round_polygonal_and_squeezed_databases() {
     use psf_db::PsfModel;
     use spreadlet::dbcache::{build_config, cached_database};
     use spreadlet::motion_smear::{psf_image, turn, NARROW_PSF_PX};
     use spreadlet::subpixel_psf::{SubpixelPsf, MIN_RADIUS_PX};
     for extra in [
+        "",
         r#", "aperture_blades": 5, "aperture_rotation_deg": 20"#,
         r#", "aperture_ratio": 2.0"#,
     ] {

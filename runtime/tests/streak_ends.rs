@@ -259,38 +259,6 @@ fn streaks_beyond_the_frames_budget_are_drawn_at_a_reduced_resolution() {
     );
 }
 
-/// The disc model a narrow thin-lens PSF is smeared from at sub-pixel shifts agrees with the
-/// light-traced database's own image of every such cell (the precompute's rays, binned per
-/// pixel), so that a streak's sides are drawn from the PSF the database holds.
-#[test]
-fn the_sub_pixel_disc_model_agrees_with_every_narrow_traced_psf() {
-    use spreadlet::motion_smear::{psf_image, NARROW_PSF_PX};
-    use spreadlet::subpixel_psf::{SubpixelPsf, MIN_RADIUS_PX};
-    let db = quick_db(PsfModel::ThinLens);
-    let space = db.space();
-    let mut modelled = 0;
-    for cell in 0..space.psf_count() {
-        let Some(base) = psf_image(&db, cell as usize) else {
-            continue;
-        };
-        let smallest = space.cell_box(cell).expect("cell").min[0];
-        if base.width.min(base.height) >= NARROW_PSF_PX || smallest < MIN_RADIUS_PX {
-            continue;
-        }
-        assert!(
-            SubpixelPsf::of_cell(&db, cell, &base, false).is_some(),
-            "cell {cell} (CoC from {smallest:.2} px, {}x{} px): the model departs from it",
-            base.width,
-            base.height
-        );
-        modelled += 1;
-    }
-    assert!(
-        modelled >= 3,
-        "only {modelled} narrow cells of CoC 1 px and more"
-    );
-}
-
 /// The outline the sub-pixel model fills is the precompute's aperture: a point lies within the
 /// outline scaled by `r` exactly where the light tracer's aperture holds it over `r` (turned
 /// half a turn: the point reflected), for discs, rotated polygons and squeezed ones.
