@@ -818,7 +818,13 @@ pub fn smear_within(
 /// each tap's shift in the smeared box's pixels (the box grown by `grow` px beyond the lens
 /// PSF's on each side), and the share of the PSF's light each carries; `taps_per_px` along
 /// the path.
-fn tap_shifts(length: f32, angle: f32, bend: f32, grow: [i32; 2], taps_per_px: f32) -> (Vec<[f32; 2]>, f32) {
+fn tap_shifts(
+    length: f32,
+    angle: f32,
+    bend: f32,
+    grow: [i32; 2],
+    taps_per_px: f32,
+) -> (Vec<[f32; 2]>, f32) {
     let (dx, dy) = (angle.cos(), angle.sin());
     let [grow_x, grow_y] = grow;
     let taps = ((length * taps_per_px).ceil() as usize + 1).max(1);
@@ -1361,14 +1367,16 @@ mod tests {
             let (mut bilinear, mut rows) = (vec![0f32; n], vec![[0u16; 2]; extent.height]);
             smear_within(&base, length, angle, 0.0, extent, &mut bilinear, &mut rows);
             let (mut shifted, mut rows_shifted) = (vec![0f32; n], vec![[0u16; 2]; extent.height]);
-            smear_within_subpixel(&sub, &base, length, angle, 0.0, extent, &mut shifted, &mut rows_shifted);
+            let out = (&mut shifted, &mut rows_shifted);
+            smear_within_subpixel(&sub, &base, length, angle, 0.0, extent, out.0, out.1);
             // The exact streak: a point's density is the share of the path within r of it.
             let (dx, dy) = (f64::from(angle).cos(), f64::from(angle).sin());
             let half = 0.5 * f64::from(length);
             let m = 24;
             let exact: Vec<f64> = (0..n)
                 .map(|i| {
-                    let (x, y) = ((i % extent.width) as i32 + extent.origin[0], (i / extent.width) as i32 + extent.origin[1]);
+                    let x = (i % extent.width) as i32 + extent.origin[0];
+                    let y = (i / extent.width) as i32 + extent.origin[1];
                     let mut share = 0.0;
                     for j in 0..m {
                         for k in 0..m {
@@ -1379,7 +1387,8 @@ mod tests {
                             let across2 = px * px + py * py - along * along;
                             if across2 <= r * r {
                                 let reach = (r * r - across2).sqrt();
-                                let (t0, t1) = ((along - reach).max(-half), (along + reach).min(half));
+                                let t0 = (along - reach).max(-half);
+                                let t1 = (along + reach).min(half);
                                 share += (t1 - t0).max(0.0);
                             }
                         }
@@ -1388,13 +1397,17 @@ mod tests {
                 })
                 .collect();
             let rms = |image: &[f32]| {
-                let s: f64 = image.iter().zip(&exact).map(|(&a, &b)| (f64::from(a) - b).powi(2)).sum();
+                let squares = image.iter().zip(&exact).map(|(&a, &b)| (f64::from(a) - b).powi(2));
+                let s: f64 = squares.sum();
                 (s / n as f64).sqrt()
             };
             let sum = |image: &[f32]| image.iter().map(|&v| f64::from(v)).sum::<f64>();
             assert!((sum(&shifted) - sum(&bilinear)).abs() < 1e-4, "L {length}: light");
             let (ours, theirs) = (rms(&shifted), rms(&bilinear));
-            assert!(ours < 0.25 * theirs, "L {length}, angle {angle}: rms {ours} against bilinear {theirs}");
+            assert!(
+                ours < 0.25 * theirs,
+                "L {length}, angle {angle}: rms {ours} against bilinear {theirs}"
+            );
             // Rows outside their written columns hold zeros.
             for (row, span) in shifted.chunks(extent.width).zip(&rows_shifted) {
                 for (x, &v) in row.iter().enumerate() {

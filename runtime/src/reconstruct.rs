@@ -332,10 +332,6 @@ fn moved_samples_of(
                     motion = [motion[0] - t * a[0], motion[1] - t * a[1]];
                 }
             }
-            // A light nearing or leaving the camera widens or narrows along its streak, its
-            // CoC following its depth: drawn over the whole path at its own time's CoC, a
-            // lamp driving at the camera came out one width, where the reference's streak
-            // doubles. Such a sample draws the stratum of the path its time falls in instead.
             Some(MovedSample {
                 q,
                 coc,
@@ -1083,9 +1079,6 @@ mod tests {
         .expect("camera")
     }
 
-    /// The sharpened split keeps the bilinear split's sum and, over a pixel's uniformly
-    /// jittered samples, its mean position, with half its spread; a quarter pixel from a
-    /// centre it is that pixel alone.
     /// A nearing light's strata: as many as its CoC's change over the shutter asks for, each
     /// sample in the one its time falls in, and the strata's segments laid end to end along
     /// the path from where it starts to where it ends.
@@ -1122,6 +1115,9 @@ mod tests {
         }
     }
 
+    /// The sharpened split keeps the bilinear split's sum and, over a pixel's uniformly
+    /// jittered samples, its mean position, with half its spread; a quarter pixel from a
+    /// centre it is that pixel alone.
     #[test]
     fn the_sharpened_split_keeps_the_mean_position_and_halves_the_spread() {
         assert_eq!(sharpened_share(0.0), 0.0);

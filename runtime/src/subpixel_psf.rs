@@ -17,9 +17,10 @@
 //! and filled uniformly, averaged over the CoC radii of the PSF's cell where the database is
 //! pre-filtered (as its rays draw them), and turned half a turn where the database's image
 //! is (in front of the focus plane). A point lies in the outline scaled by `r` where its
-//! gauge, the smallest scale whose outline holds it, is at most `r`. Its box-filtered image is computed here at shifts of `1 / STEPS` px on each
-//! axis, on a grid `STEPS` times finer than the pixel's (each fine cell's mass from
-//! `SUBSAMPLES^2` points), summed over each shifted pixel's fine cells. A model that departs
+//! gauge, the smallest scale whose outline holds it, is at most `r`. Its box-filtered image
+//! is computed here at shifts of `1 / STEPS` px on each axis, on a grid `STEPS` times finer
+//! than the pixel's (each fine cell's mass from `SUBSAMPLES^2` points), summed over each
+//! shifted pixel's fine cells. A model that departs
 //! from the database's own image at no shift by more than [`MAX_DEPARTURE`] (relative L1) is
 //! not used, nor are PSFs narrower than [`MIN_RADIUS_PX`], whose exact smear is the staircase
 //! of a point sample (the bilinear line stands in for a reconstruction filter there), nor
@@ -76,10 +77,17 @@ impl SubpixelPsf {
             return None;
         }
         let radii = cell_radii(db, cell)?;
-        if !radii.iter().all(|r| r.is_finite()) || radii.iter().copied().fold(f64::INFINITY, f64::min) < MIN_RADIUS_PX {
+        if !radii.iter().all(|r| r.is_finite())
+            || radii.iter().copied().fold(f64::INFINITY, f64::min) < MIN_RADIUS_PX
+        {
             return None;
         }
-        let outline = Outline::of(aperture.blades, f64::from(aperture.rotation_rad), f64::from(aperture.ratio), half_turn);
+        let outline = Outline::of(
+            aperture.blades,
+            f64::from(aperture.rotation_rad),
+            f64::from(aperture.ratio),
+            half_turn,
+        );
         let model = Self::of_outline(&radii, &outline, base.origin, base.width, base.height);
         let base_sum: f64 = base.data.iter().map(|&v| f64::from(v)).sum();
         if !(base_sum.is_finite() && base_sum > 0.0) {
@@ -112,12 +120,24 @@ impl SubpixelPsf {
     /// (px) centred on the PSF centre, over the box of `width x height` pixels at `origin`
     /// grown by one pixel right and down.
     pub fn of_radii(radii: &[f64], origin: [i32; 2], width: usize, height: usize) -> Self {
-        Self::of_outline(radii, &Outline::of(0, 0.0, 1.0, false), origin, width, height)
+        Self::of_outline(
+            radii,
+            &Outline::of(0, 0.0, 1.0, false),
+            origin,
+            width,
+            height,
+        )
     }
 
     /// [`SubpixelPsf::of_radii`] for the mean of `outline` scaled by each of `radii` and
     /// filled uniformly.
-    pub fn of_outline(radii: &[f64], outline: &Outline, origin: [i32; 2], width: usize, height: usize) -> Self {
+    pub fn of_outline(
+        radii: &[f64],
+        outline: &Outline,
+        origin: [i32; 2],
+        width: usize,
+        height: usize,
+    ) -> Self {
         let (w, h) = (width + 1, height + 1);
         // Pixel `k` covers offsets `[k - 1/2, k + 1/2)` from the centre; shifted by `a /
         // STEPS`, its window is `[k - 1/2 - a / STEPS, ...)`. The fine grid starts a pixel
@@ -311,7 +331,10 @@ mod tests {
                     let (px, py) = (x as i32 + sub.origin[0], y as i32 + sub.origin[1]);
                     let want = box_filtered_disc(r, centre, px, py, 128);
                     let got = f64::from(image[y * sub.width + x]);
-                    assert!((got - want).abs() < 4e-3, "shift ({a}, {b}), pixel ({px}, {py}): {got} vs {want}");
+                    assert!(
+                        (got - want).abs() < 4e-3,
+                        "shift ({a}, {b}), pixel ({px}, {py}): {got} vs {want}"
+                    );
                 }
             }
         }
@@ -323,9 +346,14 @@ mod tests {
         let sub = SubpixelPsf::of_radii(&[1.2, 2.4], [-3, -3], 7, 7);
         let image = sub.shifted(0, 0);
         for (x, y) in [(0, 0), (1, 0), (2, 1), (3, 0)] {
-            let want = 0.5 * (box_filtered_disc(1.2, [0.0; 2], x, y, 128) + box_filtered_disc(2.4, [0.0; 2], x, y, 128));
+            let want = 0.5
+                * (box_filtered_disc(1.2, [0.0; 2], x, y, 128)
+                    + box_filtered_disc(2.4, [0.0; 2], x, y, 128));
             let got = f64::from(image[(y + 3) as usize * sub.width + (x + 3) as usize]);
-            assert!((got - want).abs() < 4e-3, "pixel ({x}, {y}): {got} vs {want}");
+            assert!(
+                (got - want).abs() < 4e-3,
+                "pixel ({x}, {y}): {got} vs {want}"
+            );
         }
     }
 }
