@@ -869,6 +869,25 @@ fn tap_shifts(
     (shifts, share)
 }
 
+/// `psf` smeared along `key`'s path into `out` as [`smear_within`] does, from its images at
+/// sub-pixel shifts where `sub` holds them ([`smear_within_subpixel`]).
+pub fn smear_key_within(
+    psf: &PsfImage,
+    sub: Option<&SubpixelPsf>,
+    key: SmearKey,
+    extent: SmearExtent,
+    out: &mut [f32],
+    written: &mut [[u16; 2]],
+) {
+    let (length, angle, bend) = (key.length_px(), key.angle_rad(), key.bend_px());
+    match sub {
+        Some(sub) => {
+            smear_within_subpixel(sub, psf, length, angle, bend, extent, out, written)
+        }
+        None => smear_within(psf, length, angle, bend, extent, out, written),
+    }
+}
+
 /// [`smear_within`] for a narrow PSF whose box-filtered images at sub-pixel shifts are known
 /// (`sub`, of `psf`): each tap adds the image at its shift rounded to `1 / STEPS` px, where
 /// bilinear weights would draw the PSF widened by a second pixel box

@@ -1216,15 +1216,7 @@ impl SmearedPsfs {
                     return;
                 }
                 let Some(orbit) = orbit else {
-                    let (length, angle, bend) = (k.length_px(), k.angle_rad(), k.bend_px());
-                    match sub {
-                        Some(sub) => crate::motion_smear::smear_within_subpixel(
-                            sub, base, length, angle, bend, extent, out, written,
-                        ),
-                        None => crate::motion_smear::smear_within(
-                            base, length, angle, bend, extent, out, written,
-                        ),
-                    }
+                    crate::motion_smear::smear_key_within(base, sub, k, extent, out, written);
                     return;
                 };
                 let mut scratch = SmearScratch::default();
@@ -1298,14 +1290,8 @@ impl SmearScratch {
         }
         self.rows.clear();
         self.rows.resize(extent.height, [0, 0]);
-        let (length, angle, bend) = (key.length_px(), key.angle_rad(), key.bend_px());
         let out = &mut self.values[..len];
-        match sub {
-            Some(sub) => crate::motion_smear::smear_within_subpixel(
-                sub, base, length, angle, bend, extent, out, &mut self.rows,
-            ),
-            None => crate::motion_smear::smear_within(base, length, angle, bend, extent, out, &mut self.rows),
-        }
+        crate::motion_smear::smear_key_within(base, sub, key, extent, out, &mut self.rows);
         self.extent = Some(extent);
         self.channels = base.channels;
         ScratchImage {
