@@ -882,20 +882,19 @@ pub fn smear_key_within(
     let (length, angle, bend) = (key.length_px(), key.angle_rad(), key.bend_px());
     match sub {
         Some(sub) => {
-            smear_within_subpixel(sub, psf, length, angle, bend, extent, out, written)
+            smear_within_subpixel(sub, length, angle, bend, extent, out, written)
         }
         None => smear_within(psf, length, angle, bend, extent, out, written),
     }
 }
 
 /// [`smear_within`] for a narrow PSF whose box-filtered images at sub-pixel shifts are known
-/// (`sub`, of `psf`): each tap adds the image at its shift rounded to `1 / STEPS` px, where
+/// (`sub`): each tap adds the image at its shift rounded to `1 / STEPS` px, where
 /// bilinear weights would draw the PSF widened by a second pixel box
-/// ([`crate::subpixel_psf`]). The same taps, box and rows as [`smear_within`].
-#[allow(clippy::too_many_arguments)]
+/// ([`crate::subpixel_psf`]). The same box and rows as [`smear_within`]; taps half a pixel
+/// apart.
 pub fn smear_within_subpixel(
     sub: &SubpixelPsf,
-    psf: &PsfImage,
     length: f32,
     angle: f32,
     bend: f32,
@@ -904,7 +903,6 @@ pub fn smear_within_subpixel(
     written: &mut [[u16; 2]],
 ) {
     let width = extent.width;
-    debug_assert_eq!(psf.channels, 1);
     debug_assert_eq!(out.len(), width * extent.height);
     debug_assert_eq!(written.len(), extent.height);
     // Each tap is the PSF at its own shift, so no bilinear beads: taps half a pixel apart
@@ -1387,7 +1385,7 @@ mod tests {
             smear_within(&base, length, angle, 0.0, extent, &mut bilinear, &mut rows);
             let (mut shifted, mut rows_shifted) = (vec![0f32; n], vec![[0u16; 2]; extent.height]);
             let out = (&mut shifted, &mut rows_shifted);
-            smear_within_subpixel(&sub, &base, length, angle, 0.0, extent, out.0, out.1);
+            smear_within_subpixel(&sub, length, angle, 0.0, extent, out.0, out.1);
             // The exact streak: a point's density is the share of the path within r of it.
             let (dx, dy) = (f64::from(angle).cos(), f64::from(angle).sin());
             let half = 0.5 * f64::from(length);
