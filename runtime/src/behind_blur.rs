@@ -123,7 +123,11 @@ pub fn fill_behind_blur(
         return;
     }
     let same = |a: f32, b: f32| (a - b).abs() <= SAME_SURFACE_PARALLAX * b.abs();
-    let sharp_at = |p: usize| by_pixel[starts[p]..starts[p + 1]].iter().map(|&i| &fragments[i as usize]);
+    let sharp_at = |p: usize| {
+        by_pixel[starts[p]..starts[p + 1]]
+            .iter()
+            .map(|&i| &fragments[i as usize])
+    };
     let has_sharp: Vec<bool> = (0..w * h).map(|p| starts[p] < starts[p + 1]).collect();
     let has_blur: Vec<bool> = blurred.iter().map(|b| b.share > 0.0).collect();
     // Pixels within the tent of a pixel that lost samples to blur (only there do weights
@@ -221,7 +225,12 @@ pub fn fill_behind_blur(
         }
     };
     // The tent's mean of the surface's weight round pixel (x, y) over its region.
-    let mean_weight = |x: i64, y: i64, parallax: f32, depth: f32, scratch: &mut Vec<(usize, f32)>| -> Option<f32> {
+    let mean_weight = |x: i64,
+                       y: i64,
+                       parallax: f32,
+                       depth: f32,
+                       scratch: &mut Vec<(usize, f32)>|
+     -> Option<f32> {
         taps(x, y, scratch);
         let (mut sum, mut norm) = (0.0f32, 0.0f32);
         for &(q, k) in scratch.iter() {
@@ -276,9 +285,15 @@ pub fn fill_behind_blur(
                     break;
                 }
             }
-            let surface = surfaces.iter().max_by(|a, b| a.weight.total_cmp(&b.weight))?;
+            let surface = surfaces
+                .iter()
+                .max_by(|a, b| a.weight.total_cmp(&b.weight))?;
             let parallax = surface.parallax();
-            let depth = if parallax > 0.0 { 1.0 / parallax } else { surface.heaviest.depth };
+            let depth = if parallax > 0.0 {
+                1.0 / parallax
+            } else {
+                surface.heaviest.depth
+            };
             // Only a pixel whose blurred samples are all nearer than the surface is its hole
             // (not one where the surface itself is blurred, its samples moved away).
             region_weight(p, parallax, depth)?;
@@ -400,8 +415,15 @@ mod tests {
         fill_behind_blur(&mut frags, w, h, 2, &blurred, |_| 0.0);
         let mut weight = vec![0.0f32; w * h];
         for f in &frags {
-            let off = f.color.iter().zip([0.3, 0.3, 0.3, 1.0]).map(|(a, b)| (a - b).abs());
-            assert!(off.fold(0.0, f32::max) < 1e-6, "a hole takes its neighbours' colour");
+            let off = f
+                .color
+                .iter()
+                .zip([0.3, 0.3, 0.3, 1.0])
+                .map(|(a, b)| (a - b).abs());
+            assert!(
+                off.fold(0.0, f32::max) < 1e-6,
+                "a hole takes its neighbours' colour"
+            );
             weight[f.y as usize * w + f.x as usize] += f.weight;
         }
         // Away from the frame's ends the tent (reach 6 along x) covers whole periods.
@@ -422,7 +444,9 @@ mod tests {
         // A sharp object at 2 over the left half, covering column 4 by half; a background
         // at 6 behind it blurred.
         let mut frags: Vec<Fragment> = (0..h as i32)
-            .flat_map(|y| (0..5).map(move |x| sharp(x, y, 2.0, 0.8, if x == 4 { 0.5 } else { 1.0 })))
+            .flat_map(|y| {
+                (0..5).map(move |x| sharp(x, y, 2.0, 0.8, if x == 4 { 0.5 } else { 1.0 }))
+            })
             .collect();
         let mut blurred = veil(w, h, 0.0, 0.0, [0.0; 2]);
         for y in 0..h {
@@ -453,11 +477,19 @@ mod tests {
         let blurred = veil(w, h, 0.4, 1.0, [0.0, 0.0]);
         let before = frags.clone();
         fill_behind_blur(&mut frags, w, h, 2, &blurred, |_| 0.0);
-        let column = |fs: &[Fragment]| -> Vec<f32> { fs.iter().filter(|f| f.x == 4).map(|f| f.weight).collect() };
-        assert_eq!(column(&frags), column(&before), "the edge's pixels keep their cover");
+        let column = |fs: &[Fragment]| -> Vec<f32> {
+            fs.iter().filter(|f| f.x == 4).map(|f| f.weight).collect()
+        };
+        assert_eq!(
+            column(&frags),
+            column(&before),
+            "the edge's pixels keep their cover"
+        );
 
         let mut frags = before.clone();
-        fill_behind_blur(&mut frags, w, h, 2, &veil(w, h, 0.0, 1.0, [0.0; 2]), |_| 0.0);
+        fill_behind_blur(&mut frags, w, h, 2, &veil(w, h, 0.0, 1.0, [0.0; 2]), |_| {
+            0.0
+        });
         assert_eq!(frags, before, "nothing blurred, nothing changes");
     }
 }

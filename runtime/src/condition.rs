@@ -393,7 +393,10 @@ mod tests {
             }
             let expected = point_by_point(coc, len, sub, rx, ry);
             assert!(data.iter().any(|&v| v > 0.0), "{coc} {len}");
-            let same = data.iter().zip(&expected).all(|(a, b)| a.to_bits() == b.to_bits());
+            let same = data
+                .iter()
+                .zip(&expected)
+                .all(|(a, b)| a.to_bits() == b.to_bits());
             assert!(same, "coc {coc} len {len} sub {sub}");
         }
     }

@@ -211,7 +211,9 @@ pub fn load(
                         other => other.to_string(),
                     };
                     let at = at.display();
-                    psf_db::DbError::Invalid(format!("{at}: {why} (move it away to draw without it)"))
+                    psf_db::DbError::Invalid(format!(
+                        "{at}: {why} (move it away to draw without it)"
+                    ))
                 })?
             } else {
                 DbSet::single(prepare(db)?)?

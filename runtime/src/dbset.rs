@@ -6,7 +6,7 @@
 //! pixels wide). The splat stage, CPU or GPU, sees one database: the thin-lens PSFs first, then
 //! the other database's, so a [`crate::pipeline::SplatRecord::psf_index`] addresses either.
 
-use psf_db::{DenseShape, DatabaseBuilder, DbError, DbHeader, ParamSpace, PsfDatabase, PsfModel};
+use psf_db::{DatabaseBuilder, DbError, DbHeader, DenseShape, ParamSpace, PsfDatabase, PsfModel};
 
 /// The databases of one synthesis.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -172,7 +172,10 @@ impl DbSet {
         }
         // The rotational averages of the physical-lens PSFs on the axis.
         let mut axis_round = vec![NO_TWIN; base];
-        if let Some(m) = main.as_ref().filter(|m| m.model() == PsfModel::PhysicalLens) {
+        if let Some(m) = main
+            .as_ref()
+            .filter(|m| m.model() == PsfModel::PhysicalLens)
+        {
             for (i, image) in round_on_axis(m, axis).into_iter().enumerate() {
                 if let Some(image) = image {
                     axis_round[main_offset as usize + i] = (base + twins.len()) as u32;
@@ -291,7 +294,10 @@ pub fn extend_with_dense(
 /// format's fields (u16 sizes, i16 origin).
 fn into_dense_image(img: crate::motion_smear::PsfImage) -> Option<DenseImage> {
     Some((
-        [i16::try_from(img.origin[0]).ok()?, i16::try_from(img.origin[1]).ok()?],
+        [
+            i16::try_from(img.origin[0]).ok()?,
+            i16::try_from(img.origin[1]).ok()?,
+        ],
         u16::try_from(img.width).ok()?,
         u16::try_from(img.height).ok()?,
         img.data,
@@ -415,7 +421,11 @@ fn premixed_blends(db: &PsfDatabase) -> Vec<[Option<Vec<DenseImage>>; 2]> {
             (1..=BLEND_STEPS)
                 .map(|k| {
                     let s = k as f32 / (2 * BLEND_STEPS) as f32;
-                    let data = pa.iter().zip(&pb).map(|(&p, &q)| (1.0 - s) * p + s * q).collect();
+                    let data = pa
+                        .iter()
+                        .zip(&pb)
+                        .map(|(&p, &q)| (1.0 - s) * p + s * q)
+                        .collect();
                     (origin, size.0, size.1, data)
                 })
                 .collect(),
@@ -655,9 +665,14 @@ mod tests {
         let mut pairs = 0;
         for (i, sides) in set.dense_blends.iter().enumerate() {
             for (side, &first) in sides.iter().enumerate() {
-                let j = if side == 0 { i.checked_sub(1) } else { Some(i + 1) };
+                let j = if side == 0 {
+                    i.checked_sub(1)
+                } else {
+                    Some(i + 1)
+                };
                 let j = j.filter(|&j| j < count);
-                let dense_pair = j.is_some_and(|j| all.dense(i).is_some() && all.dense(j).is_some());
+                let dense_pair =
+                    j.is_some_and(|j| all.dense(i).is_some() && all.dense(j).is_some());
                 assert_eq!(first != NO_TWIN, dense_pair, "PSF {i}, side {side}");
                 let Some(j) = j.filter(|_| dense_pair) else {
                     continue;
@@ -669,20 +684,29 @@ mod tests {
                     // The blend covers both PSFs and is their mix everywhere.
                     let x0 = a.origin[0].min(b.origin[0]);
                     let y0 = a.origin[1].min(b.origin[1]);
-                    assert!(m.origin[0] <= x0 && m.origin[1] <= y0, "PSF {i}/{j} blend {k}");
+                    assert!(
+                        m.origin[0] <= x0 && m.origin[1] <= y0,
+                        "PSF {i}/{j} blend {k}"
+                    );
                     for y in y0 - 1..y0 + (a.height.max(b.height) as i32) + 1 {
                         for x in x0 - 1..x0 + (a.width.max(b.width) as i32) + 1 {
                             for c in 0..m.channels {
                                 let want = (1.0 - s) * value(&a, x, y, c) + s * value(&b, x, y, c);
                                 let got = value(&m, x, y, c);
-                                assert!((got - want).abs() <= 1e-6, "PSF {i}/{j} blend {k} at ({x}, {y}): {got} against {want}");
+                                assert!(
+                                    (got - want).abs() <= 1e-6,
+                                    "PSF {i}/{j} blend {k} at ({x}, {y}): {got} against {want}"
+                                );
                             }
                         }
                     }
                 }
                 let (i32_, j32) = (i as u32, j as u32);
                 assert_eq!(set.dense_blend_for(i32_, j32, 0.0), Some(i32_));
-                assert_eq!(set.dense_blend_for(i32_, j32, 0.5), Some(first + BLEND_STEPS - 1));
+                assert_eq!(
+                    set.dense_blend_for(i32_, j32, 0.5),
+                    Some(first + BLEND_STEPS - 1)
+                );
                 let near_step_5 = 5.2 / (2 * BLEND_STEPS) as f32;
                 assert_eq!(set.dense_blend_for(i32_, j32, near_step_5), Some(first + 4));
                 pairs += 1;
@@ -804,7 +828,11 @@ mod tests {
             let box_sum = 1.0 - 24.0 * 0.002;
             for (c, scale) in [1.0, 0.9, 1.1].into_iter().enumerate() {
                 let want = box_sum * scale;
-                assert!((sum_of(c) - want).abs() < 1e-4, "channel {c}: {} vs {want}", sum_of(c));
+                assert!(
+                    (sum_of(c) - want).abs() < 1e-4,
+                    "channel {c}: {} vs {want}",
+                    sum_of(c)
+                );
             }
         }
     }
@@ -828,7 +856,10 @@ mod tests {
         assert!(extended.header().psf_resolution as i32 >= (w as i32) / 2);
         // And it survives the file format's checks.
         let bytes = extended.to_bytes().expect("bytes");
-        assert_eq!(PsfDatabase::from_bytes(&bytes).expect("read back"), extended);
+        assert_eq!(
+            PsfDatabase::from_bytes(&bytes).expect("read back"),
+            extended
+        );
     }
 
     /// More PSFs than a 1-D nested grid holds (361): the paper profile's 404 lens-motion PSFs

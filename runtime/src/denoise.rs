@@ -132,7 +132,13 @@ pub fn denoise_samples(
     order.truncate(members_count);
     let member_of: Vec<u32> = place
         .into_iter()
-        .map(|p| if (p as usize) < members_count { p } else { NOT_A_MEMBER })
+        .map(|p| {
+            if (p as usize) < members_count {
+                p
+            } else {
+                NOT_A_MEMBER
+            }
+        })
         .collect();
     // Every member as the filter reads it, gathered in pixel order: one gather of each
     // sample's colour, guides and moved position, on every thread, after which the grouping
@@ -174,8 +180,11 @@ pub fn denoise_samples(
             entry_starts.push(entry_starts[entry_starts.len() - 1] + n as usize);
         }
     }
-    let entries: Vec<Entry> =
-        join_rows(&rows, |r| r.entries.len(), |y, part| part.copy_from_slice(&rows[y].entries));
+    let entries: Vec<Entry> = join_rows(
+        &rows,
+        |r| r.entries.len(),
+        |y, part| part.copy_from_slice(&rows[y].entries),
+    );
     let inv_two_var = 1.0 / (2.0 * sigma * sigma);
     let max_d2 = (CUTOFF_SIGMAS * sigma).powi(2);
     // The cross-bilateral weights round `target`: every neighbour's (weight, luminance,
@@ -208,8 +217,9 @@ pub fn denoise_samples(
                 }
                 let (guides, cosine) = guide_terms(mi, mj, inv_depth);
                 let exponent = d2 * inv_two_var + guides;
-                let weight =
-                    (-exponent.min(WEIGHT_EXPONENT_CUT)).exp() * cosine.powi(NORMAL_POWER) * entry.count;
+                let weight = (-exponent.min(WEIGHT_EXPONENT_CUT)).exp()
+                    * cosine.powi(NORMAL_POWER)
+                    * entry.count;
                 let keep = (cosine > 0.0)
                     & (exponent <= WEIGHT_EXPONENT_CUT)
                     & (weight > 0.0)
@@ -287,7 +297,8 @@ pub fn denoise_samples(
             deviation - brightest_weight * (brightest_luminance - level_luminance).abs();
         let mut ceiling = FIREFLY_FACTOR * level_luminance;
         if total > 0.0 {
-            ceiling = ceiling.min(level_luminance + FIREFLY_DEVIATIONS * (deviation / total).max(0.0));
+            ceiling =
+                ceiling.min(level_luminance + FIREFLY_DEVIATIONS * (deviation / total).max(0.0));
         }
         let (mean, taken) = capped_mean(found, ceiling)?;
         // The widening passes read the noise of the neighbourhood under the factor's cap
@@ -319,8 +330,11 @@ pub fn denoise_samples(
     };
     // The members of one pixel that lie on one surface share one filtered illumination, that
     // of their mean position: the filter runs once per pixel and surface, not once per sample.
-    let targets: Vec<Member> =
-        join_rows(&rows, |r| r.targets.len(), |y, part| part.copy_from_slice(&rows[y].targets));
+    let targets: Vec<Member> = join_rows(
+        &rows,
+        |r| r.targets.len(),
+        |y, part| part.copy_from_slice(&rows[y].targets),
+    );
     let filtered: Vec<Option<FilteredGroup>> = targets
         .par_iter()
         .map_init(Vec::new, |found, t| filter_with_noise(t, found))
@@ -333,9 +347,11 @@ pub fn denoise_samples(
             target_starts.push(target_starts[target_starts.len() - 1] + n as usize);
         }
     }
-    let counts: Vec<f32> = join_rows(&rows, |r| r.target_counts.len(), |y, part| {
-        part.copy_from_slice(&rows[y].target_counts)
-    });
+    let counts: Vec<f32> = join_rows(
+        &rows,
+        |r| r.target_counts.len(),
+        |y, part| part.copy_from_slice(&rows[y].target_counts),
+    );
     // Built on every thread: one cache line a group, and its fresh pages faulted in by both.
     let mut nodes: Vec<WideningNode> = targets
         .par_iter()
@@ -391,12 +407,16 @@ pub fn denoise_samples(
         .collect();
     // Each member's group among all the frame's (its row's groups are numbered from the row's
     // first, `target_starts` at the row's first pixel).
-    let group_of_member: Vec<u32> = join_rows(&rows, |r| r.group_of.len(), |y, part| {
-        let first = target_starts[y * w] as u32;
-        for (dst, &g) in part.iter_mut().zip(&rows[y].group_of) {
-            *dst = first + g;
-        }
-    });
+    let group_of_member: Vec<u32> = join_rows(
+        &rows,
+        |r| r.group_of.len(),
+        |y, part| {
+            let first = target_starts[y * w] as u32;
+            for (dst, &g) in part.iter_mut().zip(&rows[y].group_of) {
+                *dst = first + g;
+            }
+        },
+    );
     (0..frames.samples.len())
         .into_par_iter()
         .map_init(Vec::new, |found, k| {
@@ -709,7 +729,10 @@ fn join_rows<T: bytemuck::Zeroable + Send>(
         parts.push(part);
         rest = tail;
     }
-    parts.into_par_iter().enumerate().for_each(|(y, part)| write(y, part));
+    parts
+        .into_par_iter()
+        .enumerate()
+        .for_each(|(y, part)| write(y, part));
     out
 }
 
@@ -837,12 +860,11 @@ impl RowGroups {
                 row.targets.push(at);
                 row.target_counts.push(count as f32);
                 let rest = count.saturating_sub(1) as f32;
-                let rest_illumination: [f32; 3] = std::array::from_fn(|c| {
-                    (sum[c] - brightest.illumination[c]) / rest.max(1.0)
-                });
+                let rest_illumination: [f32; 3] =
+                    std::array::from_fn(|c| (sum[c] - brightest.illumination[c]) / rest.max(1.0));
                 let brightest_luminance = luminance(brightest.illumination);
-                let outlier = brightest_luminance
-                    > OUTLIER_FACTOR * luminance(rest_illumination).max(0.0);
+                let outlier =
+                    brightest_luminance > OUTLIER_FACTOR * luminance(rest_illumination).max(0.0);
                 if count > 1 && !outlier {
                     // Nothing stands out: one entry of all the members.
                     let illumination = sum.map(|v| v / count as f32);
@@ -872,7 +894,8 @@ impl RowGroups {
                     }
                 }
             }
-            row.entries_per_cell.push((row.entries.len() - before) as u32);
+            row.entries_per_cell
+                .push((row.entries.len() - before) as u32);
             row.targets_per_cell.push(groups.len() as u32);
         }
         row
@@ -889,8 +912,9 @@ impl Member {
         let scale = (0..3).fold(ALBEDO_EPSILON, |s, c| {
             s.max(self.albedo[c].abs()).max(other.albedo[c].abs())
         });
-        let albedo = (0..3)
-            .all(|c| (self.albedo[c] - other.albedo[c]).abs() <= SAME_SURFACE_FRACTION * ALBEDO_SIGMA * scale);
+        let albedo = (0..3).all(|c| {
+            (self.albedo[c] - other.albedo[c]).abs() <= SAME_SURFACE_FRACTION * ALBEDO_SIGMA * scale
+        });
         depth && cosine >= SAME_SURFACE_COSINE && albedo
     }
 }
@@ -1066,11 +1090,20 @@ mod tests {
     /// ordinary ones: every denoised sample stays finite, however much light the cap takes.
     #[test]
     fn samples_near_the_float_limit_leave_every_colour_finite() {
-        let light = |x: usize, y: usize| if (x + y).is_multiple_of(3) { 3.0e38 } else { 1.0 };
+        let light = |x: usize, y: usize| {
+            if (x + y).is_multiple_of(3) {
+                3.0e38
+            } else {
+                1.0
+            }
+        };
         let (frames, moved) = frame(12, 12, |_, _| 1.0, light, |_, _| 2.0);
         let guides = frames.guides.clone().expect("guides");
         let out = denoise_samples(&frames, &guides, &moved);
-        assert!(out.iter().flatten().all(|v| v.is_finite()), "a colour is not finite");
+        assert!(
+            out.iter().flatten().all(|v| v.is_finite()),
+            "a colour is not finite"
+        );
     }
 
     /// Four samples per pixel, `surface(x, y, k)` giving each one's (albedo, light, depth), at
@@ -1167,7 +1200,9 @@ mod tests {
         let (w, h, spp) = (48usize, 48usize, 16usize);
         let firefly = |x: usize, y: usize, k: usize| {
             let mut z = ((y * w + x) * spp + k) as u64;
-            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9).wrapping_add(0x9E37_79B9);
+            z = (z ^ (z >> 30))
+                .wrapping_mul(0xBF58_476D_1CE4_E5B9)
+                .wrapping_add(0x9E37_79B9);
             z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
             (z ^ (z >> 31)).is_multiple_of(128)
         };
@@ -1199,7 +1234,11 @@ mod tests {
         let frames = StochasticFrames::new(w, h, spp, samples)
             .with_guides(guides)
             .expect("guides");
-        let converged: f64 = frames.samples.iter().map(|s| f64::from(s.color[0])).sum::<f64>()
+        let converged: f64 = frames
+            .samples
+            .iter()
+            .map(|s| f64::from(s.color[0]))
+            .sum::<f64>()
             / frames.samples.len() as f64;
         let out = denoise_samples(&frames, &frames.guides.clone().expect("guides"), &moved);
         let mean: f64 = out.iter().map(|c| f64::from(c[0])).sum::<f64>() / out.len() as f64;
@@ -1209,7 +1248,10 @@ mod tests {
             mean > 0.5 + 0.6 * (converged - 0.5),
             "denoised mean {mean} against the converged {converged}"
         );
-        assert!(f64::from(brightest) < 1.5 * converged, "brightest {brightest}");
+        assert!(
+            f64::from(brightest) < 1.5 * converged,
+            "brightest {brightest}"
+        );
     }
 
     /// A spreading pass weighs a group only where the excess round it could lift its light by
@@ -1241,7 +1283,12 @@ mod tests {
         };
         let thin = spread(0.5 * EXCESS_NEGLIGIBLE);
         assert_eq!(thin[4], [0.5 * EXCESS_NEGLIGIBLE; 3]);
-        assert!(thin.iter().enumerate().all(|(x, e)| x == 4 || *e == [0.0; 3]), "{thin:?}");
+        assert!(
+            thin.iter()
+                .enumerate()
+                .all(|(x, e)| x == 4 || *e == [0.0; 3]),
+            "{thin:?}"
+        );
         let visible = spread(0.5);
         for x in [2, 6] {
             assert!(visible[x][0] > 0.1, "group {x}: {:?}", visible[x]);

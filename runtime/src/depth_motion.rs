@@ -259,10 +259,7 @@ impl DepthMotion {
                         .filter(|s| s.depth <= limit)
                         .map(|s| {
                             let coc = signed_coc(s.depth);
-                            let at = [
-                                s.jitter[0] - coc * s.lens[0],
-                                s.jitter[1] - coc * s.lens[1],
-                            ];
+                            let at = [s.jitter[0] - coc * s.lens[0], s.jitter[1] - coc * s.lens[1]];
                             (at, s.motion, s.depth)
                         }),
                 )
@@ -286,7 +283,10 @@ impl DepthMotion {
                         && (o.motion[0] - me.motion[0]).hypot(o.motion[1] - me.motion[1])
                             <= motion_limit;
                     if same {
-                        let (dx, dy) = ((j % w) as f32 - (i % w) as f32, (j / w) as f32 - (i / w) as f32);
+                        let (dx, dy) = (
+                            (j % w) as f32 - (i % w) as f32,
+                            (j / w) as f32 - (i / w) as f32,
+                        );
                         sum.add_shifted(o, dx, dy);
                     }
                 }
@@ -363,7 +363,11 @@ fn window(i: usize, w: usize, h: usize) -> impl Iterator<Item = usize> {
 /// `(p(t + 1) - p(t - 1)) / 2` (pixels per frame), as Blender's pinhole sub-renders label
 /// their samples: along `p(t) = c + P / (Z + V t)` the difference is the derivative divided
 /// by `1 - (V / Z)^2`, with `V / Z` bounded by [`MAX_RELATIVE_NEARING`].
-pub fn derivative_of_central_difference(difference: [f32; 2], depth: f32, nearing: f32) -> [f32; 2] {
+pub fn derivative_of_central_difference(
+    difference: [f32; 2],
+    depth: f32,
+    nearing: f32,
+) -> [f32; 2] {
     let rate = (nearing / depth).clamp(-MAX_RELATIVE_NEARING, MAX_RELATIVE_NEARING);
     let f = 1.0 - rate * rate;
     [difference[0] * f, difference[1] * f]
@@ -449,7 +453,10 @@ mod tests {
             for pixel in 0..48 * 48 {
                 let v = field.nearing_speed(pixel);
                 assert!(v.is_finite(), "pixel {pixel}: {v}");
-                assert!(v.abs() <= MAX_RELATIVE_NEARING * depth, "pixel {pixel}: {v}");
+                assert!(
+                    v.abs() <= MAX_RELATIVE_NEARING * depth,
+                    "pixel {pixel}: {v}"
+                );
             }
         }
     }
@@ -461,10 +468,16 @@ mod tests {
         let p = |t: f64| f * x / (z0 + v * t);
         let difference = (p(1.0) - p(-1.0)) / 2.0;
         let derivative = -f * x * v / (z0 * z0);
-        assert!((difference / derivative - 1.0).abs() > 0.05, "precondition: they differ");
+        assert!(
+            (difference / derivative - 1.0).abs() > 0.05,
+            "precondition: they differ"
+        );
         let got = derivative_of_central_difference([difference as f32, 0.0], z0 as f32, v as f32);
         let got = f64::from(got[0]);
-        assert!((got - derivative).abs() < 1e-4 * derivative.abs(), "{got} against {derivative}");
+        assert!(
+            (got - derivative).abs() < 1e-4 * derivative.abs(),
+            "{got} against {derivative}"
+        );
     }
 
     #[test]
@@ -476,6 +489,9 @@ mod tests {
         let numeric = (p(dt) - 2.0 * p(0.0) + p(-dt)) / (dt * dt);
         let motion = (p(dt) - p(-dt)) / (2.0 * dt);
         let a = f64::from(path_acceleration([motion as f32, 0.0], z0 as f32, v as f32)[0]);
-        assert!((a - numeric).abs() < 1e-3 * numeric.abs(), "{a} against {numeric}");
+        assert!(
+            (a - numeric).abs() < 1e-3 * numeric.abs(),
+            "{a} against {numeric}"
+        );
     }
 }

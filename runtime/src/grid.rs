@@ -104,7 +104,9 @@ mod tests {
         let (w, h) = (9, 9);
         let mut flat = vec![[0.25f32, 1.0]; w * h];
         gaussian_blur(&mut flat, w, h, 0.8);
-        assert!(flat.iter().all(|v| (v[0] - 0.25).abs() < 1e-6 && (v[1] - 1.0).abs() < 1e-6));
+        assert!(flat
+            .iter()
+            .all(|v| (v[0] - 0.25).abs() < 1e-6 && (v[1] - 1.0).abs() < 1e-6));
         let mut spike = vec![[0.0f32; 1]; w * h];
         spike[4 * w + 4] = [1.0];
         gaussian_blur(&mut spike, w, h, 0.8);

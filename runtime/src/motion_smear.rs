@@ -135,7 +135,15 @@ impl SmearKey {
         radial: [f32; 2],
         reach_px: f32,
     ) -> (Self, bool) {
-        Self::quantised(cell, motion, bend, radial, reach_px, 0.5, AngleResolution::Rounded)
+        Self::quantised(
+            cell,
+            motion,
+            bend,
+            radial,
+            reach_px,
+            0.5,
+            AngleResolution::Rounded,
+        )
     }
 
     /// [`SmearKey::new`] with the length's quantisation dithered: the length step below or
@@ -154,7 +162,15 @@ impl SmearKey {
         reach_px: f32,
         threshold: f32,
     ) -> (Self, bool) {
-        Self::quantised(cell, motion, bend, radial, reach_px, threshold, AngleResolution::Rounded)
+        Self::quantised(
+            cell,
+            motion,
+            bend,
+            radial,
+            reach_px,
+            threshold,
+            AngleResolution::Rounded,
+        )
     }
 
     /// [`SmearKey::dithered`] with the angle quantised as `angles` says for a lens PSF reaching
@@ -195,7 +211,10 @@ impl SmearKey {
             angle_resolution: AngleResolution::Rounded,
             bend_step: 0,
         };
-        (key.with_angles(motion, bend, reach_px, threshold, angles), clamped)
+        (
+            key.with_angles(motion, bend, reach_px, threshold, angles),
+            clamped,
+        )
     }
 
     /// This key with the angle and bend of `motion` and `bend` quantised as
@@ -237,7 +256,10 @@ impl SmearKey {
         // A bend under a step's threshold either way is none: which way the key faces (a sine
         // and cosine) matters only for one that is not.
         if !bend.is_finite() || bend.abs().min(most) < MIN_BEND_PX {
-            return SmearKey { bend_step: 0, ..key };
+            return SmearKey {
+                bend_step: 0,
+                ..key
+            };
         }
         // The key's direction may be the motion's reversed (angles are taken modulo pi): the
         // same arc is then bent the other way relative to it.
@@ -472,8 +494,13 @@ fn keep_rgb_sums(before: &[f32], after: &mut [f32]) {
         sums
     };
     let (was, is) = (sums(before), sums(after));
-    let scale: [f32; 3] =
-        std::array::from_fn(|k| if is[k] > 0.0 { (was[k] / is[k]) as f32 } else { 1.0 });
+    let scale: [f32; 3] = std::array::from_fn(|k| {
+        if is[k] > 0.0 {
+            (was[k] / is[k]) as f32
+        } else {
+            1.0
+        }
+    });
     if scale == [1.0; 3] {
         return;
     }
@@ -595,7 +622,11 @@ impl SmearExtent {
     pub fn moved(self, g: crate::smear_symmetry::GridSymmetry) -> Self {
         let (origin, width, height) =
             crate::smear_symmetry::transform_box(self.origin, self.width, self.height, g);
-        let grow = if g.swaps_axes() { [self.grow[1], self.grow[0]] } else { self.grow };
+        let grow = if g.swaps_axes() {
+            [self.grow[1], self.grow[0]]
+        } else {
+            self.grow
+        };
         Self {
             origin,
             width,
@@ -702,7 +733,11 @@ pub fn smear_within(
     let kernel = padded;
     kernel_columns.truncate(kh);
     for row in &mut kernel_columns {
-        *row = if row[0] < row[1] { [row[0], row[1].min(kw)] } else { [0, 0] };
+        *row = if row[0] < row[1] {
+            [row[0], row[1].min(kw)]
+        } else {
+            [0, 0]
+        };
     }
     // Each PSF row's span, and from them and the kernel's, the columns each output row can
     // reach; written with zeros first (a fresh page read before it is written is faulted
@@ -714,7 +749,10 @@ pub fn smear_within(
             let lit = |px: &[f32]| px.iter().any(|&v| v != 0.0);
             match row.chunks_exact(ch).position(lit) {
                 None => [0, 0],
-                Some(first) => [first, psf.width - row.chunks_exact(ch).rev().position(lit).unwrap_or(0)],
+                Some(first) => [
+                    first,
+                    psf.width - row.chunks_exact(ch).rev().position(lit).unwrap_or(0),
+                ],
             }
         })
         .collect();
@@ -733,7 +771,11 @@ pub fn smear_within(
     }
     // A single-pixel PSF reaches exactly its kernel's columns, each written once below.
     let single_pixel = psf.width == 1 && psf.height == 1;
-    for ((row, r), w) in out.chunks_exact_mut(width * ch).zip(&reach).zip(written.iter_mut()) {
+    for ((row, r), w) in out
+        .chunks_exact_mut(width * ch)
+        .zip(&reach)
+        .zip(written.iter_mut())
+    {
         if r[0] < r[1] {
             if !single_pixel {
                 row[r[0] * ch..r[1] * ch].fill(0.0);
@@ -860,7 +902,10 @@ fn tap_shifts(
         let radius = 1.0 / k64;
         for _ in 0..taps {
             let (along, across) = ((sin * radius) as f32, ((1.0 - cos) * radius) as f32);
-            (sin, cos) = (sin * step_cos + cos * step_sin, cos * step_cos - sin * step_sin);
+            (sin, cos) = (
+                sin * step_cos + cos * step_sin,
+                cos * step_cos - sin * step_sin,
+            );
             let sx = along * dx - across * dy + grow_x as f32;
             let sy = along * dy + across * dx + grow_y as f32;
             shifts.push([sx, sy]);
@@ -881,9 +926,7 @@ pub fn smear_key_within(
 ) {
     let (length, angle, bend) = (key.length_px(), key.angle_rad(), key.bend_px());
     match sub {
-        Some(sub) => {
-            smear_within_subpixel(sub, length, angle, bend, extent, out, written)
-        }
+        Some(sub) => smear_within_subpixel(sub, length, angle, bend, extent, out, written),
         None => smear_within(psf, length, angle, bend, extent, out, written),
     }
 }
@@ -936,7 +979,11 @@ pub fn smear_within_subpixel(
             *r = [r[0].min(ix), r[1].max((ix + sw).min(width))];
         }
     }
-    for ((row, r), w) in out.chunks_exact_mut(width).zip(&reach).zip(written.iter_mut()) {
+    for ((row, r), w) in out
+        .chunks_exact_mut(width)
+        .zip(&reach)
+        .zip(written.iter_mut())
+    {
         if r[0] < r[1] {
             row[r[0]..r[1]].fill(0.0);
             let column = |c: usize| u16::try_from(c).unwrap_or(u16::MAX);
@@ -981,8 +1028,14 @@ pub fn smeared_psf(db: &PsfDatabase, key: SmearKey) -> Result<Option<PsfImage>, 
 pub fn union_box(images: &[(&PsfImage, f32)]) -> Option<([i32; 2], usize, usize)> {
     let x0 = images.iter().map(|(t, _)| t.origin[0]).min()?;
     let y0 = images.iter().map(|(t, _)| t.origin[1]).min()?;
-    let x1 = images.iter().map(|(t, _)| t.origin[0] + t.width as i32).max()?;
-    let y1 = images.iter().map(|(t, _)| t.origin[1] + t.height as i32).max()?;
+    let x1 = images
+        .iter()
+        .map(|(t, _)| t.origin[0] + t.width as i32)
+        .max()?;
+    let y1 = images
+        .iter()
+        .map(|(t, _)| t.origin[1] + t.height as i32)
+        .max()?;
     Some(([x0, y0], (x1 - x0) as usize, (y1 - y0) as usize))
 }
 
@@ -1052,10 +1105,30 @@ pub fn turn_scaled(psf: &PsfImage, angle: f32, scale: f32) -> PsfImage {
     let (x1, y1) = (x0 + psf.width as f32, y0 + psf.height as f32);
     let corners = [(x0, y0), (x1, y0), (x0, y1), (x1, y1)]
         .map(|(x, y)| (cos * x - sin * y, sin * x + cos * y));
-    let lo_x = corners.iter().map(|c| c.0).fold(f32::INFINITY, f32::min).floor() as i32 - 2;
-    let lo_y = corners.iter().map(|c| c.1).fold(f32::INFINITY, f32::min).floor() as i32 - 2;
-    let hi_x = corners.iter().map(|c| c.0).fold(f32::NEG_INFINITY, f32::max).ceil() as i32 + 2;
-    let hi_y = corners.iter().map(|c| c.1).fold(f32::NEG_INFINITY, f32::max).ceil() as i32 + 2;
+    let lo_x = corners
+        .iter()
+        .map(|c| c.0)
+        .fold(f32::INFINITY, f32::min)
+        .floor() as i32
+        - 2;
+    let lo_y = corners
+        .iter()
+        .map(|c| c.1)
+        .fold(f32::INFINITY, f32::min)
+        .floor() as i32
+        - 2;
+    let hi_x = corners
+        .iter()
+        .map(|c| c.0)
+        .fold(f32::NEG_INFINITY, f32::max)
+        .ceil() as i32
+        + 2;
+    let hi_y = corners
+        .iter()
+        .map(|c| c.1)
+        .fold(f32::NEG_INFINITY, f32::max)
+        .ceil() as i32
+        + 2;
     let (width, height) = ((hi_x - lo_x + 1) as usize, (hi_y - lo_y + 1) as usize);
     let mut data = vec![0f32; width * height * ch];
     // The PSF with a border of three zero pixels: a point whose 4 x 4 taps do not all lie
@@ -1270,7 +1343,10 @@ mod tests {
                 smear_within(&psf, length, angle, bend, extent, &mut marked, &mut again);
                 assert_eq!(again, written);
                 for (i, (&a, &b)) in out.iter().zip(&slow.data).enumerate() {
-                    assert!((a - b).abs() <= 1e-6, "{length} {angle} {bend}: {i}: {a} {b}");
+                    assert!(
+                        (a - b).abs() <= 1e-6,
+                        "{length} {angle} {bend}: {i}: {a} {b}"
+                    );
                     let (row, column) = (i / ch / extent.width, i / ch % extent.width);
                     let [first, end] = written[row].map(usize::from);
                     if (first..end).contains(&column) {
@@ -1357,7 +1433,10 @@ mod tests {
                     .zip(&slow)
                     .map(|(a, b)| (a - b).abs())
                     .fold(0.0f32, f32::max);
-                assert!(worst < 1e-6, "{ch} channels, L {length}, angle {angle}: {worst}");
+                assert!(
+                    worst < 1e-6,
+                    "{ch} channels, L {length}, angle {angle}: {worst}"
+                );
             }
         }
     }
@@ -1376,7 +1455,9 @@ mod tests {
             width: 5,
             height: 5,
             channels: 1,
-            data: (0..25).map(|i| sub.shifted(0, 0)[(i / 5) * 6 + i % 5]).collect(),
+            data: (0..25)
+                .map(|i| sub.shifted(0, 0)[(i / 5) * 6 + i % 5])
+                .collect(),
         };
         for (length, angle) in [(16.3f32, 0.111f32), (9.0, 0.9), (12.0, 2.8)] {
             let extent = smear_extent(&base, length, angle, 0.0).expect("extent");
@@ -1414,12 +1495,18 @@ mod tests {
                 })
                 .collect();
             let rms = |image: &[f32]| {
-                let squares = image.iter().zip(&exact).map(|(&a, &b)| (f64::from(a) - b).powi(2));
+                let squares = image
+                    .iter()
+                    .zip(&exact)
+                    .map(|(&a, &b)| (f64::from(a) - b).powi(2));
                 let s: f64 = squares.sum();
                 (s / n as f64).sqrt()
             };
             let sum = |image: &[f32]| image.iter().map(|&v| f64::from(v)).sum::<f64>();
-            assert!((sum(&shifted) - sum(&bilinear)).abs() < 1e-4, "L {length}: light");
+            assert!(
+                (sum(&shifted) - sum(&bilinear)).abs() < 1e-4,
+                "L {length}: light"
+            );
             let (ours, theirs) = (rms(&shifted), rms(&bilinear));
             assert!(
                 ours < 0.25 * theirs,
@@ -1500,9 +1587,19 @@ mod tests {
             data,
         }
         .trimmed();
-        assert!(psf.width <= w0 && psf.height <= h0, "{} x {}", psf.width, psf.height);
+        assert!(
+            psf.width <= w0 && psf.height <= h0,
+            "{} x {}",
+            psf.width,
+            psf.height
+        );
         let after = moments(&psf, 0);
-        assert!((after.0 - before.0).abs() < 1e-6, "sum {} -> {}", before.0, after.0);
+        assert!(
+            (after.0 - before.0).abs() < 1e-6,
+            "sum {} -> {}",
+            before.0,
+            after.0
+        );
         assert!((after.1[0] - before.1[0]).abs() < 1e-3 && (after.1[1] - before.1[1]).abs() < 1e-3);
     }
 
@@ -1561,8 +1658,14 @@ mod tests {
         let (s1, c1, v1) = moments(&turned, 0);
         assert!((s1 - s0).abs() < 1e-5);
         // +x turns onto +y (y down).
-        assert!((c1[0] + c0[1]).abs() < 0.05 && (c1[1] - c0[0]).abs() < 0.05, "{c0:?} -> {c1:?}");
-        assert!((v1[0] - v0[1]).abs() < 0.3 && (v1[1] - v0[0]).abs() < 0.3, "{v0:?} -> {v1:?}");
+        assert!(
+            (c1[0] + c0[1]).abs() < 0.05 && (c1[1] - c0[0]).abs() < 0.05,
+            "{c0:?} -> {c1:?}"
+        );
+        assert!(
+            (v1[0] - v0[1]).abs() < 0.3 && (v1[1] - v0[0]).abs() < 0.3,
+            "{v0:?} -> {v1:?}"
+        );
     }
 
     /// The frame budget's estimate is an upper bound on what a key builds.
@@ -1580,7 +1683,8 @@ mod tests {
             let m = [len * angle.cos(), len * angle.sin()];
             let (key, _) = SmearKey::new(0, m, bend, [turn_by.cos(), turn_by.sin()], reach);
             let turned = turn(&psf, key.turn_rad());
-            let out = smear(&turned, key.length_px(), key.angle_rad(), key.bend_px()).expect("smear");
+            let out =
+                smear(&turned, key.length_px(), key.angle_rad(), key.bend_px()).expect("smear");
             assert!(
                 out.width * out.height <= key.estimated_pixels(reach),
                 "{} x {} > {}",
@@ -1603,27 +1707,44 @@ mod tests {
         assert!((total - 1.0).abs() < 1e-5, "{total}");
         let mean_y: f64 = (0..out.height)
             .flat_map(|y| (0..out.width).map(move |x| (x, y)))
-            .map(|(x, y)| f64::from(out.data[y * out.width + x]) * f64::from(out.origin[1] + y as i32))
+            .map(|(x, y)| {
+                f64::from(out.data[y * out.width + x]) * f64::from(out.origin[1] + y as i32)
+            })
             .sum();
         let kappa = f64::from(bend) / f64::from(len * len);
         let n = 10_000;
         let arc: f64 = (0..n)
-            .map(|k| (1.0 - (kappa * ((k as f64 + 0.5) / n as f64 - 0.5) * f64::from(len)).cos()) / kappa)
+            .map(|k| {
+                (1.0 - (kappa * ((k as f64 + 0.5) / n as f64 - 0.5) * f64::from(len)).cos()) / kappa
+            })
             .sum::<f64>()
             / n as f64;
-        assert!((mean_y - arc).abs() < 0.02, "mean offset {mean_y}, arc {arc}");
+        assert!(
+            (mean_y - arc).abs() < 0.02,
+            "mean offset {mean_y}, arc {arc}"
+        );
         assert!((f64::from(sagitta(len, bend)) - 1.4950).abs() < 1e-3);
         // The end columns hold light at the sagitta's rows only.
         let end = |x: usize| -> f64 {
-            let col: Vec<f64> = (0..out.height).map(|y| f64::from(out.data[y * out.width + x])).collect();
+            let col: Vec<f64> = (0..out.height)
+                .map(|y| f64::from(out.data[y * out.width + x]))
+                .collect();
             let w: f64 = col.iter().sum();
-            col.iter().enumerate().map(|(y, v)| v * f64::from(out.origin[1] + y as i32)).sum::<f64>() / w
+            col.iter()
+                .enumerate()
+                .map(|(y, v)| v * f64::from(out.origin[1] + y as i32))
+                .sum::<f64>()
+                / w
         };
         let lit: Vec<usize> = (0..out.width)
             .filter(|&x| (0..out.height).any(|y| out.data[y * out.width + x] > 0.0))
             .collect();
         for x in [lit[0], lit[lit.len() - 1]] {
-            assert!(end(x) > 1.0 && end(x) < 1.6, "column {x} centred at {}", end(x));
+            assert!(
+                end(x) > 1.0 && end(x) < 1.6,
+                "column {x} centred at {}",
+                end(x)
+            );
         }
         let reversed = smear(&point, len, std::f32::consts::PI, -bend).expect("smear");
         let sum_diff: f32 = reversed
@@ -1663,16 +1784,16 @@ mod tests {
                 assert!(!clamped);
                 assert_eq!(key.cell, 7);
                 let l = key.length_px();
-                assert!(
-                    (l - len).abs() <= 0.125 + 0.01 * len,
-                    "length {len} -> {l}"
-                );
+                assert!((l - len).abs() <= 0.125 + 0.01 * len, "length {len} -> {l}");
                 // The direction modulo pi: the segment reversed is the same segment.
                 let a = angle.rem_euclid(std::f32::consts::PI);
                 let mut d = (key.angle_rad() - a).abs();
                 d = d.min(std::f32::consts::PI - d);
                 let tip = 0.5 * l * d;
-                assert!(tip <= 0.3, "length {len} angle {angle}: tip off by {tip} px");
+                assert!(
+                    tip <= 0.3,
+                    "length {len} angle {angle}: tip off by {tip} px"
+                );
             }
         }
         let (_, clamped) = SmearKey::new(0, [MAX_SMEAR_PX + 10.0, 0.0], 0.0, [1.0, 0.0], 4.0);
@@ -1687,10 +1808,15 @@ mod tests {
                 let dithered = |t: f32| {
                     SmearKey::quantised(3, m, 0.0, [1.0, 0.0], 10.0, t, AngleResolution::Dithered).0
                 };
-                let rounded = SmearKey::quantised(3, m, 0.0, [1.0, 0.0], 10.0, 0.5, AngleResolution::Rounded).0;
+                let rounded =
+                    SmearKey::quantised(3, m, 0.0, [1.0, 0.0], 10.0, 0.5, AngleResolution::Rounded)
+                        .0;
                 // Steps twice as far apart: half the keys a frame's angles can fall on.
                 let (nd, nr) = (dithered(0.0).angle_steps(), rounded.angle_steps());
-                assert!(nd <= nr / 2 + 2 && nd >= nr / 2 - 2, "{nd} steps against {nr}");
+                assert!(
+                    nd <= nr / 2 + 2 && nd >= nr / 2 - 2,
+                    "{nd} steps against {nr}"
+                );
                 // Over thresholds spread evenly, the keys' mean angle is the motion's, and each
                 // key's tip is within a pixel of the motion's.
                 let n = 256;
@@ -1704,30 +1830,51 @@ mod tests {
                         d += std::f32::consts::PI;
                     }
                     let tip = 0.5 * key.length_px() * d.abs();
-                    assert!(tip <= 1.0 + 0.02 * len, "length {len} angle {angle}: tip {tip} px");
+                    assert!(
+                        tip <= 1.0 + 0.02 * len,
+                        "length {len} angle {angle}: tip {tip} px"
+                    );
                     mean += f64::from(d) / f64::from(n);
                 }
                 let mean_tip = 0.5 * f64::from(len) * mean.abs();
                 // (The length's step, dithered by the same threshold, moves the angle steps a
                 // little: the mean is off by a twentieth of a pixel at most, where a rounded
                 // angle is off by up to a quarter and flooring it by up to a half.)
-                assert!(mean_tip < 0.06, "length {len} angle {angle}: mean tip {mean_tip} px");
+                assert!(
+                    mean_tip < 0.06,
+                    "length {len} angle {angle}: mean tip {mean_tip} px"
+                );
                 // A narrow PSF's angle stays in fine steps, rounded: within half a step.
                 for t in [0.1, 0.9] {
-                    let narrow = SmearKey::quantised(3, m, 0.0, [1.0, 0.0], 2.0, t, AngleResolution::Dithered).0;
+                    let narrow = SmearKey::quantised(
+                        3,
+                        m,
+                        0.0,
+                        [1.0, 0.0],
+                        2.0,
+                        t,
+                        AngleResolution::Dithered,
+                    )
+                    .0;
                     assert_eq!(narrow.angle_resolution, AngleResolution::Fine);
                     let a = angle.rem_euclid(std::f32::consts::PI);
                     let mut d = (narrow.angle_rad() - a).abs();
                     d = d.min(std::f32::consts::PI - d);
                     let half_step = 0.5 * std::f32::consts::PI / narrow.angle_steps() as f32;
-                    assert!(d <= half_step * 1.001, "length {len} angle {angle}: {d} rad off");
+                    assert!(
+                        d <= half_step * 1.001,
+                        "length {len} angle {angle}: {d} rad off"
+                    );
                 }
             }
         }
         // Dithering the length alone keeps the rounded angle.
         let (a, _) = SmearKey::dithered(1, [30.0, 11.0], 0.0, [1.0, 0.0], 10.0, 0.8);
         let (b, _) = SmearKey::new(1, [30.0, 11.0], 0.0, [1.0, 0.0], 10.0);
-        assert_eq!((a.angle_step, a.angle_resolution), (b.angle_step, b.angle_resolution));
+        assert_eq!(
+            (a.angle_step, a.angle_resolution),
+            (b.angle_step, b.angle_resolution)
+        );
     }
 
     #[test]
@@ -1735,7 +1882,11 @@ mod tests {
         // Motions every way, bent either way or not at all (and beyond half a turn), on wide
         // and narrow PSFs, at thresholds across [0, 1): a key re-quantised at another angle
         // resolution is the key quantised at it from the start.
-        let resolutions = [AngleResolution::Rounded, AngleResolution::Dithered, AngleResolution::Fine];
+        let resolutions = [
+            AngleResolution::Rounded,
+            AngleResolution::Dithered,
+            AngleResolution::Fine,
+        ];
         for len in [0.3f32, 5.0, 12.0, 47.5, 90.0, 600.0] {
             for k in 0..24 {
                 let angle = k as f32 * 0.2618 + 0.01;
@@ -1743,10 +1894,19 @@ mod tests {
                 for bend in [0.0f32, 0.7, -1.2, 6.0, -40.0, 1e6, f32::NAN] {
                     for reach in [2.0f32, 10.0] {
                         for t in [0.0f32, 0.3, 0.99] {
-                            for (from, to) in resolutions.iter().flat_map(|&a| resolutions.map(|b| (a, b))) {
-                                let (first, clamped) = SmearKey::quantised(3, m, bend, [0.0, 1.0], reach, t, from);
-                                let (afresh, clamped_afresh) = SmearKey::quantised(3, m, bend, [0.0, 1.0], reach, t, to);
-                                assert_eq!(first.with_angles(m, bend, reach, t, to), afresh, "{m:?} bent {bend}");
+                            for (from, to) in resolutions
+                                .iter()
+                                .flat_map(|&a| resolutions.map(|b| (a, b)))
+                            {
+                                let (first, clamped) =
+                                    SmearKey::quantised(3, m, bend, [0.0, 1.0], reach, t, from);
+                                let (afresh, clamped_afresh) =
+                                    SmearKey::quantised(3, m, bend, [0.0, 1.0], reach, t, to);
+                                assert_eq!(
+                                    first.with_angles(m, bend, reach, t, to),
+                                    afresh,
+                                    "{m:?} bent {bend}"
+                                );
                                 assert_eq!(clamped, clamped_afresh);
                             }
                         }

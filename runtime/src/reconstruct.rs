@@ -265,8 +265,7 @@ fn moved_samples_of(
             if let (Some(v), true) = (nearing, central_differences) {
                 motion = crate::depth_motion::derivative_of_central_difference(motion, s.depth, v);
             }
-            let along =
-                nearing.map(|v| crate::depth_motion::path_acceleration(motion, s.depth, v));
+            let along = nearing.map(|v| crate::depth_motion::path_acceleration(motion, s.depth, v));
             // The depth at the shutter centre: a nearing surface's samples then lie at one
             // depth whatever their time, so that one PSF draws them and they merge as one
             // surface (a car's samples at a quarter's difference in depth did not). A light's
@@ -389,7 +388,13 @@ impl LightStratum {
     /// (`tau` in frames from its centre), given the path's middle `q` (`p0 + a S^2 / 8`, the
     /// midpoint of its ends) and `m0`, px and px per frame: the part's midpoint, and the motion
     /// (px per frame) that draws it over the shutter.
-    pub fn segment(&self, q: [f32; 2], m0: [f32; 2], a: [f32; 2], shutter: f32) -> ([f32; 2], [f32; 2]) {
+    pub fn segment(
+        &self,
+        q: [f32; 2],
+        m0: [f32; 2],
+        a: [f32; 2],
+        shutter: f32,
+    ) -> ([f32; 2], [f32; 2]) {
         if self.count <= 1 {
             return (q, m0);
         }
@@ -397,7 +402,10 @@ impl LightStratum {
         let p0 = [q[0] - 0.125 * s * s * a[0], q[1] - 0.125 * s * s * a[1]];
         let p = |tau: f32| {
             let h = 0.5 * tau * tau;
-            [p0[0] + tau * m0[0] + h * a[0], p0[1] + tau * m0[1] + h * a[1]]
+            [
+                p0[0] + tau * m0[0] + h * a[0],
+                p0[1] + tau * m0[1] + h * a[1],
+            ]
         };
         let width = s / self.count as f32;
         let tau0 = -0.5 * s + self.index as f32 * width;
@@ -678,9 +686,10 @@ impl<'a> PlacedSamples<'a> {
             .map(|p| {
                 let mut out = crate::behind_blur::BlurredSamples::default();
                 for k in p * spp..(p + 1) * spp {
-                    let (Some(s), Some(m)) =
-                        (self.frames.samples.get(k), self.moved.get(k).copied().flatten())
-                    else {
+                    let (Some(s), Some(m)) = (
+                        self.frames.samples.get(k),
+                        self.moved.get(k).copied().flatten(),
+                    ) else {
                         continue;
                     };
                     let motion = m.motion.map(|v| v * self.shutter);
@@ -688,7 +697,8 @@ impl<'a> PlacedSamples<'a> {
                     if s.color[3] > 0.0 && blur >= crate::sample_density::MIN_BLUR_PX {
                         out.share += self.weight;
                         out.farthest_depth = out.farthest_depth.max(m.depth);
-                        out.motion_sum = [out.motion_sum[0] + motion[0], out.motion_sum[1] + motion[1]];
+                        out.motion_sum =
+                            [out.motion_sum[0] + motion[0], out.motion_sum[1] + motion[1]];
                         out.blur_sum += blur;
                         out.count += 1;
                     }
@@ -726,9 +736,8 @@ impl<'a> PlacedSamples<'a> {
     /// What every fragment of sample `k` shares.
     fn fragment_seed(&self, k: usize) -> FragmentSeed {
         let s = &self.frames.samples[k];
-        let (motion, depth, bend) = self.moved[k].map_or(([0.0; 2], s.depth, 0.0), |m| {
-            (m.motion, m.depth, m.bend)
-        });
+        let (motion, depth, bend) =
+            self.moved[k].map_or(([0.0; 2], s.depth, 0.0), |m| (m.motion, m.depth, m.bend));
         FragmentSeed {
             color: self.denoised.as_ref().map_or(s.color, |d| d[k]),
             weight: self.weight,
@@ -747,14 +756,21 @@ impl<'a> PlacedSamples<'a> {
     /// order their seeds lie together, where in the samples' order a defocused frame's are a
     /// CoC apart, a cache miss each. One compact record a sample costs the merge far fewer
     /// misses again than the sample, its move and its denoised colour.
-    fn fragment_seeds_by_pixel(&self, width: usize, height: usize) -> (Vec<FragmentSeed>, Vec<u32>) {
+    fn fragment_seeds_by_pixel(
+        &self,
+        width: usize,
+        height: usize,
+    ) -> (Vec<FragmentSeed>, Vec<u32>) {
         let cells = width * height;
         let cell_of = |k: usize| {
             self.moved[k]
                 .and_then(|m| m.pixel(width, height))
                 .unwrap_or(cells)
         };
-        let keys: Vec<u32> = (0..self.len()).into_par_iter().map(|k| cell_of(k) as u32).collect();
+        let keys: Vec<u32> = (0..self.len())
+            .into_par_iter()
+            .map(|k| cell_of(k) as u32)
+            .collect();
         let SamplesByPixel {
             order,
             place: slot_of,
@@ -1093,25 +1109,45 @@ mod tests {
         let last = LightStratum::of(0.49, 0.27, v, shutter, coc_at);
         assert_eq!(last, LightStratum { count: 6, index: 5 });
         // No change of depth: the whole path.
-        assert_eq!(LightStratum::of(0.2, 1.0, 0.0, shutter, coc_at), LightStratum { count: 1, index: 0 });
+        assert_eq!(
+            LightStratum::of(0.2, 1.0, 0.0, shutter, coc_at),
+            LightStratum { count: 1, index: 0 }
+        );
         // A CoC that changes by 20 px: no more than the most strata.
-        assert_eq!(LightStratum::of(0.0, 1.0, -1.0, shutter, |z: f32| 10.0 / z).count, MAX_LIGHT_STRATA);
+        assert_eq!(
+            LightStratum::of(0.0, 1.0, -1.0, shutter, |z: f32| 10.0 / z).count,
+            MAX_LIGHT_STRATA
+        );
         // A depth that would reach the camera within the shutter: the whole path.
         assert_eq!(LightStratum::of(0.0, 0.4, -1.0, shutter, coc_at).count, 1);
         let (m0, a) = ([12.0f32, -5.0], [3.0f32, 2.0]);
-        let p = |tau: f32| [tau * m0[0] + 0.5 * tau * tau * a[0], tau * m0[1] + 0.5 * tau * tau * a[1]];
+        let p = |tau: f32| {
+            [
+                tau * m0[0] + 0.5 * tau * tau * a[0],
+                tau * m0[1] + 0.5 * tau * tau * a[1],
+            ]
+        };
         let middle = [0.125 * a[0], 0.125 * a[1]];
         let mut end = p(-0.5);
         for index in 0..6 {
             let (q, m) = LightStratum { count: 6, index }.segment(middle, m0, a, shutter);
-            let (from, to) = ([q[0] - 0.5 * m[0], q[1] - 0.5 * m[1]], [q[0] + 0.5 * m[0], q[1] + 0.5 * m[1]]);
+            let (from, to) = (
+                [q[0] - 0.5 * m[0], q[1] - 0.5 * m[1]],
+                [q[0] + 0.5 * m[0], q[1] + 0.5 * m[1]],
+            );
             for c in 0..2 {
-                assert!((from[c] - end[c]).abs() < 1e-4, "stratum {index} starts at {from:?}, not {end:?}");
+                assert!(
+                    (from[c] - end[c]).abs() < 1e-4,
+                    "stratum {index} starts at {from:?}, not {end:?}"
+                );
             }
             end = to;
         }
         for c in 0..2 {
-            assert!((end[c] - p(0.5)[c]).abs() < 1e-4, "the last stratum ends at {end:?}");
+            assert!(
+                (end[c] - p(0.5)[c]).abs() < 1e-4,
+                "the last stratum ends at {end:?}"
+            );
         }
     }
 
@@ -1136,10 +1172,17 @@ mod tests {
             spread += share * (1.0 - share);
             bilinear_spread += f64::from(t) * (1.0 - f64::from(t));
         }
-        let (mean, spread, bilinear_spread) = (mean / n as f64, spread / n as f64, bilinear_spread / n as f64);
+        let (mean, spread, bilinear_spread) = (
+            mean / n as f64,
+            spread / n as f64,
+            bilinear_spread / n as f64,
+        );
         assert!((mean - 0.5).abs() < 1e-6, "mean {mean}");
         assert!((spread - 1.0 / 12.0).abs() < 1e-4, "spread {spread}");
-        assert!((bilinear_spread - 1.0 / 6.0).abs() < 1e-4, "bilinear {bilinear_spread}");
+        assert!(
+            (bilinear_spread - 1.0 / 6.0).abs() < 1e-4,
+            "bilinear {bilinear_spread}"
+        );
     }
 
     /// The fragments of one still, in-focus sample 0.2 px right of and below its pixel's
@@ -1408,7 +1451,10 @@ mod tests {
             checked += 1;
         }
         assert!(checked > 1000, "{checked} samples checked");
-        assert!(worst < 0.05, "a moved sample lies {worst} px from its arc's centre point");
+        assert!(
+            worst < 0.05,
+            "a moved sample lies {worst} px from its arc's centre point"
+        );
 
         // A still wall behind, seen in one sample of a turning pixel, is not bent with it.
         let mut frames = frames;
@@ -1488,7 +1534,10 @@ mod tests {
         }
         assert!(checked > 1000, "{checked} samples checked");
         // Read as the speed, the chords left samples up to 0.5 px short of their arc's centre.
-        assert!(worst < 0.15, "a moved sample lies {worst} px from its arc's centre point");
+        assert!(
+            worst < 0.15,
+            "a moved sample lies {worst} px from its arc's centre point"
+        );
     }
 
     /// One opaque sample at depth `depth` with jitter `jitter`, in pixel (6, 9) of a 16x16 frame.

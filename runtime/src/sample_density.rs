@@ -118,12 +118,14 @@ pub fn even_out(
         .into_par_iter()
         .flat_map_iter(|p| {
             let (x, y) = ((p % w) as i64, (p / w) as i64);
-            by_pixel[starts[p]..starts[p + 1]].iter().map(move |&(weight, parallax)| {
-                weight > 0.0
-                    && (-1..=1).all(|dy| {
-                        (-1..=1).all(|dx| surface_weight(x + dx, y + dy, parallax) > 0.0)
-                    })
-            })
+            by_pixel[starts[p]..starts[p + 1]]
+                .iter()
+                .map(move |&(weight, parallax)| {
+                    weight > 0.0
+                        && (-1..=1).all(|dy| {
+                            (-1..=1).all(|dx| surface_weight(x + dx, y + dy, parallax) > 0.0)
+                        })
+                })
         })
         .collect();
     // The weight of the surface of parallax `parallax` on pixel (x, y) where that pixel is
@@ -224,13 +226,20 @@ pub(crate) mod tests {
         let before = frags.clone();
         even_out(&mut frags, w, h, 1, |f| coc_of_depth(f.depth));
         let sum = |fs: &[Fragment]| fs[..blurred].iter().map(|f| f.weight).sum::<f32>();
-        assert!((sum(&frags) - sum(&before)).abs() < 1e-4, "the surface's weight is kept");
+        assert!(
+            (sum(&frags) - sum(&before)).abs() < 1e-4,
+            "the surface's weight is kept"
+        );
         for (f, b) in frags[..blurred].iter().zip(&before) {
             let rim = f.x == 2 || f.x == 9 || f.y == 2 || f.y == 9;
             // Pixels two or more from the rim trade only with pixels inside the surface.
             let inner = (4..8).contains(&f.x) && (4..8).contains(&f.y);
             if rim {
-                assert_eq!(f.weight, b.weight, "the rim ({}, {}) keeps its weight", f.x, f.y);
+                assert_eq!(
+                    f.weight, b.weight,
+                    "the rim ({}, {}) keeps its weight",
+                    f.x, f.y
+                );
             } else if inner {
                 assert!(
                     (f.weight - 1.0).abs() < 1e-5,
@@ -269,7 +278,13 @@ pub(crate) mod tests {
             .collect();
         even_out(&mut frags, w, h, 2, |_| 3.0);
         for f in &frags {
-            assert!((f.weight - 0.75).abs() < 1e-6, "({}, {}): {}", f.x, f.y, f.weight);
+            assert!(
+                (f.weight - 0.75).abs() < 1e-6,
+                "({}, {}): {}",
+                f.x,
+                f.y,
+                f.weight
+            );
         }
     }
 }

@@ -270,9 +270,7 @@ fn box3(values: &[f64], w: usize, h: usize) -> Vec<f64> {
     let across: Vec<f64> = values
         .par_chunks(w)
         .flat_map_iter(|row| {
-            (0..w).map(move |x| {
-                (row[x.saturating_sub(1)] + row[x] + row[(x + 1).min(w - 1)]) / 3.0
-            })
+            (0..w).map(move |x| (row[x.saturating_sub(1)] + row[x] + row[(x + 1).min(w - 1)]) / 3.0)
         })
         .collect();
     (0..h)
@@ -280,7 +278,8 @@ fn box3(values: &[f64], w: usize, h: usize) -> Vec<f64> {
         .flat_map_iter(|y| {
             let (up, down) = (y.saturating_sub(1), (y + 1).min(h - 1));
             let across = &across;
-            (0..w).map(move |x| (across[up * w + x] + across[y * w + x] + across[down * w + x]) / 3.0)
+            (0..w)
+                .map(move |x| (across[up * w + x] + across[y * w + x] + across[down * w + x]) / 3.0)
         })
         .collect()
 }
@@ -312,7 +311,12 @@ mod tests {
     }
 
     /// Frames of `w x h` pixels whose pixel `(x, y)` has the samples `values(x, y)`.
-    fn frames(w: usize, h: usize, spp: usize, values: impl Fn(usize, usize) -> Vec<f32>) -> StochasticFrames {
+    fn frames(
+        w: usize,
+        h: usize,
+        spp: usize,
+        values: impl Fn(usize, usize) -> Vec<f32>,
+    ) -> StochasticFrames {
         let mut samples = Vec::new();
         for y in 0..h {
             for x in 0..w {
@@ -349,7 +353,9 @@ mod tests {
         let frames = frames(w, h, spp, |x, y| vec![truth(x, y); spp]);
         let means = PixelSampleMeans::of(&frames, &camera()).expect("8 spp");
         let band = 5..=11;
-        let recon = image(w, h, |x, y| truth(x, y) + if band.contains(&x) { 0.1 } else { 0.0 });
+        let recon = image(w, h, |x, y| {
+            truth(x, y) + if band.contains(&x) { 0.1 } else { 0.0 }
+        });
         let mut leaned = recon.clone();
         means.lean(&mut leaned);
         for y in 0..h {
@@ -358,9 +364,16 @@ mod tests {
                 if x == 8 {
                     assert!((got - truth(x, y)).abs() < 1e-5, "({x},{y}) {got}");
                 } else if band.contains(&x) {
-                    assert!((got - truth(x, y)).abs() < 0.5 * (was - truth(x, y)).abs(), "({x},{y})");
+                    assert!(
+                        (got - truth(x, y)).abs() < 0.5 * (was - truth(x, y)).abs(),
+                        "({x},{y})"
+                    );
                 } else if !(2..=14).contains(&x) {
-                    assert_eq!(leaned.pixels[y * w + x], recon.pixels[y * w + x], "({x},{y})");
+                    assert_eq!(
+                        leaned.pixels[y * w + x],
+                        recon.pixels[y * w + x],
+                        "({x},{y})"
+                    );
                 }
             }
         }
@@ -374,7 +387,11 @@ mod tests {
         let (w, h, spp) = (5, 5, 8);
         // Each pixel's samples alternate 0.4 and 0.6: mean 0.5, luminance variance of the mean
         // (0.1^2 * 8 / 7) / 8 = 0.01 / 7.
-        let noisy = |_: usize, _: usize| (0..spp).map(|k| if k % 2 == 0 { 0.4 } else { 0.6 }).collect();
+        let noisy = |_: usize, _: usize| {
+            (0..spp)
+                .map(|k| if k % 2 == 0 { 0.4 } else { 0.6 })
+                .collect()
+        };
         let frames = frames(w, h, spp, noisy);
         let means = PixelSampleMeans::of(&frames, &camera()).expect("8 spp");
         let v = 0.01 / 7.0;
@@ -383,7 +400,10 @@ mod tests {
         let close = 0.5 + (NOISE_MARGIN * v).sqrt() as f32 * 0.9;
         let mut recon = image(w, h, |_, _| close);
         means.lean(&mut recon);
-        assert!(recon.pixels.iter().all(|p| p[0] == close), "within the noise: kept");
+        assert!(
+            recon.pixels.iter().all(|p| p[0] == close),
+            "within the noise: kept"
+        );
 
         let far = 0.9f32;
         let mut recon = image(w, h, |_, _| far);
@@ -393,7 +413,11 @@ mod tests {
         let weight = bias / (bias + v);
         let expected = far as f64 + weight * (0.5 - far as f64);
         for p in &recon.pixels {
-            assert!((p[0] as f64 - expected).abs() < 1e-5, "{} against {expected}", p[0]);
+            assert!(
+                (p[0] as f64 - expected).abs() < 1e-5,
+                "{} against {expected}",
+                p[0]
+            );
             assert_eq!(p[3], 1.0);
         }
     }
@@ -472,7 +496,11 @@ mod tests {
         assert!(recon.pixels.iter().all(|p| p.iter().all(|c| c.is_finite())));
         assert_eq!(recon.pixels[5 * w + 10][0], 0.8, "kept");
         // Away from it the correction is whole.
-        assert!((recon.pixels[5 * w + 3][0] - 0.5).abs() < 1e-5, "{:?}", recon.pixels[5 * w + 3]);
+        assert!(
+            (recon.pixels[5 * w + 3][0] - 0.5).abs() < 1e-5,
+            "{:?}",
+            recon.pixels[5 * w + 3]
+        );
         assert!(recon.pixels[5 * w + 9][0] < 0.8, "a neighbour is leaned");
     }
 }

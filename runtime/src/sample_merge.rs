@@ -73,7 +73,8 @@ impl Group {
         let s = &self.seed;
         let dm = [f.motion[0] - s.motion[0], f.motion[1] - s.motion[1]];
         f.source == s.source
-            && (coc - self.seed_coc).abs() <= COC_TOLERANCE_PX + RELATIVE_TOLERANCE * self.seed_coc.abs()
+            && (coc - self.seed_coc).abs()
+                <= COC_TOLERANCE_PX + RELATIVE_TOLERANCE * self.seed_coc.abs()
             && dm[0] * dm[0] + dm[1] * dm[1] <= self.motion_tolerance_sq
             && (f.parallax - s.parallax).abs() <= RELATIVE_TOLERANCE * s.parallax.abs()
     }
@@ -183,10 +184,13 @@ pub fn merge_placed(
             let range = (r * run_len).min(items)..((r + 1) * run_len).min(items);
             let mut starts = vec![0usize; cells + 1];
             let mut outside = Vec::new();
-            produce(range.clone(), &mut |x, y, index, share| match cell_of(x, y) {
-                Some(c) => starts[c + 1] += 1,
-                None => outside.push(fragment_of(x, y, index, share)),
-            });
+            produce(
+                range.clone(),
+                &mut |x, y, index, share| match cell_of(x, y) {
+                    Some(c) => starts[c + 1] += 1,
+                    None => outside.push(fragment_of(x, y, index, share)),
+                },
+            );
             for i in 0..cells {
                 starts[i + 1] += starts[i];
             }
@@ -226,9 +230,7 @@ pub fn merge_placed(
                 for &(index, share) in members {
                     let f = &fragment_of(x, y, index, share);
                     let coc = coc_of(f);
-                    let alone = f.color[..3]
-                        .iter()
-                        .any(|&v| v * f.weight > bright_above);
+                    let alone = f.color[..3].iter().any(|&v| v * f.weight > bright_above);
                     let into = (!alone)
                         .then(|| {
                             groups.iter_mut().find(|(g, open)| {

@@ -111,12 +111,21 @@ impl GridSymmetry {
         }
         // Directions in units of pi / n over a full turn of 2 n.
         let full = 2 * i64::from(n);
-        let turned = i64::from(key.angle_step) + i64::from(self.quarter_turns % 4) * i64::from(n / 2);
+        let turned =
+            i64::from(key.angle_step) + i64::from(self.quarter_turns % 4) * i64::from(n / 2);
         let moved = if self.mirrored { -turned } else { turned }.rem_euclid(full);
         let reversed = moved >= i64::from(n);
-        let angle_step = if reversed { moved - i64::from(n) } else { moved } as u32;
+        let angle_step = if reversed {
+            moved - i64::from(n)
+        } else {
+            moved
+        } as u32;
         let flips = u8::from(self.mirrored) + u8::from(reversed);
-        let bend_step = if flips % 2 == 1 { -key.bend_step } else { key.bend_step };
+        let bend_step = if flips % 2 == 1 {
+            -key.bend_step
+        } else {
+            key.bend_step
+        };
         Some(SmearKey {
             angle_step,
             bend_step,
@@ -133,7 +142,9 @@ pub fn canonical_key(key: SmearKey) -> Option<(SmearKey, GridSymmetry)> {
     let n = key.angle_steps();
     for g in GridSymmetry::all() {
         let moved = g.apply_with_steps(key, n)?;
-        if best.is_none_or(|(b, _)| (moved.angle_step, moved.bend_step) < (b.angle_step, b.bend_step)) {
+        if best
+            .is_none_or(|(b, _)| (moved.angle_step, moved.bend_step) < (b.angle_step, b.bend_step))
+        {
             best = Some((moved, g));
         }
     }
@@ -165,10 +176,19 @@ pub fn is_grid_symmetric(psf: &PsfImage) -> bool {
 
 /// The box (top-left offset from the centre, width, height, px) that `g` moves the box at
 /// `origin`, `width` x `height` onto.
-pub fn transform_box(origin: [i32; 2], width: usize, height: usize, g: GridSymmetry) -> ([i32; 2], usize, usize) {
+pub fn transform_box(
+    origin: [i32; 2],
+    width: usize,
+    height: usize,
+    g: GridSymmetry,
+) -> ([i32; 2], usize, usize) {
     let far = [origin[0] + width as i32 - 1, origin[1] + height as i32 - 1];
     let (a, b) = (g.apply(origin), g.apply(far));
-    let (w, h) = if g.swaps_axes() { (height, width) } else { (width, height) };
+    let (w, h) = if g.swaps_axes() {
+        (height, width)
+    } else {
+        (width, height)
+    };
     ([a[0].min(b[0]), a[1].min(b[1])], w, h)
 }
 
@@ -190,7 +210,12 @@ pub struct BoxImage<'a> {
 /// `src` moved by `g` into `out`, the box [`transform_box`] gives (`out` is resized to it and
 /// written only within the columns `out_rows` then gives per row; `out_rows` resized to its
 /// height). Returns the box's origin and width.
-pub fn transform_image(src: &BoxImage, g: GridSymmetry, out: &mut Vec<f32>, out_rows: &mut Vec<[u16; 2]>) -> ([i32; 2], usize) {
+pub fn transform_image(
+    src: &BoxImage,
+    g: GridSymmetry,
+    out: &mut Vec<f32>,
+    out_rows: &mut Vec<[u16; 2]>,
+) -> ([i32; 2], usize) {
     let ch = src.channels;
     let height = src.rows.len();
     let (origin, width, out_height) = transform_box(src.origin, src.width, height, g);
@@ -247,7 +272,8 @@ mod tests {
         for g in GridSymmetry::all() {
             assert_eq!(g.inverse().apply(g.apply(p)), p, "{g:?}");
         }
-        let images: std::collections::HashSet<_> = GridSymmetry::all().map(|g| g.apply(p)).collect();
+        let images: std::collections::HashSet<_> =
+            GridSymmetry::all().map(|g| g.apply(p)).collect();
         assert_eq!(images.len(), 8);
     }
 
@@ -256,7 +282,11 @@ mod tests {
         for g in GridSymmetry::all() {
             let (transposed, [mx, my]) = g.as_transpose_and_mirrors();
             for p in [[3, -7], [-2, 5], [1, 0]] {
-                let t = if transposed { GridSymmetry::TRANSPOSE.apply(p) } else { p };
+                let t = if transposed {
+                    GridSymmetry::TRANSPOSE.apply(p)
+                } else {
+                    p
+                };
                 let f = [if mx { -t[0] } else { t[0] }, if my { -t[1] } else { t[1] }];
                 assert_eq!(f, g.apply(p), "{g:?}");
             }
@@ -270,7 +300,12 @@ mod tests {
     fn a_moved_smear_is_the_smear_of_the_moved_key() {
         let psf = point();
         let mut checked = 0;
-        for (motion, bend) in [([23.0, 7.0], 9.0), ([-5.0, 31.0], -14.0), ([40.0, 0.5], 0.0), ([3.0, 2.0], 2.5)] {
+        for (motion, bend) in [
+            ([23.0, 7.0], 9.0),
+            ([-5.0, 31.0], -14.0),
+            ([40.0, 0.5], 0.0),
+            ([3.0, 2.0], 2.5),
+        ] {
             let (key, _) = SmearKey::new(0, motion, bend, [1.0, 0.0], 0.0);
             assert_eq!(key.angle_steps() % 2, 0);
             let src = smear(&psf, key.length_px(), key.angle_rad(), key.bend_px()).expect("smears");
@@ -284,10 +319,21 @@ mod tests {
             };
             for g in GridSymmetry::all() {
                 let moved_key = g.apply_to_key(key).expect("even steps");
-                let direct = smear(&psf, moved_key.length_px(), moved_key.angle_rad(), moved_key.bend_px()).expect("smears");
+                let direct = smear(
+                    &psf,
+                    moved_key.length_px(),
+                    moved_key.angle_rad(),
+                    moved_key.bend_px(),
+                )
+                .expect("smears");
                 let (mut out, mut out_rows) = (Vec::new(), Vec::new());
                 let (origin, width) = transform_image(&boxed, g, &mut out, &mut out_rows);
-                let at = |o: [i32; 2], w: usize, h: usize, data: &[f32], rows: Option<&[[u16; 2]]>, p: [i32; 2]| {
+                let at = |o: [i32; 2],
+                          w: usize,
+                          h: usize,
+                          data: &[f32],
+                          rows: Option<&[[u16; 2]]>,
+                          p: [i32; 2]| {
                     let (x, y) = (p[0] - o[0], p[1] - o[1]);
                     if x < 0 || y < 0 || x as usize >= w || y as usize >= h {
                         return 0.0;
@@ -304,12 +350,22 @@ mod tests {
                 for y in -60..60 {
                     for x in -60..60 {
                         let a = at(origin, width, out_rows.len(), &out, Some(&out_rows), [x, y]);
-                        let b = at(direct.origin, direct.width, direct.height, &direct.data, None, [x, y]);
+                        let b = at(
+                            direct.origin,
+                            direct.width,
+                            direct.height,
+                            &direct.data,
+                            None,
+                            [x, y],
+                        );
                         worst = worst.max((a - b).abs());
                     }
                 }
                 let peak = direct.data.iter().fold(0f32, |m, &v| m.max(v));
-                assert!(worst <= 1e-4 * peak, "{key:?} {g:?} -> {moved_key:?}: off by {worst} of {peak}");
+                assert!(
+                    worst <= 1e-4 * peak,
+                    "{key:?} {g:?} -> {moved_key:?}: off by {worst} of {peak}"
+                );
                 checked += 1;
             }
         }
@@ -318,7 +374,11 @@ mod tests {
 
     #[test]
     fn the_canonical_key_moves_back_onto_the_key() {
-        for (motion, bend) in [([23.0, 7.0], 9.0), ([-5.0, 31.0], -14.0), ([0.0, 12.0], 4.0)] {
+        for (motion, bend) in [
+            ([23.0, 7.0], 9.0),
+            ([-5.0, 31.0], -14.0),
+            ([0.0, 12.0], 4.0),
+        ] {
             let (key, _) = SmearKey::new(0, motion, bend, [1.0, 0.0], 0.0);
             let (canonical, g) = canonical_key(key).expect("even steps");
             assert_eq!(g.apply_to_key(canonical), Some(key));

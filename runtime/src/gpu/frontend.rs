@@ -108,15 +108,16 @@ fn with_coarse_levels(
     use crate::pipeline::IntegratedLayers;
     let mut times = GpuStageTimes::default();
     let t = Instant::now();
-    let mut layers_of = |frame: &crate::pipeline::Classified| -> Result<IntegratedLayers, GpuError> {
-        let planes = gpu.layer_images(&frame.frame, &frame.records, options.integrator)?;
-        Ok(IntegratedLayers {
-            frame: frame.frame,
-            planes,
-            rows: Vec::new(),
-            coarse: Vec::new(),
-        })
-    };
+    let mut layers_of =
+        |frame: &crate::pipeline::Classified| -> Result<IntegratedLayers, GpuError> {
+            let planes = gpu.layer_images(&frame.frame, &frame.records, options.integrator)?;
+            Ok(IntegratedLayers {
+                frame: frame.frame,
+                planes,
+                rows: Vec::new(),
+                coarse: Vec::new(),
+            })
+        };
     let mut layers = layers_of(classified)?;
     for level in &classified.coarse {
         let coarse = layers_of(&level.classified)?;

@@ -77,7 +77,9 @@ pub fn hidden_fill_share(occluders: f32, hidden: f32) -> f32 {
     if hidden <= 0.0 {
         return least;
     }
-    (0.5 + 0.5 * (hidden / occluders).log2()).clamp(0.0, 1.0).max(least)
+    (0.5 + 0.5 * (hidden / occluders).log2())
+        .clamp(0.0, 1.0)
+        .max(least)
 }
 
 /// The sharpness ([`layer_sharpness`]) below which occluders are too blurred to have holes of
@@ -218,7 +220,8 @@ pub fn composite_with_sharpness(
                     }
                 }
             }
-            for (((dst, mut px), sum), sharp) in out_row.iter_mut().zip(over).zip(&total).zip(&sharp)
+            for (((dst, mut px), sum), sharp) in
+                out_row.iter_mut().zip(over).zip(&total).zip(&sharp)
             {
                 finish_pixel(&mut px, sum, sharp, options);
                 *dst = px;
@@ -262,7 +265,12 @@ pub(super) fn fold_layer_pixel(
 /// A pixel's "over" `px` made up to the layers' joint coverage (`sum`, the plain sum of the
 /// layers; `sharp`, the coverage-weighted sharpness sums) as `options` ask, then clamped at 0.
 #[inline]
-pub(super) fn finish_pixel(px: &mut [f32; 4], sum: &[f32; 4], sharp: &[f32; 3], options: &CompositeOptions) {
+pub(super) fn finish_pixel(
+    px: &mut [f32; 4],
+    sum: &[f32; 4],
+    sharp: &[f32; 3],
+    options: &CompositeOptions,
+) {
     if options.renormalize_coverage && options.restore_occluded {
         let hidden = sum[3] - px[3];
         if hidden > FILL_MIN_HIDDEN && px[3] < 1.0 {

@@ -79,8 +79,14 @@ pub fn splat_composite(
                     continue;
                 }
                 let recs = &classified.records[info.first_record..][..info.record_count];
-                let Some(band) = draw_band(recs, &LayerRuns::default(), Planes::Direct, band_rows, &drawing, &mut scratch.band)
-                else {
+                let Some(band) = draw_band(
+                    recs,
+                    &LayerRuns::default(),
+                    Planes::Direct,
+                    band_rows,
+                    &drawing,
+                    &mut scratch.band,
+                ) else {
                     continue;
                 };
                 let s = sharpness.get(l).copied().unwrap_or(1.0);
@@ -91,8 +97,7 @@ pub fn splat_composite(
                     .enumerate()
                 {
                     let drawn = &band.data[y * pw + pad..][..w];
-                    for (((&c, acc), total), sharp) in
-                        drawn.iter().zip(over).zip(total).zip(sharp)
+                    for (((&c, acc), total), sharp) in drawn.iter().zip(over).zip(total).zip(sharp)
                     {
                         fold_layer_pixel(c, s, acc, total, sharp);
                     }

@@ -83,9 +83,15 @@ impl IntegratedLayers {
 
     /// Whether layer `layer` has coarse levels' light to add to its own planes.
     pub fn has_coarse(&self, layer: usize) -> bool {
-        self.coarse
-            .iter()
-            .any(|level| (0..4).any(|c| level.layers.planes.get(layer * 4 + c).is_some_and(|p| !p.is_empty())))
+        self.coarse.iter().any(|level| {
+            (0..4).any(|c| {
+                level
+                    .layers
+                    .planes
+                    .get(layer * 4 + c)
+                    .is_some_and(|p| !p.is_empty())
+            })
+        })
     }
 
     /// Image row `y` (0 = top, unpadded) of layer `layer` as premultiplied RGBA, one entry per
@@ -269,16 +275,29 @@ mod tests {
         let (w, h) = (12usize, 8usize);
         // Layer 0: its own planes and both levels; layer 1: only the scale-4 level; layer 2:
         // nothing anywhere.
-        let fine_value = |l: usize, c: usize, x: usize, y: usize| (l + c) as f32 * 0.01 + (x * y) as f32 * 1e-3;
-        let mut fine = layers_from(FrameParams::padded(w as u32, h as u32, 2, 3), |l| l == 0, fine_value);
-        let linear = |s: f32| move |l: usize, c: usize, x: usize, y: usize| 0.1 * s + 0.02 * (l + c) as f32 + 0.03 * x as f32 - 0.01 * y as f32;
+        let fine_value =
+            |l: usize, c: usize, x: usize, y: usize| (l + c) as f32 * 0.01 + (x * y) as f32 * 1e-3;
+        let mut fine = layers_from(
+            FrameParams::padded(w as u32, h as u32, 2, 3),
+            |l| l == 0,
+            fine_value,
+        );
+        let linear = |s: f32| {
+            move |l: usize, c: usize, x: usize, y: usize| {
+                0.1 * s + 0.02 * (l + c) as f32 + 0.03 * x as f32 - 0.01 * y as f32
+            }
+        };
         let half = layers_from(FrameParams::padded(6, 4, 3, 3), |l| l == 0, linear(1.0));
         let quarter = layers_from(FrameParams::padded(3, 2, 2, 3), |l| l <= 1, linear(2.0));
         add_upsampled(&mut fine, half, 2);
         add_upsampled(&mut fine, quarter, 4);
         assert_eq!(fine.rows[0], [0, h + 4]);
         assert_eq!(fine.rows[1], [0, h + 4]);
-        assert_eq!(fine.rows[2], [0, 0], "a layer no level draws keeps its rows");
+        assert_eq!(
+            fine.rows[2],
+            [0, 0],
+            "a layer no level draws keeps its rows"
+        );
         assert!(fine.has_coarse(0) && fine.has_coarse(1) && !fine.has_coarse(2));
         assert!((0..8).all(|k| fine.has_plane(k)) && !(8..12).any(|k| fine.has_plane(k)));
 
@@ -290,9 +309,14 @@ mod tests {
                 fine.layer_row(l, y, &mut row);
                 for (x, px) in row.iter().enumerate() {
                     for (c, &got) in px.iter().enumerate() {
-                        let own = if l == 0 { f64::from(fine_value(l, c, x + 2, y + 2)) } else { 0.0 };
+                        let own = if l == 0 {
+                            f64::from(fine_value(l, c, x + 2, y + 2))
+                        } else {
+                            0.0
+                        };
                         let level = |s: f64, pad: f64, offset: f64| {
-                            offset + 0.02 * (l + c) as f64 + 0.03 * at(x, s, pad) - 0.01 * at(y, s, pad)
+                            offset + 0.02 * (l + c) as f64 + 0.03 * at(x, s, pad)
+                                - 0.01 * at(y, s, pad)
                         };
                         let half = if l == 0 { level(2.0, 3.0, 0.1) } else { 0.0 };
                         let expected = own + half + level(4.0, 2.0, 0.2);

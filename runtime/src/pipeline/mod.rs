@@ -16,8 +16,8 @@ pub mod composite;
 pub mod direct;
 pub mod integrate;
 pub mod packed;
-pub mod splat;
 mod sparse_runs;
+pub mod splat;
 pub mod types;
 pub mod wide;
 

@@ -58,7 +58,11 @@ impl PackedImage {
         // At most the written columns' values: one allocation rather than one per doubling.
         let most: usize = written
             .iter()
-            .map(|w| usize::from(w[1]).min(width).saturating_sub(usize::from(w[0])))
+            .map(|w| {
+                usize::from(w[1])
+                    .min(width)
+                    .saturating_sub(usize::from(w[0]))
+            })
             .sum();
         let mut values = Vec::with_capacity(most * ch);
         for (row, w) in box_values.chunks_exact(width * ch).zip(written) {
@@ -181,7 +185,11 @@ impl<'a> MirroredImage<'a> {
     /// mirrored left to right.
     #[inline]
     pub fn row(&self, v: usize) -> ([u16; 2], &'a [f32]) {
-        let v = if self.mirrors[1] { self.height() - 1 - v } else { v };
+        let v = if self.mirrors[1] {
+            self.height() - 1 - v
+        } else {
+            v
+        };
         let (span, values) = self.image.row(v);
         if self.mirrors[0] {
             // Box widths are the format's u16 widths.
@@ -245,7 +253,10 @@ mod tests {
             let mut box_mirrored = [0.0; 12];
             for v in 0..2 {
                 for u in 0..3 {
-                    let (x, y) = (if mirrors[0] { 2 - u } else { u }, if mirrors[1] { 1 - v } else { v });
+                    let (x, y) = (
+                        if mirrors[0] { 2 - u } else { u },
+                        if mirrors[1] { 1 - v } else { v },
+                    );
                     let (to, from) = ((v * 3 + u) * 2, (y * 3 + x) * 2);
                     box_mirrored[to..to + 2].copy_from_slice(&values[from..from + 2]);
                 }

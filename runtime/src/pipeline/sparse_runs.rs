@@ -255,7 +255,8 @@ mod tests {
             state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
             (state >> 8) % n
         };
-        for (count, psfs, in_order) in [(40, 2, true), (60, 5, true), (50, 20, true), (30, 3, false)]
+        for (count, psfs, in_order) in
+            [(40, 2, true), (60, 5, true), (50, 20, true), (30, 3, false)]
         {
             let mut xs: Vec<i32> = (0..count).map(|_| next(25) as i32).collect();
             if in_order {

@@ -19,8 +19,8 @@ use rayon::prelude::*;
 
 use super::packed::{MirroredImage, PackedImages};
 use super::sparse_runs::{draw_run, drawn_in_run, find_runs, LayerRuns};
-use super::wide::{WideImage, WideImages};
 use super::types::{psf_reach, Classified, FrameParams, SplatPath, SplatRecord};
+use super::wide::{WideImage, WideImages};
 
 /// Rows per band of the deterministic parallel splat. A pixel sums its records in record
 /// order whatever the band, so the height changes no byte; 64 rows halve the streaks that
@@ -160,7 +160,12 @@ pub fn splat(
             let layers: Vec<(usize, usize)> = classified
                 .layers
                 .iter()
-                .map(|l| (l.first_record, if l.sparse > 0 { l.record_count } else { 0 }))
+                .map(|l| {
+                    (
+                        l.first_record,
+                        if l.sparse > 0 { l.record_count } else { 0 },
+                    )
+                })
                 .collect();
             find_runs(
                 &classified.records,
@@ -216,23 +221,30 @@ pub fn splat(
     }
     let drawn: Vec<Option<(usize, usize, usize)>> = tasks
         .into_par_iter()
-        .map_init(Vec::new, |buffer: &mut Vec<[f32; 4]>, ((l, b, kind), out)| {
-            let info = &classified.layers[l];
-            let recs =
-                &classified.records[info.first_record..info.first_record + info.record_count];
-            let y0 = (b * BAND_ROWS) as i32;
-            let y1 = ((b + 1) * BAND_ROWS).min(ph) as i32;
-            let kind = if kind == 0 { Planes::Laplacian } else { Planes::Direct };
-            let rows = BandRows { y0, y1, width: pw };
-            let layer_runs = runs.get(l).unwrap_or(&no_runs);
-            let band = draw_band(recs, layer_runs, kind, rows, &drawing, buffer)?;
-            let [r, g, bl, a] = out;
-            for ((((px, r), g), bl), a) in band.data.iter().zip(r).zip(g).zip(bl).zip(a) {
-                (*r, *g, *bl, *a) = (px[0], px[1], px[2], px[3]);
-            }
-            *buffer = band.data;
-            Some((l, b, kind as usize))
-        })
+        .map_init(
+            Vec::new,
+            |buffer: &mut Vec<[f32; 4]>, ((l, b, kind), out)| {
+                let info = &classified.layers[l];
+                let recs =
+                    &classified.records[info.first_record..info.first_record + info.record_count];
+                let y0 = (b * BAND_ROWS) as i32;
+                let y1 = ((b + 1) * BAND_ROWS).min(ph) as i32;
+                let kind = if kind == 0 {
+                    Planes::Laplacian
+                } else {
+                    Planes::Direct
+                };
+                let rows = BandRows { y0, y1, width: pw };
+                let layer_runs = runs.get(l).unwrap_or(&no_runs);
+                let band = draw_band(recs, layer_runs, kind, rows, &drawing, buffer)?;
+                let [r, g, bl, a] = out;
+                for ((((px, r), g), bl), a) in band.data.iter().zip(r).zip(g).zip(bl).zip(a) {
+                    (*r, *g, *bl, *a) = (px[0], px[1], px[2], px[3]);
+                }
+                *buffer = band.data;
+                Some((l, b, kind as usize))
+            },
+        )
         .collect();
 
     // A layer and kind no band drew in keeps no planes.
@@ -252,7 +264,9 @@ pub fn splat(
         .map(|l| {
             let bands = &drawn_bands[l * 2 + 1];
             match (bands.iter().min(), bands.iter().max()) {
-                (Some(&first), Some(&last)) => [first * BAND_ROWS, ((last + 1) * BAND_ROWS).min(ph)],
+                (Some(&first), Some(&last)) => {
+                    [first * BAND_ROWS, ((last + 1) * BAND_ROWS).min(ph)]
+                }
                 _ => [0, 0],
             }
         })
@@ -463,7 +477,11 @@ impl Band {
         let (first, end) = (top.max(self.y0), (top + height as i32).min(self.y1));
         let width = self.width as usize;
         let (first_row, count, start) = if first < end {
-            ((first - top) as usize, (end - first) as usize, (first - self.y0) as usize * width)
+            (
+                (first - top) as usize,
+                (end - first) as usize,
+                (first - self.y0) as usize * width,
+            )
         } else {
             (0, 0, self.data.len())
         };
@@ -711,7 +729,12 @@ fn splat_dense_upright(
         (view, color, s)
     });
     let (ux0, uy0, ux1, uy1) = match &b {
-        Some((_, _, sb)) => (sa.0.min(sb.0), sa.1.min(sb.1), sa.2.max(sb.2), sa.3.max(sb.3)),
+        Some((_, _, sb)) => (
+            sa.0.min(sb.0),
+            sa.1.min(sb.1),
+            sa.2.max(sb.2),
+            sa.3.max(sb.3),
+        ),
         None => sa,
     };
     let (x_lo, x_hi) = (ux0.max(0), ux1.min(band.width));
@@ -736,7 +759,11 @@ fn splat_dense_upright(
             return None;
         }
         let (at, ch) = (row * v.width, v.channels);
-        Some((s.0 + first as i32, end - first, &v.data[(at + first) * ch..(at + end) * ch]))
+        Some((
+            s.0 + first as i32,
+            end - first,
+            &v.data[(at + first) * ch..(at + end) * ch],
+        ))
     }
     let ca = r.color;
     // Two records of one image (a reconstructed pixel's samples of one surface that did not
@@ -745,7 +772,9 @@ fn splat_dense_upright(
     if let (Some(next), Some((_, cb, _))) = (next, &b) {
         if next.psf_index == r.psf_index {
             for y in sa.1.max(band.y0)..sa.3.min(band.y1) {
-                let Some((ax0, n, values)) = row_of(&a, sa, y) else { continue };
+                let Some((ax0, n, values)) = row_of(&a, sa, y) else {
+                    continue;
+                };
                 let (lo, hi) = (ax0.max(x_lo), (ax0 + n as i32).min(x_hi));
                 if lo >= hi {
                     continue;
@@ -787,7 +816,10 @@ fn splat_dense_upright(
                     let at = |x: i32| (x - x0) as usize * ch;
                     (lo < hi).then(|| (lo as usize, hi as usize, &values[at(lo)..at(hi)]))
                 }
-                let (ra, rb) = (clip(ra, band.width, ch), clip(row_of(bv, *sb, y), band.width, ch));
+                let (ra, rb) = (
+                    clip(ra, band.width, ch),
+                    clip(row_of(bv, *sb, y), band.width, ch),
+                );
                 match (ra, rb) {
                     (None, None) => {}
                     (Some((lo, hi, va)), None) => add_row(&mut row[lo..hi], va, ch, ca),
@@ -802,7 +834,8 @@ fn splat_dense_upright(
                             add_row(&mut row[b_lo..b_hi], vb, ch, *cb);
                             continue;
                         }
-                        for (from, to, values, colour) in [(a_lo, a_hi, va, ca), (b_lo, b_hi, vb, *cb)]
+                        for (from, to, values, colour) in
+                            [(a_lo, a_hi, va, ca), (b_lo, b_hi, vb, *cb)]
                         {
                             let at = |x: usize| (x - from) * ch;
                             if from < lo {
@@ -833,7 +866,10 @@ fn add_row(pixels: &mut [[f32; 4]], values: &[f32], channels: usize, colour: [f3
         }
     };
     match channels {
-        1 => pixels.iter_mut().zip(values).for_each(|(px, &v)| add(px, weighted(colour, &[v]))),
+        1 => pixels
+            .iter_mut()
+            .zip(values)
+            .for_each(|(px, &v)| add(px, weighted(colour, &[v]))),
         3 => pixels
             .iter_mut()
             .zip(values.chunks_exact(3))
@@ -871,11 +907,18 @@ fn add_pair_row(
             .iter_mut()
             .zip(a.chunks_exact(3).zip(b.chunks_exact(3)))
             .for_each(|(px, (u, v))| {
-                add(px, weighted(ca, &[u[0], u[1], u[2]]), weighted(cb, &[v[0], v[1], v[2]]))
+                add(
+                    px,
+                    weighted(ca, &[u[0], u[1], u[2]]),
+                    weighted(cb, &[v[0], v[1], v[2]]),
+                )
             }),
         _ => pixels
             .iter_mut()
-            .zip(a.chunks_exact(channels.max(1)).zip(b.chunks_exact(channels.max(1))))
+            .zip(
+                a.chunks_exact(channels.max(1))
+                    .zip(b.chunks_exact(channels.max(1))),
+            )
             .for_each(|(px, (u, v))| add(px, weighted(ca, u), weighted(cb, v))),
     }
 }
@@ -946,17 +989,29 @@ fn splat_upright_spans<'v>(
             let (a, b) = (n - (hi - start) as usize, n - (lo - start) as usize);
             let values = &values[a * ch..b * ch];
             if ch == 1 {
-                pixels.iter_mut().zip(values.iter().rev()).for_each(|(px, &v)| add_grey(px, v));
+                pixels
+                    .iter_mut()
+                    .zip(values.iter().rev())
+                    .for_each(|(px, &v)| add_grey(px, v));
             } else {
-                pixels.iter_mut().zip(values.chunks_exact(3).rev()).for_each(|(px, v)| add_rgb(px, v));
+                pixels
+                    .iter_mut()
+                    .zip(values.chunks_exact(3).rev())
+                    .for_each(|(px, v)| add_rgb(px, v));
             }
             continue;
         }
         let values = &values[(lo - start) as usize * ch..(hi - start) as usize * ch];
         if ch == 1 {
-            pixels.iter_mut().zip(values).for_each(|(px, &v)| add_grey(px, v));
+            pixels
+                .iter_mut()
+                .zip(values)
+                .for_each(|(px, &v)| add_grey(px, v));
         } else {
-            pixels.iter_mut().zip(values.chunks_exact(3)).for_each(|(px, v)| add_rgb(px, v));
+            pixels
+                .iter_mut()
+                .zip(values.chunks_exact(3))
+                .for_each(|(px, v)| add_rgb(px, v));
         }
     }
 }
@@ -986,13 +1041,20 @@ fn splat_wide(band: &mut Band, colour: [f32; 4], centre: (i32, i32), image: &Wid
 /// A dense record whose image is packed ([`super::packed::PackedImage`]): upright from its rows' spans, as
 /// [`splat_upright_rows`] draws the same image from the database; turned (no packed image is
 /// today) from its box.
-fn splat_packed(band: &mut Band, r: &SplatRecord, image: MirroredImage, sampling: RotationSampling) {
+fn splat_packed(
+    band: &mut Band,
+    r: &SplatRecord,
+    image: MirroredImage,
+    sampling: RotationSampling,
+) {
     let ch = image.image.channels;
     let height = image.height();
     let origin = image.origin();
     if is_identity(r) && (ch == 1 || ch == 3) {
         let top_left = (r.center_x + origin[0], r.center_y + origin[1]);
-        splat_upright_spans(band, r.color, top_left, height, ch, image.mirrors[0], |v| image.row(v));
+        splat_upright_spans(band, r.color, top_left, height, ch, image.mirrors[0], |v| {
+            image.row(v)
+        });
         return;
     }
     let boxed = image.unpacked_box();
@@ -1217,7 +1279,14 @@ mod tests {
         let n = psfs.len();
         let (w, h, pad) = (30u32, 120u32, 6u32);
         let (pw, ph) = ((w + 2 * pad) as i32, (h + 2 * pad) as i32);
-        let centres = [(20, 30), (3, 63), (pw - 1, 64), (17, 65), (pw - 2, ph - 1), (10, 127)];
+        let centres = [
+            (20, 30),
+            (3, 63),
+            (pw - 1, 64),
+            (17, 65),
+            (pw - 2, ph - 1),
+            (10, 127),
+        ];
         let records: Vec<SplatRecord> = centres
             .iter()
             .enumerate()
@@ -1348,16 +1417,24 @@ mod tests {
     #[test]
     fn unturned_dense_records_land_where_their_pixels_say() {
         use psf_db::{DatabaseBuilder, DbHeader, ParamSpace, PsfModel};
-        let space =
-            ParamSpace::for_model(PsfModel::ThinLens, &[[0.0, 8.0]], 8).expect("space");
+        let space = ParamSpace::for_model(PsfModel::ThinLens, &[[0.0, 8.0]], 8).expect("space");
         let n = space.psf_count() as usize;
         let mut builder = DatabaseBuilder::new(DbHeader::new(PsfModel::ThinLens, space, 32));
         let mut images = Vec::new();
         for i in 0..n {
             let (w, h) = (3 + 2 * (i % 5) as u16, 1 + 3 * (i % 4) as u16);
-            let origin = [-(w as i16) / 2 - (i % 3) as i16, -(h as i16) / 2 + (i % 2) as i16];
+            let origin = [
+                -(w as i16) / 2 - (i % 3) as i16,
+                -(h as i16) / 2 + (i % 2) as i16,
+            ];
             let data: Vec<f32> = (0..w as usize * h as usize)
-                .map(|k| if (k + i) % 4 == 0 { 0.0 } else { 0.01 * (1 + k % 9) as f32 })
+                .map(|k| {
+                    if (k + i) % 4 == 0 {
+                        0.0
+                    } else {
+                        0.01 * (1 + k % 9) as f32
+                    }
+                })
                 .collect();
             builder.push_dense(origin, w, h, &data).expect("dense");
             images.push((origin, w as usize, h as usize, data));
@@ -1366,7 +1443,14 @@ mod tests {
         let (w, h, pad) = (30u32, 120u32, 6u32);
         let (pw, ph) = ((w + 2 * pad) as i32, (h + 2 * pad) as i32);
         let mut records = Vec::new();
-        let centres = [(0, 0), (3, 63), (pw - 1, 64), (17, 65), (pw - 2, ph - 1), (10, 127)];
+        let centres = [
+            (0, 0),
+            (3, 63),
+            (pw - 1, 64),
+            (17, 65),
+            (pw - 2, ph - 1),
+            (10, 127),
+        ];
         for (k, &(cx, cy)) in centres.iter().enumerate() {
             let pair = k % 2 == 0;
             let parts: &[(usize, f32)] = if pair {
@@ -1412,11 +1496,16 @@ mod tests {
         assert_planes_hold(&stack.direct, &expected, pw);
         // Rows no record reaches are not drawn, and the stack says which rows hold light.
         let [first, end] = stack.direct_rows[0];
-        assert!(first <= 63 - 12 && end >= ph as usize, "rows {first}..{end}");
+        assert!(
+            first <= 63 - 12 && end >= ph as usize,
+            "rows {first}..{end}"
+        );
 
         // Taking the stack moves its planes and gives the same layers; compositing skips the
         // rows outside a layer's and gives the same image as reading every row.
-        use crate::pipeline::{composite, integrate, integrate_owned, CompositeOptions, Integrator};
+        use crate::pipeline::{
+            composite, integrate, integrate_owned, CompositeOptions, Integrator,
+        };
         let borrowed = integrate(&stack, Integrator::Exact);
         let owned = integrate_owned(stack, Integrator::Exact);
         assert_eq!(borrowed, owned);
@@ -1441,10 +1530,21 @@ mod tests {
         for i in 0..n {
             let (w, h) = (3 + 4 * (i % 6) as u16, 2 + (i % 6) as u16);
             let data: Vec<f32> = (0..w as usize * h as usize)
-                .map(|k| if (k + i) % 5 == 0 { 0.0 } else { 0.01 * (1 + k % 7) as f32 })
+                .map(|k| {
+                    if (k + i) % 5 == 0 {
+                        0.0
+                    } else {
+                        0.01 * (1 + k % 7) as f32
+                    }
+                })
                 .collect();
             builder
-                .push_dense([-(w as i16) / 2 - (i % 6) as i16, -(h as i16) / 2], w, h, &data)
+                .push_dense(
+                    [-(w as i16) / 2 - (i % 6) as i16, -(h as i16) / 2],
+                    w,
+                    h,
+                    &data,
+                )
                 .expect("dense");
         }
         let db = builder.finish().expect("database");
@@ -1452,7 +1552,10 @@ mod tests {
         let classified = |records: Vec<SplatRecord>| one_layer(&records, w, h, pad);
         // The second record of a pair of another PSF, or of the same one (drawn from its
         // image's own spans).
-        for (angle, second) in [0.0f32, 0.3, 1.9, -2.4].into_iter().flat_map(|a| [(a, 1), (a, 0)]) {
+        for (angle, second) in [0.0f32, 0.3, 1.9, -2.4]
+            .into_iter()
+            .flat_map(|a| [(a, 1), (a, 0)])
+        {
             let mut records = Vec::new();
             for k in 0..5 {
                 let centre = (pad as i32 + 5 + 7 * k, pad as i32 + 9 + 13 * k);
@@ -1523,7 +1626,13 @@ mod tests {
         for i in 0..n {
             let (w, h) = (2 + (i % 5) as u16, 1 + 2 * (i % 4) as u16);
             let data: Vec<f32> = (0..w as usize * h as usize * 3)
-                .map(|k| if (k / 3 + i) % 4 == 0 { 0.0 } else { 0.013 * (1 + k % 11) as f32 })
+                .map(|k| {
+                    if (k / 3 + i) % 4 == 0 {
+                        0.0
+                    } else {
+                        0.013 * (1 + k % 11) as f32
+                    }
+                })
                 .collect();
             let origin = [-(w as i16) / 2 - (i % 3) as i16, -(h as i16) / 2];
             builder.push_dense(origin, w, h, &data).expect("dense");
@@ -1550,19 +1659,34 @@ mod tests {
         let wide = WideImages::for_records(&classified.records, &db, None);
         assert_eq!(wide.count(), 3, "the images drawn many times are widened");
         let together = splat(&classified, Some(&db), &SplatOptions::default());
-        let mut apart: Vec<Vec<f32>> = together.direct.iter().map(|p| vec![0.0; p.data.len()]).collect();
+        let mut apart: Vec<Vec<f32>> = together
+            .direct
+            .iter()
+            .map(|p| vec![0.0; p.data.len()])
+            .collect();
         for r in &sorted {
-            let one = splat(&one_layer(&[*r], w, h, pad), Some(&db), &SplatOptions::default());
+            let one = splat(
+                &one_layer(&[*r], w, h, pad),
+                Some(&db),
+                &SplatOptions::default(),
+            );
             for (sum, plane) in apart.iter_mut().zip(&one.direct) {
                 for (s, v) in sum.iter_mut().zip(&plane.data) {
                     *s += v;
                 }
             }
         }
-        assert!(together.direct[0].data.iter().any(|&v| v > 0.0), "something was drawn");
+        assert!(
+            together.direct[0].data.iter().any(|&v| v > 0.0),
+            "something was drawn"
+        );
         for (plane, sum) in together.direct.iter().zip(&apart) {
             assert!(
-                plane.data.iter().zip(sum).all(|(a, b)| a.to_bits() == b.to_bits()),
+                plane
+                    .data
+                    .iter()
+                    .zip(sum)
+                    .all(|(a, b)| a.to_bits() == b.to_bits()),
                 "widened images draw other values"
             );
         }
@@ -1609,7 +1733,18 @@ mod tests {
     /// of a zero, which no caller sees), halves included, over the offsets a PSF can reach.
     #[test]
     fn exact_floor_and_round_match_the_standard_ones() {
-        let mut values = vec![0.0f32, -0.0, 0.5, -0.5, 1.5, -1.5, 2.5, -2.5, 0.49999997, -0.49999997];
+        let mut values = vec![
+            0.0f32,
+            -0.0,
+            0.5,
+            -0.5,
+            1.5,
+            -1.5,
+            2.5,
+            -2.5,
+            0.49999997,
+            -0.49999997,
+        ];
         let mut v = -3000.0f32;
         while v < 3000.0 {
             values.push(v);
@@ -1617,7 +1752,14 @@ mod tests {
         }
         for k in 1..2000 {
             let x = k as f32 * 0.25;
-            values.extend([x, -x, x.next_up(), x.next_down(), -x.next_up(), -x.next_down()]);
+            values.extend([
+                x,
+                -x,
+                x.next_up(),
+                x.next_down(),
+                -x.next_up(),
+                -x.next_down(),
+            ]);
         }
         for v in values {
             assert_eq!(floor_exact(v), v.floor(), "floor {v}");

@@ -55,7 +55,10 @@ impl WideImage {
             let row = view.data.get(at..stop)?;
             starts.push(u32::try_from(values.len()).ok()?);
             spans.push(span);
-            values.extend(row.chunks_exact(3).map(|p| [p[0], p[1], p[2], p[0] + p[1] + p[2]]));
+            values.extend(
+                row.chunks_exact(3)
+                    .map(|p| [p[0], p[1], p[2], p[0] + p[1] + p[2]]),
+            );
         }
         Some(WideImage {
             origin: view.origin,
@@ -113,7 +116,12 @@ impl WideImages {
                 return None;
             }
             let view = db.dense(i).filter(|v| v.channels == 3)?;
-            Some(view.row_spans.iter().map(|s| usize::from(s[1].saturating_sub(s[0]))).sum())
+            Some(
+                view.row_spans
+                    .iter()
+                    .map(|s| usize::from(s[1].saturating_sub(s[0])))
+                    .sum(),
+            )
         };
         let mut wanted: Vec<(u32, usize, usize)> = uses
             .iter()

@@ -230,7 +230,11 @@ mod tests {
         };
         let field: Vec<[f32; 2]> = (0..w * h).map(scaling).collect();
         let bends = path_bends(w, h, &field, Some(&flat), &all);
-        assert!(bends.iter().all(|b| b.abs() < 1e-3), "{:?}", bends.iter().fold(0f32, |a, b| a.max(b.abs())));
+        assert!(
+            bends.iter().all(|b| b.abs() < 1e-3),
+            "{:?}",
+            bends.iter().fold(0f32, |a, b| a.max(b.abs()))
+        );
     }
 
     /// A rolling wheel: its rim turns about a centre that travels. Its own acceleration (the
@@ -264,8 +268,17 @@ mod tests {
         let len = (m[0] * m[0] + m[1] * m[1]).sqrt();
         // (-m_y, m_x) / |m| is straight down here: a positive bend.
         assert!((own - expected).abs() < 1e-4, "{own} against {expected}");
-        let fitted = path_bends(w, h, &motion, Some(&vec![5.0; w * h]), &vec![[1.0; 4]; w * h])[top];
-        assert!((fitted - 2.0 * expected).abs() < 1e-3, "{fitted}, length {len}");
+        let fitted = path_bends(
+            w,
+            h,
+            &motion,
+            Some(&vec![5.0; w * h]),
+            &vec![[1.0; 4]; w * h],
+        )[top];
+        assert!(
+            (fitted - 2.0 * expected).abs() < 1e-3,
+            "{fitted}, length {len}"
+        );
     }
 
     /// At a silhouette the still background is not taken for the moving surface's field.
@@ -276,7 +289,9 @@ mod tests {
         let motion: Vec<[f32; 2]> = (0..w * h)
             .map(|i| if slab(i) { [12.0, 0.0] } else { [0.0, 0.0] })
             .collect();
-        let depth: Vec<f32> = (0..w * h).map(|i| if slab(i) { 2.0 } else { 10.0 }).collect();
+        let depth: Vec<f32> = (0..w * h)
+            .map(|i| if slab(i) { 2.0 } else { 10.0 })
+            .collect();
         let bends = path_bends(w, h, &motion, Some(&depth), &vec![[1.0; 4]; w * h]);
         assert!(bends.iter().all(|&b| b == 0.0));
     }

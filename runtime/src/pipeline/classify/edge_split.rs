@@ -93,7 +93,15 @@ pub(super) fn edge_split(
     // relative to the pixel where its path crosses the pixel.
     let mut coc_gap = (coc_j - coc_i).abs();
     if bright(g.color[j]) {
-        coc_gap += 0.5 * crossing_motion((xi, yi), (d, dj), motion_at(j), motion_at(i), &index, depth_at);
+        coc_gap += 0.5
+            * crossing_motion(
+                (xi, yi),
+                (d, dj),
+                motion_at(j),
+                motion_at(i),
+                &index,
+                depth_at,
+            );
     }
     // Only where the depth step is visible as a difference in blur (or, for a pinhole with
     // motion, a large relative depth step).
@@ -192,7 +200,10 @@ fn crossing_motion(
     index: &impl Fn(i32, i32) -> Option<usize>,
     depth_at: &impl Fn(usize) -> f32,
 ) -> f32 {
-    let relative = [foreground_motion[0] - motion[0], foreground_motion[1] - motion[1]];
+    let relative = [
+        foreground_motion[0] - motion[0],
+        foreground_motion[1] - motion[1],
+    ];
     let length = relative[0].hypot(relative[1]);
     if !(length > 0.0 && length.is_finite()) {
         return 0.0;
@@ -322,7 +333,10 @@ mod tests {
         let still = |_: usize| [0.0f32; 2];
         let near = bright_near(&g, 8.0);
         // (4, 4): light, its only nearer neighbour the diagonal (5, 5), dark squares beyond.
-        assert_eq!(edge_split(&g, 4, 4, &coc_at, &depth_at, &still, 8.0, &near), None);
+        assert_eq!(
+            edge_split(&g, 4, 4, &coc_at, &depth_at, &still, 8.0, &near),
+            None
+        );
         let rim = edge_split(&g, 4, 6, &coc_at, &depth_at, &still, 8.0, &near).expect("rim split");
         assert!((rim.alpha - 0.5).abs() < 0.05, "rim coverage {}", rim.alpha);
     }
@@ -350,7 +364,9 @@ mod tests {
         };
         let frame = |lone: bool| {
             let color: Vec<[f32; 4]> = (0..w * h).map(|i| colour_of(i % w, lone)).collect();
-            let depth: Vec<f32> = (0..w * h).map(|i| if foreground(i % w) { 1.0 } else { 4.0 }).collect();
+            let depth: Vec<f32> = (0..w * h)
+                .map(|i| if foreground(i % w) { 1.0 } else { 4.0 })
+                .collect();
             GBuffer::from_planes(w, h, color, Some(depth), None).expect("frame")
         };
         for (lone, split) in [(false, false), (true, true)] {
@@ -393,16 +409,30 @@ mod tests {
         let g = GBuffer::from_planes(w, h, color, Some(depth.clone()), None).expect("frame");
         let coc_at = |i: usize| if depth[i] < 1.1 { 0.3 } else { 0.5 };
         let depth_at = |i: usize| depth[i];
-        let moving = |i: usize| if depth[i] < 1.1 { [8.0f32, 0.0] } else { [0.0; 2] };
+        let moving = |i: usize| {
+            if depth[i] < 1.1 {
+                [8.0f32, 0.0]
+            } else {
+                [0.0; 2]
+            }
+        };
         let still = |_: usize| [0.0f32; 2];
         let near = bright_near(&g, 8.0);
         let split = |x, y, motion: &dyn Fn(usize) -> [f32; 2]| {
             edge_split(&g, x, y, &coc_at, &depth_at, &motion, 8.0, &near)
         };
         let leading = split(10, 4, &moving).expect("the leading rim is split");
-        assert!((leading.alpha - 0.5).abs() < 0.05, "coverage {}", leading.alpha);
+        assert!(
+            (leading.alpha - 0.5).abs() < 0.05,
+            "coverage {}",
+            leading.alpha
+        );
         assert_eq!(split(8, 2, &moving), None, "the top rim moves along itself");
-        assert_eq!(split(10, 4, &still), None, "a still light's rim at the wall's blur");
+        assert_eq!(
+            split(10, 4, &still),
+            None,
+            "a still light's rim at the wall's blur"
+        );
     }
 
     /// Walking the 3x3 window where no bright pixel is near splits every pixel as the full
@@ -426,6 +456,9 @@ mod tests {
                 splits += usize::from(full.is_some());
             }
         }
-        assert!(splits > 10, "{splits} pixels split: the frame should have edges");
+        assert!(
+            splits > 10,
+            "{splits} pixels split: the frame should have edges"
+        );
     }
 }

@@ -48,7 +48,10 @@ fn layer_drawn_from_images(records: &[SplatRecord], reach: &[i32], plane: usize)
     let side = |psf: u32| 2 * reach.get(psf as usize).copied().unwrap_or(0).max(0) as usize + 1;
     let mut cost = 0usize;
     let mut keys = Vec::new();
-    for r in records.iter().filter(|r| r.path == SplatPath::Sparse as u32) {
+    for r in records
+        .iter()
+        .filter(|r| r.path == SplatPath::Sparse as u32)
+    {
         let Some(turn) = turn_of(r) else {
             return false;
         };

@@ -4,10 +4,10 @@
 use super::edge_split::edge_split;
 use super::hidden::hidden_background;
 use super::*;
-use rayon::prelude::*;
 use crate::camera::Camera;
 use crate::gbuffer::GBuffer;
 use psf_db::PsfModel;
+use rayon::prelude::*;
 
 /// One part of a pixel (or one stochastic sample) before layering: where its PSF is centred,
 /// its colour, weight, parallax, depth and motion. Synthesis makes one or two per G-buffer
@@ -325,7 +325,10 @@ pub(super) fn pixel_fragments(
         }
         // Behind a split pixel the continued background is its hidden share, beside the
         // pixel's own background part rather than behind it: that part must not hide it.
-        for f in filled.iter_mut().filter(|f| f.source == super::hidden::HIDDEN_SOURCE) {
+        for f in filled
+            .iter_mut()
+            .filter(|f| f.source == super::hidden::HIDDEN_SOURCE)
+        {
             let (x, y) = (f.x + overscan.left as i32, f.y + overscan.top as i32);
             let split = x >= 0
                 && y >= 0

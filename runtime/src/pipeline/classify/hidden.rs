@@ -116,7 +116,11 @@ pub(super) fn hidden_background(
                     // (none of them nearer) never need.
                     let nearer = |k: i32| {
                         let (qx, qy) = (x + d.0 * k, y + d.1 * k);
-                        qx >= 0 && qy >= 0 && qx < w && qy < h && depth_at((qy * w + qx) as usize) < db
+                        qx >= 0
+                            && qy >= 0
+                            && qx < w
+                            && qy < h
+                            && depth_at((qy * w + qx) as usize) < db
                     };
                     let split_next = was_split
                         [((y + d.1).clamp(0, h - 1) * w + (x + d.0).clamp(0, w - 1)) as usize];
@@ -409,7 +413,12 @@ fn walk_weight(k: i32) -> f32 {
 /// Filled pixel `q`'s colour (premultiplied RGBA): over the filled pixels of its 3 x 3
 /// window, the mean of each one's walks' colours, weighted by their [`walk_weight`]s
 /// (`walked`: the weighted sums; `fills`: the weights' sums, zero where no walk fills).
-fn smoothed_fill_color(walked: &[[f32; 4]], fills: &[f32], (w, h): (i32, i32), q: usize) -> [f32; 4] {
+fn smoothed_fill_color(
+    walked: &[[f32; 4]],
+    fills: &[f32],
+    (w, h): (i32, i32),
+    q: usize,
+) -> [f32; 4] {
     let (x, y) = (q as i32 % w, q as i32 / w);
     let mut sum = [0.0f32; 4];
     let mut n = 0.0f32;
@@ -520,7 +529,10 @@ mod tests {
             // Pixel x lies x - 7 px from the dark side's last pixel and 16 - x from the light's.
             let (a, b) = ((x - 7) as f32, (16 - x) as f32);
             let linear = (b * dark + a * light) / (a + b);
-            assert!((sum - linear).abs() < 0.03, "column {x}: {sum} against {linear}");
+            assert!(
+                (sum - linear).abs() < 0.03,
+                "column {x}: {sum} against {linear}"
+            );
         }
     }
 
@@ -535,7 +547,17 @@ mod tests {
     ) -> Vec<Fragment> {
         let split = vec![false; g.width * g.height];
         let depth_at = |i: usize| depth[i];
-        hidden_background(g, &split, &[], &|_| 0.0, &depth_at, motion, blur_along, 8.0, own)
+        hidden_background(
+            g,
+            &split,
+            &[],
+            &|_| 0.0,
+            &depth_at,
+            motion,
+            blur_along,
+            8.0,
+            own,
+        )
     }
 
     /// A disc tilted a little away from the camera (each pixel 0.01 % farther than the one
@@ -584,9 +606,17 @@ mod tests {
             .iter()
             .filter(|f| f.source != VEIL_SOURCE && f.depth < 1.5)
             .count();
-        assert_eq!(behind_itself, 0, "{} of {} continued", behind_itself, filled.len());
+        assert_eq!(
+            behind_itself,
+            0,
+            "{} of {} continued",
+            behind_itself,
+            filled.len()
+        );
         // The disc covers the wall: the wall is continued behind it, as before.
-        assert!(filled.iter().any(|f| f.source != VEIL_SOURCE && f.depth > 1.5));
+        assert!(filled
+            .iter()
+            .any(|f| f.source != VEIL_SOURCE && f.depth > 1.5));
 
         // A bar moving 12 px to the right over a still wall 2 % behind it.
         let (w, h) = (32usize, 6usize);
@@ -615,7 +645,10 @@ mod tests {
         let own = |i: usize| own_fragment(&g, &depth, i);
         let coc = |i: usize| if depth[i] < 1.0 { 12.0 } else { 0.0 };
         let was_split: Vec<bool> = (0..w * h).map(|i| i % w == rim).collect();
-        let split_hidden: Vec<f32> = was_split.iter().map(|&s| if s { 0.4 } else { 0.0 }).collect();
+        let split_hidden: Vec<f32> = was_split
+            .iter()
+            .map(|&s| if s { 0.4 } else { 0.0 })
+            .collect();
         let filled = hidden_background(
             &g,
             &was_split,
@@ -628,10 +661,22 @@ mod tests {
             &own,
         );
         let weight_at = |x: i32| -> f32 {
-            filled.iter().filter(|f| f.y == 2 && f.x == x).map(|f| f.weight).sum()
+            filled
+                .iter()
+                .filter(|f| f.y == 2 && f.x == x)
+                .map(|f| f.weight)
+                .sum()
         };
-        assert!((weight_at(rim as i32) - 0.4).abs() < 1e-5, "rim {}", weight_at(rim as i32));
-        assert!((weight_at(7) - 1.0).abs() < 1e-5, "behind the bar {}", weight_at(7));
+        assert!(
+            (weight_at(rim as i32) - 0.4).abs() < 1e-5,
+            "rim {}",
+            weight_at(rim as i32)
+        );
+        assert!(
+            (weight_at(7) - 1.0).abs() < 1e-5,
+            "behind the bar {}",
+            weight_at(7)
+        );
     }
 
     /// A wall whose rows alternate between two greys, beside a nearer, blurrier occluder (a

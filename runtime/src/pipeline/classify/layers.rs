@@ -9,12 +9,12 @@ use super::*;
 use crate::camera::Camera;
 use crate::dbset::{DbSet, NO_TWIN};
 use crate::motion_smear::{AngleResolution, PsfImage, SmearError, SmearExtent, SmearKey};
+use crate::pipeline::packed::{PackedImage, PackedImages};
+use crate::pipeline::types::{psf_reach, CoarseLevel, FrameParams, SplatPath, SplatRecord};
 use crate::smear_symmetry::{
     canonical_key, is_grid_symmetric, transform_image, BoxImage, GridSymmetry,
 };
-use crate::pipeline::packed::{PackedImage, PackedImages};
 use crate::subpixel_psf::SubpixelPsf;
-use crate::pipeline::types::{psf_reach, CoarseLevel, FrameParams, SplatPath, SplatRecord};
 use psf_db::{PsfDatabase, PsfModel};
 use rayon::prelude::*;
 
@@ -72,33 +72,39 @@ pub fn classify_fragments(
         let m = f.motion;
         coc + 0.5 * (m[0] * m[0] + m[1] * m[1]).sqrt()
     };
-    let edges = LayerEdges::new(
-        (pmin, span),
-        n_layers,
-        &fragments,
-        &blur_of,
-    );
+    let edges = LayerEdges::new((pmin, span), n_layers, &fragments, &blur_of);
     // Layer coordinate: 0 at the far edge, n at the near edge.
     let layer_coord = |p: f32| -> f32 { edges.coord(p) };
     let continue_layers = options.continue_layers
         && matches!(model, Some(PsfModel::ThinLens | PsfModel::LensMotion))
         && n_layers > 1;
     if continue_layers {
-        let layer_of = |f: &Fragment| {
-            (layer_coord(f.parallax).floor() as usize).min(n_layers - 1)
-        };
+        let layer_of = |f: &Fragment| (layer_coord(f.parallax).floor() as usize).min(n_layers - 1);
         let continued = if one_source {
-            continue_across_layers(&fragments, (w, h), &layer_of, &blur_of, options.hdr_dense_threshold)
+            continue_across_layers(
+                &fragments,
+                (w, h),
+                &layer_of,
+                &blur_of,
+                options.hdr_dense_threshold,
+            )
         } else {
             // Render layers: each one's surfaces on their own, what another layer holds in
             // the same pixel being another surface.
-            let mut sources: Vec<u32> =
-                fragments.iter().filter(input_source).map(|f| f.source).collect();
+            let mut sources: Vec<u32> = fragments
+                .iter()
+                .filter(input_source)
+                .map(|f| f.source)
+                .collect();
             sources.sort_unstable();
             sources.dedup();
             let mut continued = Vec::new();
             for source in sources {
-                let own: Vec<Fragment> = fragments.iter().filter(|f| f.source == source).copied().collect();
+                let own: Vec<Fragment> = fragments
+                    .iter()
+                    .filter(|f| f.source == source)
+                    .copied()
+                    .collect();
                 continued.extend(continue_across_layers(
                     &own,
                     (w, h),
@@ -117,7 +123,10 @@ pub fn classify_fragments(
     // layer (a soft split spans two neighbouring ones): beside a near, defocused post most of
     // its veils lie on a background layers behind it, and sorting them cost a tenth of the
     // frame's classification.
-    if fragments.iter().any(|f| f.source == super::hidden::VEIL_SOURCE) {
+    if fragments
+        .iter()
+        .any(|f| f.source == super::hidden::VEIL_SOURCE)
+    {
         fragments.retain(|f| {
             f.source != super::hidden::VEIL_SOURCE || f.color[0] <= 0.0 || {
                 let occluder = layer_coord(f.parallax).floor();
@@ -142,7 +151,9 @@ pub fn classify_fragments(
         let sharp = coc.max(motion_len) < options.soft_layers_min_blur_px;
         // Continued across the layers instead, a still surface is layered hard.
         let continued = continue_layers && motion_len < 1.0;
-        let band = options.soft_layers.filter(|_| !sharp && !continued && one_source);
+        let band = options
+            .soft_layers
+            .filter(|_| !sharp && !continued && one_source);
         layer_targets(layer_coord(frag.parallax), n_layers, band)
     };
     // A surface behind a nearer one in its pixel (another render layer, deep sample, or the
@@ -152,16 +163,14 @@ pub fn classify_fragments(
     // that its two halves do not let it through (a spinning sphere's rim greyed by the wall
     // continued behind it).
     let ceilings = Ceilings::new(fragments, &own_targets);
-    let targets_of = |frag: &Fragment| {
-        match ceilings.as_ref() {
-            Some(ceilings) if frag.source != super::hidden::VEIL_SOURCE => {
-                if ceilings.covers_another(frag) {
-                    return layer_targets(layer_coord(frag.parallax), n_layers, None);
-                }
-                ceilings.lower(frag, own_targets(frag))
+    let targets_of = |frag: &Fragment| match ceilings.as_ref() {
+        Some(ceilings) if frag.source != super::hidden::VEIL_SOURCE => {
+            if ceilings.covers_another(frag) {
+                return layer_targets(layer_coord(frag.parallax), n_layers, None);
             }
-            _ => own_targets(frag),
+            ceilings.lower(frag, own_targets(frag))
         }
+        _ => own_targets(frag),
     };
     let transmission = occlusion_within_layers(fragments, n_layers, &targets_of);
     let flip_front = front_turns_the_aperture(dbs);
@@ -208,8 +217,7 @@ pub fn classify_fragments(
         let m = frag.motion;
         let len = (m[0] * m[0] + m[1] * m[1]).sqrt();
         let mut scale = 1u32;
-        while scale < MAX_SCALE && (coc > coc_max * scale as f32 || len > len_max * scale as f32)
-        {
+        while scale < MAX_SCALE && (coc > coc_max * scale as f32 || len > len_max * scale as f32) {
             scale *= 2;
         }
         scale
@@ -302,7 +310,15 @@ pub fn classify_fragments(
                             let at = (frag.x, frag.y);
                             let edges = &first_box_edges[..];
                             let i = found.psf_index;
-                            across_first_box_edge(dbs, i, at, frag.depth, centre, pixels_per_mm, edges)
+                            across_first_box_edge(
+                                dbs,
+                                i,
+                                at,
+                                frag.depth,
+                                centre,
+                                pixels_per_mm,
+                                edges,
+                            )
                         })
                         .flatten()
                         .filter(|a| ordered_dither(frag.x, frag.y) < a.share);
@@ -320,26 +336,27 @@ pub fn classify_fragments(
         let mut smear_keys = keys_at_rounded_angles();
         if thin_smear.is_some() && many_keys(&smear_keys) {
             // Only the angles change: each key's cell, length and turn are kept, in place.
-            smear_keys.par_iter_mut().enumerate().for_each(|(index, key)| {
-                if let Some((key, _)) = key {
-                    let (frag, _) = at_level(&fragments[index], level_of(index));
-                    let reach = reach.get(key.cell as usize).copied().unwrap_or(0) as f32;
-                    let threshold = ordered_dither(frag.x, frag.y);
-                    let angles = AngleResolution::Dithered;
-                    *key = key.with_angles(frag.motion, frag.bend, reach, threshold, angles);
-                }
-            });
+            smear_keys
+                .par_iter_mut()
+                .enumerate()
+                .for_each(|(index, key)| {
+                    if let Some((key, _)) = key {
+                        let (frag, _) = at_level(&fragments[index], level_of(index));
+                        let reach = reach.get(key.cell as usize).copied().unwrap_or(0) as f32;
+                        let threshold = ordered_dither(frag.x, frag.y);
+                        let angles = AngleResolution::Dithered;
+                        *key = key.with_angles(frag.motion, frag.bend, reach, threshold, angles);
+                    }
+                });
         }
         let built = match combined {
-            Some(all) if !smear_keys.is_empty() => {
-                SmearedPsfs::build(
-                    &smear_keys,
-                    all,
-                    thin_smear,
-                    options.pack_images,
-                    options.smeared_values_budget,
-                )
-            }
+            Some(all) if !smear_keys.is_empty() => SmearedPsfs::build(
+                &smear_keys,
+                all,
+                thin_smear,
+                options.pack_images,
+                options.smeared_values_budget,
+            ),
             _ => Ok(SmearedPsfs::default()),
         };
         match built {
@@ -394,8 +411,8 @@ pub fn classify_fragments(
         // Through a real lens, though, a bright fragment blends too: its cell is a box over
         // inverse depth, and the blend of the two nearest cells' PSFs has about the size of
         // its own (a squared RMS radius is linear in the blend).
-        let continuous = options.continuous_lookup
-            && (!bright || model == Some(PsfModel::PhysicalLens));
+        let continuous =
+            options.continuous_lookup && (!bright || model == Some(PsfModel::PhysicalLens));
         let Lookup {
             path,
             psf_index,
@@ -427,7 +444,11 @@ pub fn classify_fragments(
         let lookup_clamped = clamped && !(thin_smear.is_some() && smear.is_some());
         counts.clamped += usize::from(lookup_clamped || smear.is_some_and(|(_, c)| c));
         let smeared_index = smear.and_then(|(k, _)| smeared.index_of(k));
-        let round_share = if smeared_index.is_some() { 0.0 } else { round_share };
+        let round_share = if smeared_index.is_some() {
+            0.0
+        } else {
+            round_share
+        };
         // Near the first eccentricity box's edge, a still pixel through a real lens draws
         // part of the next box's PSF ([`super::lookup::first_box_edge`]).
         let across_edge = (continuous && smeared_index.is_none() && level_of(index) == 0)
@@ -506,7 +527,11 @@ pub fn classify_fragments(
                         .filter(|&i| round_share > 0.0 && i != NO_TWIN)
                 };
                 let part_weight = |psf_index: u32, share: f32| {
-                    let kept = if round_of(psf_index).is_some() { 1.0 - round_share } else { 1.0 };
+                    let kept = if round_of(psf_index).is_some() {
+                        1.0 - round_share
+                    } else {
+                        1.0
+                    };
                     weight * share * kept
                 };
                 // Two turned dense PSFs of a frame whose shared turns are drawn upright: one
@@ -589,13 +614,16 @@ pub fn classify_fragments(
                 }
             }
         }
-
     };
     // Fragments in chunks on every thread, each chunk's records per layer appended in chunk
     // order: the same records in the same order as one pass over them.
     const CHUNK: usize = 4096;
     // `chunks[c][level][layer]`.
-    let n_levels = scales.iter().copied().max().map_or(1, |l| usize::from(l) + 1);
+    let n_levels = scales
+        .iter()
+        .copied()
+        .max()
+        .map_or(1, |l| usize::from(l) + 1);
     let chunks: Vec<(Vec<Vec<Vec<SplatRecord>>>, PathCounts)> = fragments
         .par_chunks(CHUNK)
         .enumerate()
@@ -693,8 +721,7 @@ pub fn classify_fragments(
             } else {
                 vec![f32::NAN; base.psf_count()]
             };
-            let turned =
-                super::turned::draw_shared_turns_upright(&mut classified, base, &defocus)?;
+            let turned = super::turned::draw_shared_turns_upright(&mut classified, base, &defocus)?;
             classified.counts.turned += turned;
         }
     }
@@ -718,7 +745,9 @@ fn merge_coincident(classified: &mut Classified) {
     let merged: Vec<Vec<SplatRecord>> = classified
         .layers
         .par_iter()
-        .map(|info| merged_in_pixel_runs(&records[info.first_record..info.first_record + info.record_count]))
+        .map(|info| {
+            merged_in_pixel_runs(&records[info.first_record..info.first_record + info.record_count])
+        })
         .collect();
     let mut first_record = 0;
     let counts = &mut classified.counts;
@@ -808,7 +837,13 @@ pub(super) fn continue_across_layers(
     }
     let layers: Vec<usize> = main
         .par_iter()
-        .map(|&m| if m == NONE { 0 } else { layer_of(&fragments[m as usize]) })
+        .map(|&m| {
+            if m == NONE {
+                0
+            } else {
+                layer_of(&fragments[m as usize])
+            }
+        })
         .collect();
     let (wi, hi) = (w as i32, h as i32);
     let walks: Vec<(u32, (i32, i32), i32)> = (0..hi)
@@ -826,8 +861,7 @@ pub(super) fn continue_across_layers(
                 // A moving pixel's copies would be smeared along its own motion from where
                 // they are put, across the motion: steps along the boundary.
                 let bright = f.color[..3].iter().any(|&c| c * f.weight > bright_above);
-                if f.color[3] * f.weight < 0.5 || f.motion[0].hypot(f.motion[1]) >= 1.0 || bright
-                {
+                if f.color[3] * f.weight < 0.5 || f.motion[0].hypot(f.motion[1]) >= 1.0 || bright {
                     return out;
                 }
                 let lp = layers[p];
@@ -892,9 +926,7 @@ const MAX_SCALE: u32 = 8;
 /// (or the longest smear, where moving fragments are smeared); `None` for the physical lens,
 /// whose space is over depth and the field, or when nothing is simulated.
 fn blur_range(dbs: &DbSet, model: Option<PsfModel>, smear: bool) -> Option<[f32; 2]> {
-    let max_of = |db: &PsfDatabase, dim: usize| {
-        db.space().dims().get(dim).map(|d| d.max as f32)
-    };
+    let max_of = |db: &PsfDatabase, dim: usize| db.space().dims().get(dim).map(|d| d.max as f32);
     let main = dbs.main.as_ref();
     let thin = dbs.thin_lens.as_ref();
     match model? {
@@ -909,7 +941,9 @@ fn blur_range(dbs: &DbSet, model: Option<PsfModel>, smear: bool) -> Option<[f32;
             let len_max = if smear {
                 crate::motion_smear::MAX_SMEAR_PX
             } else {
-                motion_db.and_then(|db| max_of(db, 1)).unwrap_or(f32::INFINITY)
+                motion_db
+                    .and_then(|db| max_of(db, 1))
+                    .unwrap_or(f32::INFINITY)
             };
             coc_max.is_finite().then_some([coc_max, len_max])
         }
@@ -1087,13 +1121,19 @@ impl SmearedPsfs {
                 let t = turn_of(k);
                 bases[t]
                     .as_ref()
-                    .map(|base| match symmetric[t].then(|| canonical_key(*k)).flatten() {
-                        Some((canonical, g)) => extent_of(base, canonical).map(|e| {
-                            let orbit = SmearOrbit { canonical, symmetry: g, extent: e };
-                            (base, e.moved(g), Some(orbit))
-                        }),
-                        None => extent_of(base, *k).map(|e| (base, e, None)),
-                    })
+                    .map(
+                        |base| match symmetric[t].then(|| canonical_key(*k)).flatten() {
+                            Some((canonical, g)) => extent_of(base, canonical).map(|e| {
+                                let orbit = SmearOrbit {
+                                    canonical,
+                                    symmetry: g,
+                                    extent: e,
+                                };
+                                (base, e.moved(g), Some(orbit))
+                            }),
+                            None => extent_of(base, *k).map(|e| (base, e, None)),
+                        },
+                    )
                     .transpose()
             })
             .collect::<Result<Vec<_>, _>>()?;
@@ -1169,8 +1209,17 @@ impl SmearedPsfs {
                 };
                 let Some(orbit) = orbit else {
                     let smeared = scratch.smear(base, sub, key, extent);
-                    let image = PackedImage::pack(extent.origin, extent.width, ch, smeared.values, smeared.rows);
-                    return Ok((vec![image.ok_or_else(not_finite)?], vec![(members[0], 0, [false, false])]));
+                    let image = PackedImage::pack(
+                        extent.origin,
+                        extent.width,
+                        ch,
+                        smeared.values,
+                        smeared.rows,
+                    );
+                    return Ok((
+                        vec![image.ok_or_else(not_finite)?],
+                        vec![(members[0], 0, [false, false])],
+                    ));
                 };
                 scratch.smear(base, sub, orbit.canonical, orbit.extent);
                 let mut images = Vec::with_capacity(2);
@@ -1183,10 +1232,20 @@ impl SmearedPsfs {
                     let index = match which[usize::from(transposed)] {
                         Some(index) => index,
                         None => {
-                            let g = if transposed { GridSymmetry::TRANSPOSE } else { GridSymmetry::IDENTITY };
+                            let g = if transposed {
+                                GridSymmetry::TRANSPOSE
+                            } else {
+                                GridSymmetry::IDENTITY
+                            };
                             let source = scratch.moved(g);
                             let e = orbit.extent.moved(g);
-                            let image = PackedImage::pack(e.origin, e.width, ch, source.values, source.rows);
+                            let image = PackedImage::pack(
+                                e.origin,
+                                e.width,
+                                ch,
+                                source.values,
+                                source.rows,
+                            );
                             images.push(image.ok_or_else(not_finite)?);
                             let index = images.len() as u32 - 1;
                             which[usize::from(transposed)] = Some(index);
@@ -1231,9 +1290,10 @@ impl SmearedPsfs {
                 }
             })
             .map_err(not_built)?;
-        let packed = slots.iter().any(Option::is_some).then(|| {
-            std::sync::Arc::new(PackedImages { first, pool, slots })
-        });
+        let packed = slots
+            .iter()
+            .any(Option::is_some)
+            .then(|| std::sync::Arc::new(PackedImages { first, pool, slots }));
         Ok(Self {
             database: Some(std::sync::Arc::new(database)),
             packed,
@@ -1389,7 +1449,10 @@ pub(super) fn assemble_layers(
         plan.beyond = plan.beyond.max(ox.max(oy) + reach_of(r));
     };
     let on_border = |r: &SplatRecord| {
-        r.center_x == data.x0 || r.center_x == data.x1 || r.center_y == data.y0 || r.center_y == data.y1
+        r.center_x == data.x0
+            || r.center_x == data.x1
+            || r.center_y == data.y0
+            || r.center_y == data.y1
     };
     let plans: Vec<LayerPlan> = (0..n_layers)
         .into_par_iter()
@@ -1459,7 +1522,11 @@ pub(super) fn assemble_layers(
     parts.into_par_iter().for_each(|(l, part, plan)| {
         let layer = || {
             let extension = plan.extension.iter().copied();
-            layer_pieces(l).flatten().filter(kept).copied().chain(extension)
+            layer_pieces(l)
+                .flatten()
+                .filter(kept)
+                .copied()
+                .chain(extension)
         };
         if plan.in_row_order {
             for (dst, r) in part.iter_mut().zip(layer()) {
@@ -1535,13 +1602,10 @@ pub(super) fn occlusion_within_layers(
     // the frame's classification. Each pass over every fragment runs on every thread: one
     // thread walking a 512 px frame's 13 MB of fragments three times was a serial tenth of
     // a moving frame's classification.
-    let (x0, y0, x1, y1) = fragments
-        .par_iter()
-        .map(|f| (f.x, f.y, f.x, f.y))
-        .reduce(
-            || (i32::MAX, i32::MAX, i32::MIN, i32::MIN),
-            |a, b| (a.0.min(b.0), a.1.min(b.1), a.2.max(b.2), a.3.max(b.3)),
-        );
+    let (x0, y0, x1, y1) = fragments.par_iter().map(|f| (f.x, f.y, f.x, f.y)).reduce(
+        || (i32::MAX, i32::MAX, i32::MIN, i32::MIN),
+        |a, b| (a.0.min(b.0), a.1.min(b.1), a.2.max(b.2), a.3.max(b.3)),
+    );
     let width = (i64::from(x1) - i64::from(x0) + 1) as usize;
     let height = (i64::from(y1) - i64::from(y0) + 1) as usize;
     let cells = width.saturating_mul(height);
@@ -1764,7 +1828,11 @@ impl LayerEdges {
             return n as f32;
         }
         // The layer whose edges enclose `p`: the last edge at or below it.
-        let l = self.edges.partition_point(|&e| e <= p).saturating_sub(1).min(n - 1);
+        let l = self
+            .edges
+            .partition_point(|&e| e <= p)
+            .saturating_sub(1)
+            .min(n - 1);
         let (a, b) = (self.edges[l], self.edges[l + 1]);
         l as f32 + if b > a { (p - a) / (b - a) } else { 0.0 }
     }
@@ -1814,9 +1882,10 @@ impl Ceilings {
         let (x0, y0, x1, y1) = fragments
             .iter()
             .filter(|f| counts(f) && f.source != first_source)
-            .fold((i32::MAX, i32::MAX, i32::MIN, i32::MIN), |(x0, y0, x1, y1), f| {
-                (x0.min(f.x), y0.min(f.y), x1.max(f.x), y1.max(f.y))
-            });
+            .fold(
+                (i32::MAX, i32::MAX, i32::MIN, i32::MIN),
+                |(x0, y0, x1, y1), f| (x0.min(f.x), y0.min(f.y), x1.max(f.x), y1.max(f.y)),
+            );
         if x1 < x0 {
             return None;
         }

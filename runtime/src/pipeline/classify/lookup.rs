@@ -267,7 +267,10 @@ pub(super) fn axis_share(db: &PsfDatabase, idx: u32, r_px: f32, pixels_per_mm: f
     // A cell above the grid's first eccentricity box starts above the range's start, which
     // is not below zero: decided without turning grid units into millimetres.
     let above_first_box = space.grid().cell_box(idx).is_some_and(|g| g.min[1] > 0.0)
-        && space.dims().get(1).is_some_and(|d| d.min >= 0.0 && d.max > d.min);
+        && space
+            .dims()
+            .get(1)
+            .is_some_and(|d| d.min >= 0.0 && d.max > d.min);
     if above_first_box {
         return 0.0;
     }

@@ -124,7 +124,12 @@ pub(super) fn pack_pair(
 /// A record made by [`pack_pair`]: its two PSFs (lower index first), the higher one's share
 /// in steps of [`PAIR_SHARE_STEPS`], and its layer.
 pub(super) fn pair_parts(r: &SplatRecord) -> Option<(u32, u32, u32, u32)> {
-    (r.path & !0xFF == PAIR_PATH).then_some((r.psf_index, r.layer >> 8, r.path & 0xFF, r.layer & 0xFF))
+    (r.path & !0xFF == PAIR_PATH).then_some((
+        r.psf_index,
+        r.layer >> 8,
+        r.path & 0xFF,
+        r.layer & 0xFF,
+    ))
 }
 
 /// A dense PSF and a quantised turn of it, packed into one integer (the PSF's index in the
@@ -180,7 +185,12 @@ pub(super) fn lens_defocus(dbs: &crate::dbset::DbSet, count: usize) -> Vec<f32> 
     let Some(main) = dbs.main.as_ref() else {
         return defocus;
     };
-    let Some(lens) = main.header().lens.as_ref().filter(|l| l.focus_distance > 0.0) else {
+    let Some(lens) = main
+        .header()
+        .lens
+        .as_ref()
+        .filter(|l| l.focus_distance > 0.0)
+    else {
         return defocus;
     };
     let focus = 1.0 / lens.focus_distance;
@@ -303,7 +313,11 @@ fn turns_every_sparse_record(records: &[SplatRecord], reach: &[i32], frame: Fram
     let most = LAYER_INTEGRATION_COST * plane;
     let reach_of = |psf: u32| reach.get(psf as usize).copied().unwrap_or(0).max(0) as usize;
     let side = |psf: u32| 2 * reach_of(psf) + 9;
-    let sparse = || records.iter().filter(|r| r.path == SplatPath::Sparse as u32);
+    let sparse = || {
+        records
+            .iter()
+            .filter(|r| r.path == SplatPath::Sparse as u32)
+    };
     // Drawing them first, which a frame of many sparse records exceeds early, before keys
     // are gathered.
     let mut cost = 0usize;
@@ -536,8 +550,7 @@ pub(super) fn draw_shared_turns_upright(
         .iter()
         .map(|key| match *key {
             Shared::Single(k) => {
-                turned_of(psf_of(k), k as u32, steps[psf_of(k) as usize], 1.0)
-                    .map(Source::Turned)
+                turned_of(psf_of(k), k as u32, steps[psf_of(k) as usize], 1.0).map(Source::Turned)
             }
             Shared::Pair(p) => {
                 let [k_lo, k_hi] = scales_of(&p);
@@ -718,7 +731,10 @@ mod tests {
     use crate::pipeline::types::{LayerInfo, PathCounts};
 
     /// Half a turn's eighth: a rotation a pair may be packed at.
-    const TURNED: (f32, f32) = (std::f32::consts::FRAC_1_SQRT_2, std::f32::consts::FRAC_1_SQRT_2);
+    const TURNED: (f32, f32) = (
+        std::f32::consts::FRAC_1_SQRT_2,
+        std::f32::consts::FRAC_1_SQRT_2,
+    );
 
     fn pair(share_step: u32) -> PairKey {
         PairKey {
@@ -737,7 +753,10 @@ mod tests {
     fn a_pair_is_scaled_onto_the_blends_own_defocus() {
         let [lo, hi] = morph_scales(&[0.2, 0.25], &pair(PAIR_SHARE_STEPS / 4));
         let d = 0.75 * 0.2 + 0.25 * 0.25;
-        assert!((lo - d / 0.2).abs() < 1e-6 && (hi - d / 0.25).abs() < 1e-6, "{lo} {hi}");
+        assert!(
+            (lo - d / 0.2).abs() < 1e-6 && (hi - d / 0.25).abs() < 1e-6,
+            "{lo} {hi}"
+        );
         assert!(lo > 1.0 && hi < 1.0);
         // In front of it (negative): the same scales.
         let [lo_f, hi_f] = morph_scales(&[-0.2, -0.25], &pair(PAIR_SHARE_STEPS / 4));
@@ -757,12 +776,18 @@ mod tests {
         let r = pack_pair((7, 9), 3, TURNED, colour, (40, wa), (12, wb)).expect("packed");
         let (lo, hi, share_step, layer) = pair_parts(&r).expect("a pair");
         assert_eq!((lo, hi, layer), (12, 40, 3));
-        assert_eq!(share_step, (wa / (wa + wb) * PAIR_SHARE_STEPS as f32).round() as u32);
+        assert_eq!(
+            share_step,
+            (wa / (wa + wb) * PAIR_SHARE_STEPS as f32).round() as u32
+        );
         assert_eq!(r.weight, wa + wb);
         for (&c, &v) in r.color.iter().zip(&colour) {
             assert_eq!(c, v * wa + v * wb);
         }
-        assert_eq!((r.center_x, r.center_y, r.rot_cos, r.rot_sin), (7, 9, TURNED.0, TURNED.1));
+        assert_eq!(
+            (r.center_x, r.center_y, r.rot_cos, r.rot_sin),
+            (7, 9, TURNED.0, TURNED.1)
+        );
         // Upright (two rotational averages on the axis) is a pair too.
         assert!(pack_pair((0, 0), 0, (1.0, 0.0), colour, (1, wa), (2, wb)).is_some());
         // Not a pair: a weight of zero, one PSF twice, indices or a layer beyond the fields,
@@ -825,8 +850,17 @@ mod tests {
         let r = &classified.records;
         assert_eq!(r.len(), 5);
         assert_eq!(classified.frame.record_count, 5);
-        assert_eq!((classified.layers[1].first_record, classified.layers[1].record_count), (1, 4));
-        assert_eq!((classified.layers[1].dense, classified.counts.dense), (4, 5));
+        assert_eq!(
+            (
+                classified.layers[1].first_record,
+                classified.layers[1].record_count
+            ),
+            (1, 4)
+        );
+        assert_eq!(
+            (classified.layers[1].dense, classified.counts.dense),
+            (4, 5)
+        );
         // The pair's place, lower index first: 0.75 of the light is PSF 5's, 12 steps of 16.
         let share = 12.0 / PAIR_SHARE_STEPS as f32;
         for (k, (psf, s)) in [(4, 1.0 - share), (5, share)].into_iter().enumerate() {
@@ -845,7 +879,10 @@ mod tests {
         for reach in [1.0f32, 2.0, 5.5, 12.0, 40.0] {
             let steps = turn_steps(reach);
             let rim_move = reach * std::f32::consts::TAU / steps as f32;
-            assert!(rim_move <= RIM_STEP_PX + 1e-6, "reach {reach}: {rim_move} px");
+            assert!(
+                rim_move <= RIM_STEP_PX + 1e-6,
+                "reach {reach}: {rim_move} px"
+            );
         }
     }
 }
