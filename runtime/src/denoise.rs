@@ -21,9 +21,10 @@
 //! and albedo within a tenth of theirs) share the filtered illumination of their mean position
 //! and depth: the filter
 //! runs once per pixel and surface, four times less often at 4 spp, and their fragments are
-//! merged after it anyway ([`crate::sample_merge`]). Its neighbours see them there as one
-//! entry weighted by their number, or as two where the brightest stands out
-//! ([`OUTLIER_FACTOR`]), so that the firefly rules below still see a firefly alone.
+//! merged after it anyway ([`crate::sample_merge`]). Its neighbours see those whose depths
+//! agree within a tenth of the tolerance as one entry at their mean position, weighted by
+//! their number, or as two where the brightest stands out ([`OUTLIER_FACTOR`]), so that the
+//! firefly rules below still see a firefly alone.
 //!
 //! The first filter reaches 2.5 sigma (4 px at 1 spp, 3 px at 4 spp), too little to take the
 //! noise of one or four samples per pixel down to a clean frame. Its result is widened by
@@ -742,18 +743,25 @@ const NOT_A_MEMBER: u32 = u32::MAX;
 
 /// Of two members of one pixel filtered as one surface, the albedos differ by at most this
 /// fraction of [`ALBEDO_SIGMA`] (and the normals by at most [`SAME_SURFACE_COSINE`], the
-/// depths by at most [`SAME_SURFACE_DEPTH_FRACTION`]).
+/// depths by at most [`SAME_SURFACE_DEPTH_FRACTION`] or [`NEIGHBOUR_DEPTH_FRACTION`]).
 const SAME_SURFACE_ALBEDO_FRACTION: f32 = 0.1;
 
-/// Of two members of one pixel filtered as one surface, the depths differ by at most this
-/// fraction of [`DEPTH_TOLERANCE`] (1.5 %). A floor receding towards the horizon changes its
-/// depth by more than a tenth of the tolerance across one pixel, and at a tenth its samples
-/// each made a group of their own: the groups, and the filter's work (targets times
-/// neighbours), grew with the sample count (a car driving at the camera, 16 spp: 1.39 M groups
-/// of 4.17 M samples, its reconstruction 7.4 s; at half the tolerance 4.7 s, and no score of
-/// any stochastic set moves by more than 0.0003 in FLIP mean). The group's depth is its
+/// Of two members of one pixel that share one filtered illumination (one target of the first
+/// filter and one node of the widening passes), the depths differ by at most this fraction of
+/// [`DEPTH_TOLERANCE`] (1.5 %). A floor receding towards the horizon changes its depth by more
+/// than a tenth of the tolerance across one pixel, and at a tenth its samples each made a
+/// target: the targets, and with them the work of the filter and of the passes (targets times
+/// neighbours), grew with the sample count (a car driving at the camera at 16 spp: 1.39 M
+/// targets of 4.17 M samples, 7.4 s; at half the tolerance 5.4 s). A target's depth is its
 /// members' mean, the depth at their mean position on a plane.
 const SAME_SURFACE_DEPTH_FRACTION: f32 = 0.5;
+
+/// Of two members of one pixel that a neighbour sees as one entry, the depths differ by at
+/// most this fraction of [`DEPTH_TOLERANCE`] (0.3 %). Merged as loosely as the targets, a
+/// receding floor's entries stood at their mean position and the first filter lost the spread
+/// its spatial weights read (`studio` at 8 spp: FLIP mean 0.0451 -> 0.0453, p99 0.1634 ->
+/// 0.1667); kept apart, every score is as before or better.
+const NEIGHBOUR_DEPTH_FRACTION: f32 = 0.1;
 
 /// The least cosine between the normals of two members filtered as one surface (about 2.6
 /// degrees).
@@ -775,8 +783,9 @@ struct Member {
     illumination: [f32; 3],
 }
 
-/// The members of one pixel on one surface as a neighbour sees them: at their mean position,
-/// with the first member's guides, `count` members of the given mean illumination. A group
+/// The members of one pixel on one surface as a neighbour sees them (their depths within
+/// [`NEIGHBOUR_DEPTH_FRACTION`]): at their mean position and depth, with the first member's
+/// normal and albedo, `count` members of the given mean illumination. A group
 /// whose brightest member stands out ([`OUTLIER_FACTOR`]) makes two entries, that member alone
 /// and the rest, so that the filter can still set a firefly aside and cap its luminance.
 #[derive(Clone, Copy, Debug, bytemuck::Zeroable)]
@@ -829,53 +838,28 @@ impl RowGroups {
         let mut row = RowGroups::default();
         let base = cell_starts[0];
         let mut groups: Vec<Group> = Vec::new();
+        let mut entry_groups: Vec<Group> = Vec::new();
         for bounds in cell_starts.windows(2) {
             groups.clear();
+            entry_groups.clear();
             for m in &members[bounds[0] - base..bounds[1] - base] {
-                let g = match groups.iter().position(|g| g.first.same_surface(m)) {
-                    Some(g) => g,
-                    None => {
-                        groups.push(Group {
-                            first: *m,
-                            position_sum: [0.0; 2],
-                            depth_sum: 0.0,
-                            count: 0,
-                            brightest: *m,
-                            illumination_sum: [0.0; 3],
-                        });
-                        groups.len() - 1
-                    }
-                };
-                let group = &mut groups[g];
-                let q = &mut group.position_sum;
-                (q[0], q[1]) = (q[0] + m.q[0], q[1] + m.q[1]);
-                group.depth_sum += m.depth;
-                group.count += 1;
-                if luminance(m.illumination) > luminance(group.brightest.illumination) {
-                    group.brightest = *m;
-                }
-                for (sum, e) in group.illumination_sum.iter_mut().zip(m.illumination) {
-                    *sum += e;
-                }
+                let g = Group::join(&mut groups, m, SAME_SURFACE_DEPTH_FRACTION);
+                Group::join(&mut entry_groups, m, NEIGHBOUR_DEPTH_FRACTION);
                 row.group_of.push((row.targets.len() + g) as u32);
             }
             let before = row.entries.len();
             for group in &groups {
+                row.targets.push(group.at());
+                row.target_counts.push(group.count as f32);
+            }
+            for group in &entry_groups {
                 let Group {
-                    first,
-                    position_sum: q,
-                    depth_sum,
                     count,
                     brightest,
                     illumination_sum: sum,
+                    ..
                 } = *group;
-                let at = Member {
-                    q: [q[0] / count as f32, q[1] / count as f32],
-                    depth: depth_sum / count as f32,
-                    ..first
-                };
-                row.targets.push(at);
-                row.target_counts.push(count as f32);
+                let at = group.at();
                 let rest = count.saturating_sub(1) as f32;
                 let rest_illumination: [f32; 3] =
                     std::array::from_fn(|c| (sum[c] - brightest.illumination[c]) / rest.max(1.0));
@@ -919,13 +903,63 @@ impl RowGroups {
     }
 }
 
+impl Group {
+    /// Adds `m` to the first of `groups` on its surface (depths within `depth_fraction` of
+    /// [`DEPTH_TOLERANCE`]), or to a new group; returns the group's index.
+    fn join(groups: &mut Vec<Group>, m: &Member, depth_fraction: f32) -> usize {
+        let g = match groups
+            .iter()
+            .position(|g| g.first.same_surface(m, depth_fraction))
+        {
+            Some(g) => g,
+            None => {
+                groups.push(Group {
+                    first: *m,
+                    position_sum: [0.0; 2],
+                    depth_sum: 0.0,
+                    count: 0,
+                    brightest: *m,
+                    illumination_sum: [0.0; 3],
+                });
+                groups.len() - 1
+            }
+        };
+        groups[g].add(m);
+        g
+    }
+
+    fn add(&mut self, m: &Member) {
+        let q = &mut self.position_sum;
+        (q[0], q[1]) = (q[0] + m.q[0], q[1] + m.q[1]);
+        self.depth_sum += m.depth;
+        self.count += 1;
+        if luminance(m.illumination) > luminance(self.brightest.illumination) {
+            self.brightest = *m;
+        }
+        for (sum, e) in self.illumination_sum.iter_mut().zip(m.illumination) {
+            *sum += e;
+        }
+    }
+
+    /// The group as one member: its mean position and depth, its first member's normal and
+    /// albedo (and illumination, which callers replace).
+    fn at(&self) -> Member {
+        let (q, n) = (self.position_sum, self.count as f32);
+        Member {
+            q: [q[0] / n, q[1] / n],
+            depth: self.depth_sum / n,
+            ..self.first
+        }
+    }
+}
+
 impl Member {
-    /// Whether `other` lies on this member's surface: the filter weighs both alike against
-    /// any neighbour ([`SAME_SURFACE_DEPTH_FRACTION`], [`SAME_SURFACE_COSINE`],
-    /// [`SAME_SURFACE_ALBEDO_FRACTION`]).
-    fn same_surface(&self, other: &Member) -> bool {
-        let depth = (other.depth - self.depth).abs()
-            <= SAME_SURFACE_DEPTH_FRACTION * DEPTH_TOLERANCE * self.depth.abs();
+    /// Whether `other` lies on this member's surface, their depths within `depth_fraction` of
+    /// [`DEPTH_TOLERANCE`] (normals and albedos within [`SAME_SURFACE_COSINE`] and
+    /// [`SAME_SURFACE_ALBEDO_FRACTION`]): the filter weighs both alike against any neighbour.
+    fn same_surface(&self, other: &Member, depth_fraction: f32) -> bool {
+        let depth =
+            (other.depth - self.depth).abs() <= depth_fraction * DEPTH_TOLERANCE * self.depth.abs();
         let cosine: f32 = (0..3).map(|c| self.normal[c] * other.normal[c]).sum();
         let scale = (0..3).fold(ALBEDO_EPSILON, |s, c| {
             s.max(self.albedo[c].abs()).max(other.albedo[c].abs())
@@ -1373,16 +1407,19 @@ mod tests {
     }
 
     /// A floor receding from the camera changes its depth by about a percent across one pixel
-    /// near the horizon: its samples there are one surface. A surface 5 % farther, or turned,
-    /// is another.
+    /// near the horizon: its samples there share one filtered illumination. A surface 5 %
+    /// farther, or turned, is another.
     #[test]
     fn a_pixels_samples_on_a_receding_floor_are_one_surface() {
         let up = [0.0, 1.0, 0.0];
         let floor = member_at(2.0, up);
-        assert!(floor.same_surface(&member_at(2.02, up)));
-        assert!(floor.same_surface(&member_at(1.98, up)));
-        assert!(!floor.same_surface(&member_at(2.1, up)));
-        assert!(!floor.same_surface(&member_at(2.0, [0.0, 0.0, -1.0])));
+        assert!(floor.same_surface(&member_at(2.02, up), SAME_SURFACE_DEPTH_FRACTION));
+        assert!(floor.same_surface(&member_at(1.98, up), SAME_SURFACE_DEPTH_FRACTION));
+        assert!(!floor.same_surface(&member_at(2.1, up), SAME_SURFACE_DEPTH_FRACTION));
+        assert!(!floor.same_surface(
+            &member_at(2.0, [0.0, 0.0, -1.0]),
+            SAME_SURFACE_DEPTH_FRACTION
+        ));
         // The group stands at its members' mean position and depth, and counts them all.
         let members: Vec<Member> = [2.0, 2.01, 2.02, 2.015, 2.4]
             .iter()
@@ -1400,5 +1437,16 @@ mod tests {
         assert!((near.q[0] - 0.4).abs() < 1e-5, "{:?}", near.q);
         assert_eq!(far.depth, 2.4);
         assert_eq!(row.group_of, vec![0, 0, 0, 0, 1]);
+        // Its neighbours see the near members as entries of depths within a tenth of the
+        // tolerance, each at its own mean: 2.0; 2.01 and 2.015; 2.02; and the far one.
+        let counts: Vec<f32> = row.entries.iter().map(|e| e.count).collect();
+        assert_eq!(counts, vec![1.0, 2.0, 1.0, 1.0]);
+        assert!((row.entries[1].at.depth - 2.0125).abs() < 1e-5);
+        assert!(
+            (row.entries[1].at.q[0] - 0.5).abs() < 1e-5,
+            "{:?}",
+            row.entries[1].at.q
+        );
+        assert_eq!(row.entries_per_cell, vec![4]);
     }
 }
