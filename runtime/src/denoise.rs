@@ -19,9 +19,8 @@
 //!
 //! The samples of one pixel that lie on one surface (depth within half that tolerance, normal
 //! and albedo within a tenth of theirs) share the filtered illumination of their mean position
-//! and depth: the filter
-//! runs once per pixel and surface, four times less often at 4 spp, and their fragments are
-//! merged after it anyway ([`crate::sample_merge`]). Its neighbours see those whose depths
+//! and depth: the filter runs once per pixel and surface, four times less often at 4 spp, and
+//! their fragments are merged after it anyway ([`crate::sample_merge`]). Its neighbours see those whose depths
 //! agree within a tenth of the tolerance as one entry at their mean position, weighted by
 //! their number, or as two where the brightest stands out ([`OUTLIER_FACTOR`]), so that the
 //! firefly rules below still see a firefly alone.
@@ -752,8 +751,8 @@ const SAME_SURFACE_ALBEDO_FRACTION: f32 = 0.1;
 /// than a tenth of the tolerance across one pixel, and at a tenth its samples each made a
 /// target: the targets, and with them the work of the filter and of the passes (targets times
 /// neighbours), grew with the sample count (a car driving at the camera at 16 spp: 1.39 M
-/// targets of 4.17 M samples, 7.4 s; at half the tolerance 5.4 s). A target's depth is its
-/// members' mean, the depth at their mean position on a plane.
+/// targets of 4.17 M samples, 7.7 s; at half the tolerance 0.93 M, 5.3 s). A target's depth
+/// is its members' mean, the depth at their mean position on a plane.
 const SAME_SURFACE_DEPTH_FRACTION: f32 = 0.5;
 
 /// Of two members of one pixel that a neighbour sees as one entry, the depths differ by at
