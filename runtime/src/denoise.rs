@@ -20,10 +20,10 @@
 //! The samples of one pixel that lie on one surface (depth within half that tolerance, normal
 //! and albedo within a tenth of theirs) share the filtered illumination of their mean position
 //! and depth: the filter runs once per pixel and surface, four times less often at 4 spp, and
-//! their fragments are merged after it anyway ([`crate::sample_merge`]). Its neighbours see those whose depths
-//! agree within a tenth of the tolerance as one entry at their mean position, weighted by
-//! their number, or as two where the brightest stands out ([`OUTLIER_FACTOR`]), so that the
-//! firefly rules below still see a firefly alone.
+//! their fragments are merged after it anyway ([`crate::sample_merge`]). Its neighbours see
+//! those whose depths agree within a tenth of the tolerance as one entry at their mean
+//! position, weighted by their number, or as two where the brightest stands out
+//! ([`OUTLIER_FACTOR`]), so that the firefly rules below still see a firefly alone.
 //!
 //! The first filter reaches 2.5 sigma (4 px at 1 spp, 3 px at 4 spp), too little to take the
 //! noise of one or four samples per pixel down to a clean frame. Its result is widened by
