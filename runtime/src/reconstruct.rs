@@ -738,9 +738,20 @@ impl<'a> PlacedSamples<'a> {
         let s = &self.frames.samples[k];
         let (motion, depth, bend) =
             self.moved[k].map_or(([0.0; 2], s.depth, 0.0), |m| (m.motion, m.depth, m.bend));
+        // A blurred surface near the frame's edge is seen through the part of the lens (and
+        // of the shutter) whose rays start inside the frame: fewer of its samples come back to
+        // it than in the middle, and each stands for the rest.
+        let inside = self.moved[k].map_or(1.0, |m| {
+            inside_fraction(
+                m.q,
+                m.coc,
+                [motion[0] * self.shutter, motion[1] * self.shutter],
+                (self.frames.width, self.frames.height),
+            )
+        });
         FragmentSeed {
             color: self.denoised.as_ref().map_or(s.color, |d| d[k]),
-            weight: self.weight,
+            weight: self.weight / inside,
             parallax: 1.0 / depth,
             depth,
             motion: [motion[0] * self.shutter, motion[1] * self.shutter],
@@ -790,6 +801,62 @@ impl<'a> PlacedSamples<'a> {
         (seeds, slot_of)
     }
 }
+
+/// The least share of a sample's lens and shutter that [`inside_fraction`] returns: a sample
+/// at the frame's very edge stands for at most four.
+pub const MIN_INSIDE_FRACTION: f32 = 0.25;
+
+/// Points of the unit disc where [`inside_fraction`] places the lens: a golden-angle spiral,
+/// each point the centre of an equal area.
+const INSIDE_LENS_POINTS: usize = 24;
+
+/// Times over the shutter where [`inside_fraction`] places a moving sample.
+const INSIDE_TIMES: usize = 3;
+
+/// The share of the lens and shutter whose rays, meeting a surface point that lies at
+/// lens-centre and shutter-centre position `q` (pixels) with signed CoC radius `coc` (pixels)
+/// and motion `path` over the shutter (pixels), start inside a `width x height` frame. A
+/// sample lands at `q` from pixel `q + coc u + path t`, for lens point `u` in the unit disc and
+/// time `t` in `[-1/2, 1/2]`; near the frame's edge only part of those pixels were rendered,
+/// and the surface's samples there are that much sparser. 1 where the disc and path stay
+/// inside; at least [`MIN_INSIDE_FRACTION`].
+pub fn inside_fraction(
+    q: [f32; 2],
+    coc: f32,
+    path: [f32; 2],
+    (width, height): (usize, usize),
+) -> f32 {
+    let (w, h) = (width as f32, height as f32);
+    let reach = [
+        coc.abs() + 0.5 * path[0].abs(),
+        coc.abs() + 0.5 * path[1].abs(),
+    ];
+    let finite = q.iter().chain(&reach).all(|v| v.is_finite());
+    let clear = q[0] - reach[0] >= 0.0
+        && q[0] + reach[0] <= w
+        && q[1] - reach[1] >= 0.0
+        && q[1] + reach[1] <= h;
+    if clear || !finite {
+        return 1.0;
+    }
+    let times = if path == [0.0; 2] { 1 } else { INSIDE_TIMES };
+    let mut inside = 0usize;
+    for i in 0..INSIDE_LENS_POINTS {
+        let radius = ((i as f32 + 0.5) / INSIDE_LENS_POINTS as f32).sqrt();
+        let angle = i as f32 * GOLDEN_ANGLE;
+        let u = [radius * angle.cos(), radius * angle.sin()];
+        for j in 0..times {
+            let t = (j as f32 + 0.5) / times as f32 - 0.5;
+            let x = q[0] + coc * u[0] + path[0] * t;
+            let y = q[1] + coc * u[1] + path[1] * t;
+            inside += usize::from(x >= 0.0 && y >= 0.0 && x < w && y < h);
+        }
+    }
+    (inside as f32 / (INSIDE_LENS_POINTS * times) as f32).max(MIN_INSIDE_FRACTION)
+}
+
+/// `pi (3 - sqrt 5)`, radians.
+const GOLDEN_ANGLE: f32 = 2.399_963;
 
 /// The part of a sample's fragments that does not depend on the pixel: colour, the sample's
 /// weight in the frame (`1 / spp`), parallax and depth, motion and bend over the shutter.
@@ -951,10 +1018,15 @@ pub fn reconstruct(
 /// `options` as reconstruction applies them: the coverage that "over" leaves missing is made up
 /// with the colour it hid of the farther layers
 /// ([`crate::pipeline::composite::CompositeOptions::restore_occluded`]), because the samples
-/// already hold their visibility.
+/// already hold their visibility; and nothing is repeated beyond the frame's edge
+/// ([`crate::pipeline::FrameEdges::Black`]), whose light the samples' weights make up.
 pub fn for_samples(options: &SynthOptions) -> SynthOptions {
     let mut options = options.clone();
     options.composite.restore_occluded = true;
+    // Samples near the frame's edge are weighted for the share of the lens and shutter that
+    // reached them from inside it ([`inside_fraction`]); repeating the border's records
+    // outwards as well counted that light twice (the Cycles fence's top rows 25 % too bright).
+    options.classify.frame_edges = crate::pipeline::FrameEdges::Black;
     options
 }
 
@@ -1070,6 +1142,31 @@ pub fn normalize_density(image: &mut RgbaImage) {
 
 #[cfg(test)]
 mod tests {
+    /// The share of the lens inside the frame: all of it in the middle and for an in-focus
+    /// point, half on an edge, a quarter in a corner, less beyond, never under the floor.
+    #[test]
+    fn the_share_of_the_lens_inside_the_frame_falls_to_half_on_its_edge() {
+        let frame = (100, 80);
+        let f = |q: [f32; 2], coc: f32| inside_fraction(q, coc, [0.0; 2], frame);
+        assert_eq!(f([50.0, 40.0], 20.0), 1.0);
+        assert_eq!(f([0.5, 0.5], 0.0), 1.0);
+        let edge = f([50.0, 0.0], 10.0);
+        assert!((edge - 0.5).abs() < 0.1, "{edge}");
+        let inner = f([50.0, 5.0], 10.0);
+        assert!(inner > edge && inner < 1.0, "{inner}");
+        assert!(f([50.0, -5.0], 10.0) < edge);
+        assert_eq!(f([0.0, 0.0], 10.0), MIN_INSIDE_FRACTION);
+        assert_eq!(f([-50.0, 40.0], 10.0), MIN_INSIDE_FRACTION);
+        // A path along the edge changes nothing; across it, its far half leaves the frame.
+        let along = inside_fraction([50.0, 40.0], 0.0, [30.0, 0.0], frame);
+        assert_eq!(along, 1.0);
+        let across = inside_fraction([50.0, 1.0], 0.0, [0.0, 30.0], frame);
+        assert!((across - 2.0 / 3.0).abs() < 0.01, "{across}");
+        // Labels far beyond f32's pixel grid leave the weight alone.
+        assert_eq!(f([f32::NAN, 0.0], 10.0), 1.0);
+        assert_eq!(f([50.0, 40.0], f32::INFINITY), 1.0);
+    }
+
     use super::*;
     use formats::Sample;
 
