@@ -841,10 +841,7 @@ pub fn inside_fraction(
     }
     let times = if path == [0.0; 2] { 1 } else { INSIDE_TIMES };
     let mut inside = 0usize;
-    for i in 0..INSIDE_LENS_POINTS {
-        let radius = ((i as f32 + 0.5) / INSIDE_LENS_POINTS as f32).sqrt();
-        let angle = i as f32 * GOLDEN_ANGLE;
-        let u = [radius * angle.cos(), radius * angle.sin()];
+    for u in inside_lens_points() {
         for j in 0..times {
             let t = (j as f32 + 0.5) / times as f32 - 0.5;
             let x = q[0] + coc * u[0] + path[0] * t;
@@ -858,8 +855,22 @@ pub fn inside_fraction(
 /// `pi (3 - sqrt 5)`, radians.
 const GOLDEN_ANGLE: f32 = 2.399_963;
 
+/// The lens points of [`inside_fraction`], made once: every sample near the frame's edge reads
+/// them.
+fn inside_lens_points() -> &'static [[f32; 2]; INSIDE_LENS_POINTS] {
+    static POINTS: std::sync::OnceLock<[[f32; 2]; INSIDE_LENS_POINTS]> = std::sync::OnceLock::new();
+    POINTS.get_or_init(|| {
+        std::array::from_fn(|i| {
+            let radius = ((i as f32 + 0.5) / INSIDE_LENS_POINTS as f32).sqrt();
+            let angle = i as f32 * GOLDEN_ANGLE;
+            [radius * angle.cos(), radius * angle.sin()]
+        })
+    })
+}
+
 /// The part of a sample's fragments that does not depend on the pixel: colour, the sample's
-/// weight in the frame (`1 / spp`), parallax and depth, motion and bend over the shutter.
+/// weight in the frame (`1 / spp`, over its [`inside_fraction`]), parallax and depth, motion
+/// and bend over the shutter.
 #[derive(Clone, Copy)]
 struct FragmentSeed {
     color: [f32; 4],
