@@ -12,7 +12,7 @@
 //! - their signed CoC differs by at most [`COC_TOLERANCE_PX`] plus [`RELATIVE_TOLERANCE`] of
 //!   the seed's (pixels),
 //! - their motion vectors differ by at most [`MOTION_TOLERANCE_PX`] plus
-//!   [`RELATIVE_TOLERANCE`] of the seed's length (pixels over the shutter),
+//!   [`MOTION_RELATIVE_TOLERANCE`] of the seed's length (pixels over the shutter),
 //! - their parallax differs by at most [`RELATIVE_TOLERANCE`] of the seed's (the depth
 //!   layers, and the CoC of a pinhole camera, which has none),
 //! - they come from the same source, and the merged fragment is not brighter than
@@ -30,10 +30,19 @@ use rayon::prelude::*;
 /// Absolute CoC tolerance for merging, pixels.
 pub const COC_TOLERANCE_PX: f32 = 0.1;
 
-/// Absolute motion tolerance for merging, pixels over the shutter.
-pub const MOTION_TOLERANCE_PX: f32 = 0.1;
+/// Absolute motion tolerance for merging, pixels over the shutter: the finest step of a smeared
+/// PSF's length ([`crate::motion_smear::SmearKey`]), which draws motions this close alike.
+pub const MOTION_TOLERANCE_PX: f32 = 0.25;
 
-/// Tolerance relative to the seed's CoC, motion length and parallax.
+/// Motion tolerance relative to the seed's motion length. The samples of one surface that land
+/// on a pixel carry motions that differ by more than its motion changes over a pixel: each is
+/// moved back from its own time, so the motion it is drawn with is an estimate of the shutter
+/// centre's. At 2 % (as for the CoC) a moving surface kept two or three fragments a pixel; at
+/// 8 % one or two, drawn with the mean of their motions, and every stochastic set scores the
+/// same to the fourth digit (docs/BENCHMARKS.md, "Moving samples merged by their smear").
+pub const MOTION_RELATIVE_TOLERANCE: f32 = 0.08;
+
+/// Tolerance relative to the seed's CoC and parallax.
 pub const RELATIVE_TOLERANCE: f32 = 0.02;
 
 /// Pixels beyond the frame on every side within which fragments are merged; fragments farther
@@ -56,7 +65,8 @@ struct Group {
 
 impl Group {
     fn new(f: &Fragment, coc: f32) -> Self {
-        let tolerance = MOTION_TOLERANCE_PX + RELATIVE_TOLERANCE * f.motion[0].hypot(f.motion[1]);
+        let tolerance =
+            MOTION_TOLERANCE_PX + MOTION_RELATIVE_TOLERANCE * f.motion[0].hypot(f.motion[1]);
         Group {
             seed: *f,
             seed_coc: coc,
@@ -318,6 +328,25 @@ mod tests {
         assert!((light - (0.2 * 0.25 + 0.6 * 0.5)).abs() < 1e-6, "{light}");
         let total = |fs: &[Fragment]| -> f32 { fs.iter().map(|f| f.color[0] * f.weight).sum() };
         assert!((total(&merged) - total(&frags)).abs() < 1e-5);
+    }
+
+    /// Motions within the tolerance of the seed's (0.25 px plus 8 % of its length) merge to
+    /// their weighted mean; a motion farther off starts a fragment of its own.
+    #[test]
+    fn moving_fragments_merge_within_the_motion_tolerance() {
+        let frags = [
+            fragment(2, 2, 2.0, [40.0, 0.0], 0.5, 0.25),
+            fragment(2, 2, 2.0, [42.0, 1.0], 0.5, 0.25), // 2.2 px off, within 3.45
+            fragment(2, 2, 2.0, [44.0, 0.0], 0.5, 0.25), // 4 px off: apart
+            fragment(2, 2, 2.0, [0.2, 0.1], 0.5, 0.25),
+            fragment(2, 2, 2.0, [0.0, 0.0], 0.5, 0.25), // 0.22 px off a slow seed
+        ];
+        let merged = merge_alike(&frags, 8, 8, &camera(), 2.0);
+        assert_eq!(merged.len(), 3, "{merged:?}");
+        assert_eq!(merged[0].motion, [41.0, 0.5]);
+        assert!((merged[0].weight - 0.5).abs() < 1e-6);
+        assert_eq!(merged[1].motion, [44.0, 0.0]);
+        assert!((merged[2].motion[0] - 0.1).abs() < 1e-6);
     }
 
     /// A bright fragment is never merged, nor does merging make a group bright.
