@@ -212,8 +212,10 @@ pub fn denoise_samples(
                 let mj = &entry.at;
                 let (dx, dy) = (mj.q[0] - mi.q[0], mj.q[1] - mi.q[1]);
                 let d2 = dx * dx + dy * dy;
-                // Beyond the cut-off: which entries are is geometry, predictable.
-                if d2 > max_d2 {
+                // Beyond the cut-off, or another surface (a depth beyond the weight's cut-off
+                // on its own): which entries are is geometry, predictable.
+                let dz = (mj.depth - mi.depth) * inv_depth;
+                if d2 > max_d2 || dz * dz > WEIGHT_EXPONENT_CUT {
                     continue;
                 }
                 let (guides, cosine) = guide_terms(mi, mj, inv_depth);
@@ -537,6 +539,13 @@ fn widen(
             let mut total = 0.0f32;
             for (cell, tent) in tent_taps(cx, cy, step, (w, h)) {
                 for other in &nodes[target_starts[cell]..target_starts[cell + 1]] {
+                    // Another surface (a depth beyond the weight's cut-off on its own) weighs
+                    // nothing: which nodes those are is geometry, predictable, so this branch
+                    // costs less than their arithmetic where two surfaces share the pixels.
+                    let dz = (other.at.depth - me.at.depth) * inv_depth;
+                    if dz * dz > WEIGHT_EXPONENT_CUT {
+                        continue;
+                    }
                     let d = other.luminance - me.luminance;
                     // The smaller of the two: a group whose first filter straddled a
                     // shadow's edge reads the edge as noise, its neighbour does not.
@@ -669,6 +678,11 @@ fn spread_excess(
             for (cell, tent) in cells() {
                 let first = target_starts[cell];
                 for (o, other) in nodes[first..target_starts[cell + 1]].iter().enumerate() {
+                    // Another surface: as in the widening passes.
+                    let dz = (other.at.depth - me.at.depth) * inv_depth;
+                    if dz * dz > WEIGHT_EXPONENT_CUT {
+                        continue;
+                    }
                     let (guides, cosine) = guide_terms(&me.at, &other.at, inv_depth);
                     let weight = tent
                         * other.count
