@@ -20,8 +20,10 @@
 //!   PSF, and stays alone).
 //!
 //! The merged fragment carries the summed weight, the weighted mean colour, parallax and
-//! motion; its depth is the inverse of its mean parallax. Each member's PSF parameters are
-//! within twice the tolerance of the merged ones, a small part of a database cell.
+//! motion; its depth is the inverse of its mean parallax. Each member's CoC and parallax are
+//! within twice the tolerance of the merged ones, a small part of a database cell; its motion
+//! within twice [`MOTION_TOLERANCE_PX`] plus [`MOTION_RELATIVE_TOLERANCE`], by which its own
+//! streak's ends would lie apart from the merged one's.
 
 use crate::camera::Camera;
 use crate::pipeline::classify::Fragment;
