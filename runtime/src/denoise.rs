@@ -212,10 +212,9 @@ pub fn denoise_samples(
                 let mj = &entry.at;
                 let (dx, dy) = (mj.q[0] - mi.q[0], mj.q[1] - mi.q[1]);
                 let d2 = dx * dx + dy * dy;
-                // Beyond the cut-off, or another surface (a depth beyond the weight's cut-off
-                // on its own): which entries are is geometry, predictable.
-                let dz = (mj.depth - mi.depth) * inv_depth;
-                if d2 > max_d2 || dz * dz > WEIGHT_EXPONENT_CUT {
+                // Beyond the cut-off, or another surface: which entries are is geometry,
+                // predictable.
+                if d2 > max_d2 || another_surface(mi, mj, inv_depth) {
                     continue;
                 }
                 let (guides, cosine) = guide_terms(mi, mj, inv_depth);
@@ -539,11 +538,9 @@ fn widen(
             let mut total = 0.0f32;
             for (cell, tent) in tent_taps(cx, cy, step, (w, h)) {
                 for other in &nodes[target_starts[cell]..target_starts[cell + 1]] {
-                    // Another surface (a depth beyond the weight's cut-off on its own) weighs
-                    // nothing: which nodes those are is geometry, predictable, so this branch
-                    // costs less than their arithmetic where two surfaces share the pixels.
-                    let dz = (other.at.depth - me.at.depth) * inv_depth;
-                    if dz * dz > WEIGHT_EXPONENT_CUT {
+                    // Which nodes lie on another surface is geometry, predictable: this
+                    // branch costs less than their arithmetic where two surfaces share pixels.
+                    if another_surface(&me.at, &other.at, inv_depth) {
                         continue;
                     }
                     let d = other.luminance - me.luminance;
@@ -678,9 +675,8 @@ fn spread_excess(
             for (cell, tent) in cells() {
                 let first = target_starts[cell];
                 for (o, other) in nodes[first..target_starts[cell + 1]].iter().enumerate() {
-                    // Another surface: as in the widening passes.
-                    let dz = (other.at.depth - me.at.depth) * inv_depth;
-                    if dz * dz > WEIGHT_EXPONENT_CUT {
+                    // As in the widening passes.
+                    if another_surface(&me.at, &other.at, inv_depth) {
                         continue;
                     }
                     let (guides, cosine) = guide_terms(&me.at, &other.at, inv_depth);
@@ -707,6 +703,15 @@ fn spread_excess(
             }
         })
         .collect()
+}
+
+/// Whether `b` weighs nothing for `a` by depth alone: the depth term of [`guide_terms`] beyond
+/// [`WEIGHT_EXPONENT_CUT`], which every weight's exponent then exceeds too (its other terms are
+/// at least zero), so skipping `b` leaves the same result. `inv_depth` as there.
+#[inline(always)]
+fn another_surface(a: &Member, b: &Member, inv_depth: f32) -> bool {
+    let dz = (b.depth - a.depth) * inv_depth;
+    dz * dz > WEIGHT_EXPONENT_CUT
 }
 
 /// The filter's weight of `b` for `a` without the distance (both passes weigh the guides
