@@ -71,6 +71,17 @@ fn draw_through(
     let classified = prepared.classified().expect("records");
     assert!(classified.counts.smeared > 100, "{:?}", classified.counts);
     let packed = classified.packed.as_ref().map_or(0, |p| p.count());
+    // A packed image's values are held once, packed: its place in the frame's database is
+    // an empty image.
+    if let (Some(images), Some(db)) = (&classified.packed, &classified.database) {
+        for (psf, _) in images.images() {
+            let held = db.dense(psf as usize).map_or(0, |d| d.data.len());
+            assert_eq!(
+                held, 0,
+                "packed PSF {psf} also holds {held} values in the database"
+            );
+        }
+    }
     (render_cpu(prepared, dbs).0, packed)
 }
 
@@ -111,7 +122,7 @@ fn packed_images_draw_what_the_database_draws() {
 }
 
 /// Through a real lens every moving pixel's PSF is smeared too, and its turned lens PSFs are
-/// appended to the frame's database after the packed images' boxes: the packed frame still
+/// appended to the frame's database after the packed images' places: the packed frame still
 /// draws what the database's images draw.
 #[test]
 fn packed_images_through_a_real_lens_draw_what_the_database_draws() {

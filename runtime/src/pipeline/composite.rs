@@ -55,7 +55,7 @@ use poisson::Plane;
 use rayon::prelude::*;
 
 use super::integrate::IntegratedLayers;
-use super::types::{psf_reach, Classified, SplatPath};
+use super::types::{frame_psf_reach, Classified, SplatPath};
 use formats::RgbaImage;
 use psf_db::PsfDatabase;
 
@@ -93,7 +93,9 @@ pub const SMOOTH_OCCLUDERS_SHARPNESS: f32 = 0.05;
 /// by each record's coverage; 0 for a copied pixel), the inverse of one sample's footprint.
 /// Layers without records get 1.
 pub fn layer_sharpness(classified: &Classified, db: Option<&PsfDatabase>) -> Vec<f32> {
-    let reach = db.map_or_else(Vec::new, psf_reach);
+    let reach = db.map_or_else(Vec::new, |db| {
+        frame_psf_reach(db, classified.packed.as_deref())
+    });
     let layers = classified.frame.layers as usize;
     let mut reach_sum = vec![0.0f64; layers];
     let mut coverage_sum = vec![0.0f64; layers];

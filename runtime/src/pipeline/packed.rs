@@ -5,9 +5,11 @@
 //! add up to hundreds of MB of mostly zeros. Written into the frame's database, every page of
 //! those boxes is faulted in and cleared by the kernel before a value lands in it. Packed, the
 //! streaks are written and read while in cache (on Cycles' spinning disc the process's peak
-//! memory drops from 387 to 156 MB). The frame's database keeps
-//! each packed image's box (its reach, what the splat and the composite ask of it) with
-//! values that are never written or read. The GPU path reads the database's images itself,
+//! memory drops from 387 to 156 MB). The frame's database holds an empty image in each packed
+//! one's place, so its values take no memory there (a box of zeros, never written, still had
+//! to be cleared wherever the allocator handed back memory a frame before had used); what
+//! asks a PSF's reach asks [`crate::pipeline::types::frame_psf_reach`], which reads a packed
+//! image's box from here. The GPU path reads the database's images itself,
 //! so frames for it are classified with the images written there
 //! ([`super::ClassifyOptions::pack_images`] off).
 
@@ -145,6 +147,15 @@ impl PackedImages {
         Some(MirroredImage {
             image: self.pool.get(index as usize)?,
             mirrors,
+        })
+    }
+
+    /// Each packed PSF's database index and its image, in index order.
+    pub fn images(&self) -> impl Iterator<Item = (u32, MirroredImage<'_>)> {
+        (self.first..).zip(&self.slots).filter_map(|(psf, slot)| {
+            let (index, mirrors) = (*slot)?;
+            let image = self.pool.get(index as usize)?;
+            Some((psf, MirroredImage { image, mirrors }))
         })
     }
 

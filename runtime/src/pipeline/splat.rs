@@ -19,7 +19,7 @@ use rayon::prelude::*;
 
 use super::packed::{MirroredImage, PackedImages};
 use super::sparse_runs::{draw_run, drawn_in_run, find_runs, LayerRuns};
-use super::types::{psf_reach, Classified, FrameParams, SplatPath, SplatRecord};
+use super::types::{frame_psf_reach, Classified, FrameParams, SplatPath, SplatRecord};
 use super::wide::{WideImage, WideImages};
 
 /// Rows per band of the deterministic parallel splat. A pixel sums its records in record
@@ -299,7 +299,7 @@ pub(super) struct BandRows {
 pub(super) struct Drawing<'a> {
     /// The database the records index; `None` only when every record is a copy.
     pub db: Option<&'a PsfDatabase>,
-    /// [`psf_reach`] of `db` (px, rounded up, +1 for bilinear splitting): a record only visits
+    /// [`frame_psf_reach`] of `db` (px, rounded up, +1 for bilinear splitting): a record only visits
     /// the bands its own PSF reaches.
     pub reach: Vec<i32>,
     /// Rows beyond which no record's PSF reaches from its centre: the padding and 2.
@@ -323,7 +323,9 @@ impl<'a> Drawing<'a> {
     ) -> Self {
         Drawing {
             db,
-            reach: db.map_or_else(Vec::new, psf_reach),
+            reach: db.map_or_else(Vec::new, |db| {
+                frame_psf_reach(db, classified.packed.as_deref())
+            }),
             extent: classified.frame.pad as i32 + 2,
             in_row_order: db.is_some_and(PsfDatabase::spreadlets_in_row_order),
             packed: classified.packed.as_deref(),
@@ -601,7 +603,7 @@ fn is_identity(r: &SplatRecord) -> bool {
     r.rot_cos == 1.0 && r.rot_sin == 0.0
 }
 
-/// `reach` is the PSF's [`psf_reach`], where known.
+/// `reach` is the PSF's [`frame_psf_reach`], where known.
 fn splat_sparse(
     band: &mut Band,
     r: &SplatRecord,

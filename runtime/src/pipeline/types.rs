@@ -7,6 +7,8 @@
 use bytemuck::{Pod, Zeroable};
 use psf_db::PsfDatabase;
 
+use super::packed::PackedImages;
+
 /// One pixel (or one stochastic sample) after classification: where its PSF is centred, which
 /// database PSF it uses, which layer it goes to and with what colour.
 #[repr(C)]
@@ -219,13 +221,7 @@ pub fn psf_reach(db: &PsfDatabase) -> Vec<i32> {
     (0..db.psf_count())
         .map(|i| {
             let r2 = match db.dense(i) {
-                Some(d) => {
-                    let xs = [d.origin[0], d.origin[0] + d.width as i32 - 1];
-                    let ys = [d.origin[1], d.origin[1] + d.height as i32 - 1];
-                    let mx = xs.iter().map(|x| x.abs()).max().unwrap_or(0);
-                    let my = ys.iter().map(|y| y.abs()).max().unwrap_or(0);
-                    mx * mx + my * my
-                }
+                Some(d) => box_corner_distance_sq(d.origin, d.width, d.height),
                 None => db
                     .spreadlets(i)
                     .0
@@ -237,4 +233,48 @@ pub fn psf_reach(db: &PsfDatabase) -> Vec<i32> {
             (f64::from(r2).sqrt().ceil() as i32) + 1
         })
         .collect()
+}
+
+/// Squared distance (px^2) from a PSF's centre to the farthest corner pixel of its image's
+/// box: `origin` its top-left pixel, `width x height` px.
+fn box_corner_distance_sq(origin: [i32; 2], width: usize, height: usize) -> i32 {
+    let xs = [origin[0], origin[0] + width as i32 - 1];
+    let ys = [origin[1], origin[1] + height as i32 - 1];
+    let mx = xs.iter().map(|x| x.abs()).max().unwrap_or(0);
+    let my = ys.iter().map(|y| y.abs()).max().unwrap_or(0);
+    mx * mx + my * my
+}
+
+/// [`psf_reach`] of a frame's database whose images kept packed (`packed`) are empty boxes
+/// there: a packed image's reach is its own box's.
+pub fn frame_psf_reach(db: &PsfDatabase, packed: Option<&PackedImages>) -> Vec<i32> {
+    let mut reach = psf_reach(db);
+    for (psf, image) in packed.into_iter().flat_map(PackedImages::images) {
+        if let Some(r) = reach.get_mut(psf as usize) {
+            let r2 = box_corner_distance_sq(image.origin(), image.image.width, image.height());
+            *r = (f64::from(r2).sqrt().ceil() as i32) + 1;
+        }
+    }
+    reach
+}
+
+/// [`PsfDatabase::max_extent_px`] of a frame's database whose images kept packed (`packed`)
+/// are empty boxes there: the farthest any of its PSFs reaches from its centre, px, the
+/// packed images' boxes included.
+pub fn frame_extent_px(db: &PsfDatabase, packed: Option<&PackedImages>) -> u32 {
+    let packed_extent = packed
+        .into_iter()
+        .flat_map(PackedImages::images)
+        .filter(|(_, image)| image.image.width > 0 && image.height() > 0)
+        .map(|(_, image)| {
+            let [x0, y0] = image.origin();
+            let x1 = x0 + image.image.width as i32 - 1;
+            let y1 = y0 + image.height() as i32 - 1;
+            let fx = i64::from(x0.abs().max(x1.abs()));
+            let fy = i64::from(y0.abs().max(y1.abs()));
+            ((fx * fx + fy * fy) as f64).sqrt().ceil() as u32
+        })
+        .max()
+        .unwrap_or(0);
+    db.max_extent_px().max(packed_extent)
 }

@@ -23,7 +23,7 @@ use rayon::prelude::*;
 use super::turned::{count_paths_again, images_cost, LAYER_INTEGRATION_COST};
 use super::ClassifyError;
 use crate::motion_smear::{psf_image, PsfImage};
-use crate::pipeline::types::{psf_reach, Classified, SplatPath, SplatRecord};
+use crate::pipeline::types::{frame_psf_reach, Classified, SplatPath, SplatRecord};
 
 /// How a sparse record of a layer drawn from images is turned.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
@@ -95,7 +95,7 @@ pub(super) fn draw_few_sparse_from_images(
     if classified.counts.sparse == 0 {
         return Ok(0);
     }
-    let reach = psf_reach(base);
+    let reach = frame_psf_reach(base, classified.packed.as_deref());
     let plane = classified.frame.padded_width as usize * classified.frame.padded_height as usize;
     let chosen: Vec<usize> = classified
         .layers

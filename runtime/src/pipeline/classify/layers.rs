@@ -10,7 +10,9 @@ use crate::camera::Camera;
 use crate::dbset::{DbSet, NO_TWIN};
 use crate::motion_smear::{AngleResolution, PsfImage, SmearError, SmearExtent, SmearKey};
 use crate::pipeline::packed::{PackedImage, PackedImages};
-use crate::pipeline::types::{psf_reach, CoarseLevel, FrameParams, SplatPath, SplatRecord};
+use crate::pipeline::types::{
+    frame_extent_px, frame_psf_reach, psf_reach, CoarseLevel, FrameParams, SplatPath, SplatRecord,
+};
 use crate::smear_symmetry::{
     canonical_key, is_grid_symmetric, transform_image, BoxImage, GridSymmetry,
 };
@@ -671,6 +673,7 @@ pub fn classify_fragments(
         h,
         data,
         combined,
+        smeared.packed.as_deref(),
         options,
         counts,
         &edges.edges,
@@ -694,6 +697,7 @@ pub fn classify_fragments(
             h.div_ceil(scale as usize),
             coarse_data,
             combined,
+            smeared.packed.as_deref(),
             options,
             PathCounts::default(),
             &edges.edges,
@@ -1170,14 +1174,20 @@ impl SmearedPsfs {
             .zip(&unique_of_key)
             .map(|(k, &u)| (*k, unique_index[u as usize]))
             .collect();
+        let not_built = |e: psf_db::DbError| ClassifyError::PhysicalLens(e.to_string());
+        // Packed images first, each smeared into a box of its thread's that is reused; in the
+        // database each is an empty image, its box kept with its values.
+        let packable = |base: &PsfImage| pack && (base.channels == 1 || base.channels == 3);
         let boxes: Vec<_> = drawn
             .iter()
-            .map(|(_, _, e, _, _)| (e.origin, e.width, e.height))
+            .map(|&(_, base, e, _, _)| {
+                if packable(base) {
+                    ([0, 0], 0, 0)
+                } else {
+                    (e.origin, e.width, e.height)
+                }
+            })
             .collect();
-        let not_built = |e: psf_db::DbError| ClassifyError::PhysicalLens(e.to_string());
-        // Packed images first, each smeared into a box of its thread's that is reused, so
-        // their boxes in the database are never written.
-        let packable = |base: &PsfImage| pack && (base.channels == 1 || base.channels == 3);
         // Each orbit's members in turn, so its smear is built once; an image of its own
         // (`None`) is an orbit of one.
         let mut by_orbit: Vec<(Option<SmearKey>, usize)> = drawn
@@ -1390,7 +1400,8 @@ impl SmearScratch {
 /// extended outwards as [`ClassifyOptions::frame_edges`] says, row order within each layer
 /// (stable: what a stable sort of the layer's records by row, then column, gives), the padding
 /// every PSF needs, and the layers' summaries. `edges` are the layers' parallax edges, far to
-/// near ([`LayerEdges`]).
+/// near ([`LayerEdges`]); `packed`, the images of `combined` kept packed, whose boxes count
+/// for the reach and the padding.
 ///
 /// Each layer is written once, into its place in the frame's list: copied where its records
 /// are in row order already (a flat frame's pixels, row by row), else counted into its rows
@@ -1404,12 +1415,13 @@ pub(super) fn assemble_layers(
     h: usize,
     data: DataWindow,
     combined: Option<&PsfDatabase>,
+    packed: Option<&PackedImages>,
     options: &ClassifyOptions,
     mut counts: PathCounts,
     edges: &[f32],
 ) -> Classified {
     // Beyond the data: records of the outermost pixels, repeated outwards (or nothing).
-    let reach: Vec<i32> = combined.map_or_else(Vec::new, psf_reach);
+    let reach: Vec<i32> = combined.map_or_else(Vec::new, |db| frame_psf_reach(db, packed));
     let reach_of = |r: &SplatRecord| -> i32 {
         let of = |psf: u32| reach.get(psf as usize).copied().unwrap_or(0);
         if r.path == SplatPath::Copy as u32 {
@@ -1486,7 +1498,7 @@ pub(super) fn assemble_layers(
     // Padding: every PSF, wherever its centre lies, must fit inside the padded layer.
     let beyond = plans.iter().map(|p| p.beyond).max().unwrap_or(0);
     let pad = combined
-        .map_or(0, |d| d.max_extent_px())
+        .map_or(0, |d| frame_extent_px(d, packed))
         .max(beyond.max(0) as u32)
         + options.pad_margin;
     let padded_width = w as u32 + 2 * pad;

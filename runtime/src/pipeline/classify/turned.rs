@@ -38,7 +38,7 @@ use psf_db::PsfDatabase;
 
 use super::ClassifyError;
 use crate::motion_smear::{add_weighted, psf_image, turn_scaled, union_box, PsfImage};
-use crate::pipeline::types::{psf_reach, Classified, FrameParams, SplatPath, SplatRecord};
+use crate::pipeline::types::{frame_psf_reach, Classified, FrameParams, SplatPath, SplatRecord};
 
 /// Largest move of a PSF's rim between neighbouring turn steps, px: a record drawn from its
 /// step's image has its rim at most half of this from where its own turn puts it.
@@ -361,7 +361,7 @@ pub(super) fn draw_shared_turns_upright(
     base: &PsfDatabase,
     defocus: &[f32],
 ) -> Result<usize, ClassifyError> {
-    let reach = psf_reach(base);
+    let reach = frame_psf_reach(base, classified.packed.as_deref());
     let every_sparse = turns_every_sparse_record(&classified.records, &reach, classified.frame);
     // A sparse PSF is drawn from a turned dense image where that costs less per record
     // ([`SPREADLET_COST`]), or where its records are the frame's few sparse ones.
