@@ -12,7 +12,10 @@
 //! lighting is averaged), multiplied back by its own albedo. The weight of a neighbour `j` for
 //! sample `i` is the product of
 //! - space: `exp(-d^2 / (2 sigma^2))`, `d` the distance of their moved positions in pixels;
-//! - depth: `exp(-(dz / (DEPTH_TOLERANCE z_i))^2)`, the same surface or none;
+//! - depth: `exp(-(dz / (DEPTH_TOLERANCE z_i))^2)`, the same surface or none, of the depths
+//!   at the shutter centre ([`crate::reconstruct::MovedSample::depth`]): a surface nearing the
+//!   camera is one depth there, where its samples' own depths, each at its time, lay apart by
+//!   more than the tolerance and split it into as many surfaces as times;
 //! - normal: `max(0, n_i . n_j)^NORMAL_POWER`;
 //! - albedo: `exp(-|a_i - a_j|^2 / ALBEDO_SIGMA^2)`, relative to the brighter albedo, so that an
 //!   emitter (whose guide albedo holds its emission) never mixes with a lit surface.
@@ -152,9 +155,12 @@ pub fn denoise_samples(
         .map(|&k| {
             let k = k as usize;
             let (s, g) = (&frames.samples[k], &guides[k]);
+            // Where and how deep the sample lies at the lens and shutter centre: a surface
+            // nearing the camera is one depth there, whatever each sample's time.
+            let (q, depth) = moved[k].map_or(([0.0; 2], s.depth), |m| (m.q, m.depth));
             Member {
-                q: moved[k].map_or([0.0; 2], |m| m.q),
-                depth: s.depth,
+                q,
+                depth,
                 normal: g.normal,
                 albedo: g.albedo,
                 illumination: std::array::from_fn(|c| {
@@ -426,10 +432,10 @@ pub fn denoise_samples(
             let illumination = match (member_of[k], moved[k]) {
                 (NOT_A_MEMBER, Some(m)) if hit(k) => {
                     // Outside the frame: on its own, as far as the frame's members reach.
-                    let (s, g) = (&frames.samples[k], &guides[k]);
+                    let g = &guides[k];
                     let target = Member {
                         q: m.q,
-                        depth: s.depth,
+                        depth: m.depth,
                         normal: g.normal,
                         albedo: g.albedo,
                         illumination: [0.0; 3],
@@ -1009,10 +1015,10 @@ mod tests {
         let mut moved = Vec::new();
         for y in 0..h {
             for x in 0..w {
-                let (a, l) = (albedo(x, y), light(x, y));
+                let (a, l, z) = (albedo(x, y), light(x, y), depth(x, y));
                 samples.push(Sample {
                     color: [a * l, a * l, a * l, 1.0],
-                    depth: depth(x, y),
+                    depth: z,
                     ..Sample::default()
                 });
                 guides.push(SampleGuides {
@@ -1021,9 +1027,7 @@ mod tests {
                 });
                 moved.push(Some(MovedSample {
                     q: [x as f32 + 0.5, y as f32 + 0.5],
-                    coc: 0.0,
-                    motion: [0.0; 2],
-                    bend: 0.0,
+                    depth: z,
                     ..MovedSample::default()
                 }));
             }
@@ -1201,9 +1205,7 @@ mod tests {
                     let jitter = [0.2 + 0.5 * (k % 2) as f32, 0.3 + 0.4 * (k / 2) as f32];
                     moved.push(Some(MovedSample {
                         q: [x as f32 + jitter[0], y as f32 + jitter[1]],
-                        coc: 0.0,
-                        motion: [0.0; 2],
-                        bend: 0.0,
+                        depth: z,
                         ..MovedSample::default()
                     }));
                 }
@@ -1294,9 +1296,7 @@ mod tests {
                     let jitter = [(k % 4) as f32 * 0.25 + 0.125, (k / 4) as f32 * 0.25 + 0.125];
                     moved.push(Some(MovedSample {
                         q: [x as f32 + jitter[0], y as f32 + jitter[1]],
-                        coc: 0.0,
-                        motion: [0.0; 2],
-                        bend: 0.0,
+                        depth: 2.0,
                         ..MovedSample::default()
                     }));
                 }
@@ -1380,9 +1380,7 @@ mod tests {
         ] {
             moved[k] = Some(MovedSample {
                 q,
-                coc: 0.0,
-                motion: [0.0; 2],
-                bend: 0.0,
+                depth: 2.0,
                 ..MovedSample::default()
             });
         }
@@ -1411,6 +1409,68 @@ mod tests {
         for (k, c) in out.iter().enumerate() {
             let want = frames.samples[k].color[0];
             assert!((c[0] / want - 1.0).abs() < 1e-4, "{k}: {c:?} vs {want}");
+        }
+    }
+
+    /// A surface nearing the camera: each pixel's samples, taken at four times over the
+    /// shutter, lie 6 % apart in depth from first to last (twice the depth tolerance), but
+    /// at one depth at the shutter centre, where they are compared. They are filtered as one
+    /// surface: every sample of a pixel gets the same light, and the noise between the
+    /// times is averaged as well as the noise between pixels.
+    #[test]
+    fn a_nearing_surface_is_one_surface_at_the_shutter_centre() {
+        let times = [-0.375f32, -0.125, 0.125, 0.375];
+        // Depth at the shutter centre, and its change over a frame (scene units).
+        let (centre_depth, speed) = (2.0f32, -0.16f32);
+        let (frames, mut moved) = frame_4spp(24, 24, |x, y, k| {
+            let light = 1.0 + 0.5 * noise(x * 4 + k, y);
+            (0.5, light, centre_depth + speed * times[k])
+        });
+        for (m, s) in moved.iter_mut().zip(&frames.samples) {
+            if let Some(m) = m {
+                m.depth = centre_depth;
+            }
+            // Each sample's own depth is its time's.
+            assert!(s.depth != centre_depth);
+        }
+        let guides = frames.guides.clone().expect("guides");
+        let out = denoise_samples(&frames, &guides, &moved);
+        let inner = |k: &usize| {
+            let (x, y) = ((k / 4) % 24, k / 96);
+            (4..20).contains(&x) && (4..20).contains(&y)
+        };
+        // The four times' light, each averaged over the inner pixels: apart in the input by
+        // the noise between times, together after it.
+        let per_time = |colours: &dyn Fn(usize) -> f32| -> Vec<f64> {
+            (0..4)
+                .map(|t| {
+                    let ks = (0..frames.samples.len())
+                        .filter(inner)
+                        .filter(|k| k % 4 == t);
+                    mean_var(ks.map(colours)).0
+                })
+                .collect()
+        };
+        let spread = |v: &[f64]| {
+            v.iter().cloned().fold(f64::MIN, f64::max) - v.iter().cloned().fold(f64::MAX, f64::min)
+        };
+        let before = per_time(&|k| frames.samples[k].color[0]);
+        let after = per_time(&|k| out[k][0]);
+        let (m0, v0) = mean_var(
+            (0..frames.samples.len())
+                .filter(inner)
+                .map(|k| frames.samples[k].color[0]),
+        );
+        let (m1, v1) = mean_var((0..frames.samples.len()).filter(inner).map(|k| out[k][0]));
+        assert!(v1 * 20.0 < v0, "variance {v0} -> {v1}");
+        assert!((m1 / m0 - 1.0).abs() < 0.01, "mean {m0} -> {m1}");
+        assert!(
+            spread(&after) * 4.0 < spread(&before),
+            "the times' means {before:?} -> {after:?}"
+        );
+        // A pixel's four samples share one light.
+        for pixel in out.chunks(4) {
+            assert!(pixel.iter().all(|c| c[0] == pixel[0][0]), "{pixel:?}");
         }
     }
 
