@@ -185,8 +185,9 @@ pub struct Classified {
     /// PSFs followed by this frame's own (the physical-lens PSFs of its moving pixels smeared
     /// along their motion, [`crate::motion_smear`]). `None`: the set's combined database.
     pub database: Option<std::sync::Arc<PsfDatabase>>,
-    /// Images of `database` kept packed ([`super::packed::PackedImages`]; their boxes there
-    /// hold zeros), drawn by the CPU splat. `None`: every image is in the database.
+    /// Images of `database` kept packed ([`super::packed::PackedImages`]; each an empty image
+    /// there, its box read with [`frame_psf_reach`]), drawn by the CPU splat. `None`: every
+    /// image is in the database.
     pub packed: Option<std::sync::Arc<super::packed::PackedImages>>,
     /// The fragments whose CoC or motion is beyond the database's range, at reduced
     /// resolutions ([`super::ClassifyOptions::reduced_resolution`]), each level a frame of

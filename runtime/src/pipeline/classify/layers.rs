@@ -997,7 +997,7 @@ fn many_keys(keys: &[Option<(SmearKey, bool)>]) -> bool {
 #[derive(Default)]
 struct SmearedPsfs {
     database: Option<std::sync::Arc<PsfDatabase>>,
-    /// The images of `database` kept packed ([`PackedImages`]), whose boxes there hold zeros.
+    /// The images of `database` kept packed ([`PackedImages`]), each an empty image there.
     packed: Option<std::sync::Arc<PackedImages>>,
     /// Sorted, each with its index in `database` (`None`: its lens PSF is empty).
     keys: Vec<(SmearKey, Option<u32>)>,
