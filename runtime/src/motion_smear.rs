@@ -46,8 +46,8 @@ const FINE_LENGTH_STEP_PX: f32 = 0.25;
 /// Relative length step beyond [`FINE_LENGTH_MAX_PX`].
 const COARSE_LENGTH_RATIO: f32 = 1.02;
 /// Relative length step beyond [`FINE_LENGTH_MAX_PX`] of a key whose angle is dithered
-/// ([`AngleResolution::Dithered`]): a frame whose every pixel streaks its own way, where the
-/// lengths are dithered between steps twice as far apart as its angles are. On a car driving
+/// ([`AngleResolution::Dithered`]: a frame whose every pixel streaks its own way), twice
+/// [`COARSE_LENGTH_RATIO`]'s step as its angle steps are twice the rounded ones. On a car driving
 /// at the camera reconstructed from 4 spp, 11 % less time for the same scores
 /// (docs/BENCHMARKS.md, "Dithered keys' lengths in steps of 4 %").
 const DITHERED_LENGTH_RATIO: f32 = 1.04;
