@@ -345,7 +345,7 @@ impl DepthMotion {
 }
 
 /// Whether the vector `d` (pixels) is at most `limit` long: its squared length against the
-/// limit's, in f64, where neither overflows nor rounds. The window's test runs for 49 pixels
+/// limit's, in f64, where f32 values neither overflow nor lose precision. The window's test runs for 49 pixels
 /// round every moving pixel, and `hypot` there was a third of the fit's time on a camera pan.
 #[inline]
 fn within(d: [f32; 2], limit: f32) -> bool {

@@ -268,12 +268,8 @@ pub fn frame_extent_px(db: &PsfDatabase, packed: Option<&PackedImages>) -> u32 {
         .flat_map(PackedImages::images)
         .filter(|(_, image)| image.image.width > 0 && image.height() > 0)
         .map(|(_, image)| {
-            let [x0, y0] = image.origin();
-            let x1 = x0 + image.image.width as i32 - 1;
-            let y1 = y0 + image.height() as i32 - 1;
-            let fx = i64::from(x0.abs().max(x1.abs()));
-            let fy = i64::from(y0.abs().max(y1.abs()));
-            ((fx * fx + fy * fy) as f64).sqrt().ceil() as u32
+            let r2 = box_corner_distance_sq(image.origin(), image.image.width, image.height());
+            f64::from(r2).sqrt().ceil() as u32
         })
         .max()
         .unwrap_or(0);
