@@ -1468,6 +1468,63 @@ mod tests {
         }
     }
 
+    /// The sub-pixel smear is to the bit the plain sum of each tap's shifted image, in tap
+    /// order, placed where its shift rounds to: on paths whose taps reach the box's last
+    /// columns, and on images of several widths.
+    #[test]
+    fn sub_pixel_smears_rows_are_the_taps_plain_sum() {
+        use crate::subpixel_psf::SubpixelPsf;
+        for (size, r) in [(5usize, 1.2f64), (7, 2.6), (3, 1.0)] {
+            let origin = -(size as i32 / 2);
+            let sub = SubpixelPsf::of_radii(&[r], [origin; 2], size, size);
+            let base = PsfImage {
+                origin: sub.origin,
+                width: size,
+                height: size,
+                channels: 1,
+                data: vec![1.0; size * size],
+            };
+            for (length, angle) in [(16.3f32, 0.111f32), (9.0, 0.9), (12.0, 2.8), (5.5, -1.9)] {
+                let extent = smear_extent(&base, length, angle, 0.0).expect("extent");
+                let n = extent.width * extent.height;
+                let (mut ours, mut rows) = (vec![0f32; n], vec![[0u16; 2]; extent.height]);
+                smear_within_subpixel(&sub, length, angle, 0.0, extent, &mut ours, &mut rows);
+                // The same taps and places, each image added value by value.
+                let (shifts, share) =
+                    tap_shifts(length, angle, 0.0, extent.grow, SUBPIXEL_TAPS_PER_PX);
+                let mut plain = vec![0f32; n];
+                for [sx, sy] in shifts {
+                    let place = |v: f32| {
+                        let whole = v.floor() as usize;
+                        let step = ((v - whole as f32) * STEPS as f32).round() as usize;
+                        if step >= STEPS {
+                            (whole + 1, 0)
+                        } else {
+                            (whole, step)
+                        }
+                    };
+                    let ((ix, a), (iy, b)) = (place(sx), place(sy));
+                    let image = sub.shifted(a, b);
+                    for y in 0..sub.height {
+                        for x in 0..sub.width {
+                            if ix + x < extent.width && iy + y < extent.height {
+                                plain[(iy + y) * extent.width + ix + x] +=
+                                    share * image[y * sub.width + x];
+                            }
+                        }
+                    }
+                }
+                for (i, (a, b)) in ours.iter().zip(&plain).enumerate() {
+                    assert_eq!(
+                        a.to_bits(),
+                        b.to_bits(),
+                        "size {size}, L {length}, angle {angle}: pixel {i}"
+                    );
+                }
+            }
+        }
+    }
+
     /// A narrow disc smeared along a slanted path through its images at sub-pixel shifts
     /// against the exact box-filtered streak (each pixel's points, the share of the path
     /// within the disc's radius of each), beside the bilinear taps' smear: the streak's sides
