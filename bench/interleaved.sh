@@ -1,12 +1,19 @@
 #!/usr/bin/env bash
 # Interleaved per-call timing of two or more spreadlet binaries on one input: each round runs
 # every binary once in turn (A B A B ...), so a change of the machine's load hits all alike.
-# Prints each binary's median and range of `spreadlet synth --stats` synthesis.times.total_ms.
+# Prints each binary's median and range of `spreadlet synth --stats` synthesis.times.total_ms,
+# or with --reconstruct, of `spreadlet reconstruct --stats` reconstruction.times.total_ms on
+# stochastic frames.
 #
-#   bench/interleaved.sh ROUNDS G-BUFFER.exr CAMERA.json BINARY...
+#   bench/interleaved.sh [--reconstruct] ROUNDS G-BUFFER.exr|FRAMES.exr CAMERA.json BINARY...
 set -euo pipefail
+command=synth section=synthesis
+if [ "${1:-}" = "--reconstruct" ]; then
+  command=reconstruct section=reconstruction
+  shift
+fi
 if [ $# -lt 4 ]; then
-  echo "usage: $0 ROUNDS G-BUFFER.exr CAMERA.json BINARY..." >&2
+  echo "usage: $0 [--reconstruct] ROUNDS G-BUFFER.exr|FRAMES.exr CAMERA.json BINARY..." >&2
   exit 2
 fi
 rounds=$1 gbuffer=$2 camera=$3
@@ -16,10 +23,10 @@ trap 'rm -rf "$work"' EXIT
 for ((r = 0; r < rounds; r++)); do
   k=0
   for bin in "$@"; do
-    "$bin" synth --input "$gbuffer" --camera "$camera" --out "$work/out.exr" --backend cpu \
+    "$bin" "$command" --input "$gbuffer" --camera "$camera" --out "$work/out.exr" --backend cpu \
       --stats "$work/stats.json" -q
-    python3 -c "import json,sys; print(json.load(open(sys.argv[1]))['synthesis']['times']['total_ms'])" \
-      "$work/stats.json" >> "$work/times.$k"
+    python3 -c "import json,sys; print(json.load(open(sys.argv[1]))[sys.argv[2]]['times']['total_ms'])" \
+      "$work/stats.json" "$section" >> "$work/times.$k"
     k=$((k + 1))
   done
 done
