@@ -276,7 +276,10 @@ impl DepthMotion {
                 }
                 let motion_limit = WINDOW_MOTION_TOLERANCE * speed + WINDOW_MOTION_SLACK_PX;
                 let mut sum = PixelMoments::default();
-                for j in window(i, w, h) {
+                // The window's pixels as `window` lists them, each with its offset from the
+                // centre: two integer divisions per pixel to recover the offsets were a fifth
+                // of the fit's time on a camera pan.
+                for (j, [dx, dy]) in window_offsets(i, w, h) {
                     let o = &moments[slot[j] as usize];
                     let same = o.n > 0.0
                         && (o.depth - me.depth).abs() <= WINDOW_DEPTH_TOLERANCE * me.depth
@@ -285,11 +288,7 @@ impl DepthMotion {
                             motion_limit,
                         );
                     if same {
-                        let (dx, dy) = (
-                            (j % w) as f32 - (i % w) as f32,
-                            (j / w) as f32 - (i / w) as f32,
-                        );
-                        sum.add_shifted(o, dx, dy);
+                        sum.add_shifted(o, dx as f32, dy as f32);
                     }
                 }
                 let nearing = sum
@@ -356,16 +355,19 @@ fn within(d: [f32; 2], limit: f32) -> bool {
 /// The pixels a fit for pixel `i` of a `w x h` frame reads: every other pixel along each axis
 /// within [`FIT_RADIUS_PX`] of it, inside the frame.
 fn window(i: usize, w: usize, h: usize) -> impl Iterator<Item = usize> {
+    window_offsets(i, w, h).map(|(j, _)| j)
+}
+
+/// [`window`]'s pixels, each with its offset from pixel `i` (columns, rows).
+fn window_offsets(i: usize, w: usize, h: usize) -> impl Iterator<Item = (usize, [i64; 2])> {
     let (cx, cy) = ((i % w) as i64, (i / w) as i64);
     let offsets = || (-FIT_RADIUS_PX..=FIT_RADIUS_PX).step_by(2);
     offsets()
-        .map(move |dy| cy + dy)
-        .filter(move |&y| y >= 0 && y < h as i64)
-        .flat_map(move |y| {
+        .filter(move |&dy| cy + dy >= 0 && cy + dy < h as i64)
+        .flat_map(move |dy| {
             offsets()
-                .map(move |dx| cx + dx)
-                .filter(move |&x| x >= 0 && x < w as i64)
-                .map(move |x| y as usize * w + x as usize)
+                .filter(move |&dx| cx + dx >= 0 && cx + dx < w as i64)
+                .map(move |dx| ((cy + dy) as usize * w + (cx + dx) as usize, [dx, dy]))
         })
 }
 
@@ -397,6 +399,30 @@ pub fn path_acceleration(motion: [f32; 2], depth: f32, nearing: f32) -> [f32; 2]
 mod tests {
     use super::*;
     use formats::Sample;
+
+    /// Each window pixel's offset is its column and row less the centre's, every other pixel
+    /// within the radius and inside the frame, at the frame's corners and edges too.
+    #[test]
+    fn window_offsets_are_the_pixels_offsets() {
+        let (w, h) = (9, 7);
+        for i in [0, 4, w - 1, 3 * w + 4, w * h - 1, (h - 1) * w + 2] {
+            let listed: Vec<(usize, [i64; 2])> = window_offsets(i, w, h).collect();
+            let mut expected = Vec::new();
+            for j in 0..w * h {
+                let dx = (j % w) as i64 - (i % w) as i64;
+                let dy = (j / w) as i64 - (i / w) as i64;
+                if dx.abs() <= FIT_RADIUS_PX
+                    && dy.abs() <= FIT_RADIUS_PX
+                    && dx % 2 == 0
+                    && dy % 2 == 0
+                {
+                    expected.push((j, [dx, dy]));
+                }
+            }
+            assert_eq!(listed, expected, "pixel {i}");
+            assert!(window(i, w, h).eq(expected.iter().map(|&(j, _)| j)));
+        }
+    }
 
     /// The squared test agrees with `hypot`'s wherever the length is not within a rounding of
     /// the limit, and says no for NaN, infinite vectors and negative limits.
