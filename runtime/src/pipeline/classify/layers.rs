@@ -975,8 +975,10 @@ const MANY_SMEAR_KEYS: usize = 4096;
 
 /// Whether `keys` holds more than [`MANY_SMEAR_KEYS`] distinct keys whose angles are not in
 /// fine steps (a narrow PSF's, which stay rounded). Neighbouring fragments of one surface
-/// mostly share a key: the runs of equal keys are counted first, and sorted only where there
-/// are more runs than that (a camera pan's few distinct keys come in long runs).
+/// mostly share a key: the runs of equal keys are counted first (a camera pan's few distinct
+/// keys come in long runs), and only where there are more runs than the bar are the distinct
+/// ones gathered, until one more than the bar is found (a car's 100 k runs were sorted
+/// whole).
 fn many_keys(keys: &[Option<(SmearKey, bool)>]) -> bool {
     let mut runs: Vec<SmearKey> = Vec::new();
     for &(key, _) in keys.iter().flatten() {
@@ -987,9 +989,9 @@ fn many_keys(keys: &[Option<(SmearKey, bool)>]) -> bool {
     if runs.len() <= MANY_SMEAR_KEYS {
         return false;
     }
-    runs.par_sort_unstable();
-    runs.dedup();
-    runs.len() > MANY_SMEAR_KEYS
+    let mut distinct = std::collections::HashSet::with_capacity(MANY_SMEAR_KEYS + 1);
+    runs.into_iter()
+        .any(|key| distinct.insert(key) && distinct.len() > MANY_SMEAR_KEYS)
 }
 
 /// The smeared PSFs of one frame ([`crate::motion_smear`]): the database its records index
@@ -2025,6 +2027,39 @@ pub(super) fn layer_targets(u: f32, n_layers: usize, band: Option<f32>) -> Layer
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Distinct keys are counted across runs, however they repeat: the bar's own count is not
+    /// many, one more is, and fine-angled keys never count.
+    #[test]
+    fn many_keys_counts_distinct_keys_beyond_the_bar() {
+        let key = |i: usize, angle_resolution| SmearKey {
+            cell: 0,
+            length_step: (i % 97) as u32,
+            angle_step: (i / 97) as u32,
+            turn_step: 0,
+            turn_steps: 8,
+            angle_resolution,
+            bend_step: 0,
+        };
+        // Every distinct key in runs of two, the whole set twice over.
+        let keys_of = |n: usize, resolution| -> Vec<Option<(SmearKey, bool)>> {
+            (0..2 * n)
+                .flat_map(|i| [Some((key(i % n, resolution), false)); 2])
+                .chain([None])
+                .collect()
+        };
+        let rounded = AngleResolution::Rounded;
+        assert!(!many_keys(&keys_of(MANY_SMEAR_KEYS, rounded)));
+        assert!(many_keys(&keys_of(MANY_SMEAR_KEYS + 1, rounded)));
+        assert!(!many_keys(&keys_of(
+            MANY_SMEAR_KEYS + 1,
+            AngleResolution::Fine
+        )));
+        assert!(!many_keys(&vec![
+            Some((key(3, rounded), true));
+            3 * MANY_SMEAR_KEYS
+        ]));
+    }
 
     fn record(x: i32, psf: u32, rot: f32, color: f32) -> SplatRecord {
         SplatRecord {
