@@ -51,7 +51,7 @@ pub const MOTION_RELATIVE_TOLERANCE: f32 = 0.08;
 /// each moved back to the shutter centre from an estimate of that speed-up, still differ by a
 /// median 15 % within one pixel (`approaching-car`, 4 spp): at 8 % its moving pixels kept three
 /// or four fragments each, a streak drawn three or four times. At 16 % the car's reconstruction
-/// at 4 spp draws 29 % fewer streaks in 22 % less time with the same scores; on a bent path (a
+/// at 4 spp draws 29 % fewer streaks in 18 % less time with the same scores; on a bent path (a
 /// rolling wheel, whose points' motions differ in direction within a pixel) 16 % cost FLIP, so
 /// there the tolerance stays [`MOTION_RELATIVE_TOLERANCE`] (docs/BENCHMARKS.md, "Straight
 /// streaks merged at twice the motion tolerance").
