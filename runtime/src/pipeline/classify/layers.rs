@@ -975,23 +975,18 @@ const MANY_SMEAR_KEYS: usize = 4096;
 
 /// Whether `keys` holds more than [`MANY_SMEAR_KEYS`] distinct keys whose angles are not in
 /// fine steps (a narrow PSF's, which stay rounded). Neighbouring fragments of one surface
-/// mostly share a key: the runs of equal keys are counted first (a camera pan's few distinct
-/// keys come in long runs), and only where there are more runs than the bar are the distinct
-/// ones gathered, until one more than the bar is found (a car's 100 k runs were sorted
-/// whole).
+/// mostly share a key, so each run of equal keys is looked up once, and the look-ups stop at
+/// the first key beyond the bar (a car's 100 k runs were once sorted whole to learn that).
 fn many_keys(keys: &[Option<(SmearKey, bool)>]) -> bool {
-    let mut runs: Vec<SmearKey> = Vec::new();
-    for &(key, _) in keys.iter().flatten() {
-        if key.angle_resolution != AngleResolution::Fine && runs.last() != Some(&key) {
-            runs.push(key);
-        }
-    }
-    if runs.len() <= MANY_SMEAR_KEYS {
-        return false;
-    }
     let mut distinct = std::collections::HashSet::with_capacity(MANY_SMEAR_KEYS + 1);
-    runs.into_iter()
-        .any(|key| distinct.insert(key) && distinct.len() > MANY_SMEAR_KEYS)
+    let mut last = None;
+    keys.iter()
+        .flatten()
+        .filter(|(key, _)| key.angle_resolution != AngleResolution::Fine)
+        .any(|&(key, _)| {
+            let new_run = last.replace(key) != Some(key);
+            new_run && distinct.insert(key) && distinct.len() > MANY_SMEAR_KEYS
+        })
 }
 
 /// The smeared PSFs of one frame ([`crate::motion_smear`]): the database its records index
